@@ -1,0 +1,1 @@
+fn main() { eprintln!("hcc-controller: not yet implemented"); std::process::exit(2); }

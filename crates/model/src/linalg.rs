@@ -1,0 +1,1 @@
+//! Small in-place dense linear algebra that never allocates (Cholesky, solves, QR, ...).

@@ -1,0 +1,1 @@
+//! Building a [`crate::Model`] from a URDF file or string (urdf-rs).

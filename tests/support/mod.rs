@@ -1,0 +1,1 @@
+//! Helpers shared by the system tests: locating the built binaries, temporary directories, unique namespaces.
