@@ -6,7 +6,11 @@ use std::process::ExitCode;
 mod model_cmd;
 
 #[derive(Parser)]
-#[command(name = "hcc", version, about = "Hierarchical compliance control for redundant robots")]
+#[command(
+    name = "hcc",
+    version,
+    about = "Hierarchical compliance control for redundant robots"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -97,7 +97,9 @@ pub struct Model {
 pub struct Data {
     /// World placement of each body (joint frame after the joint motion).
     pub o_m_i: Vec<Isometry3<f64>>,
-    /// Spatial velocity of each body (algorithm-internal convention).
+    /// Spatial velocity of each body (algorithm-internal convention: world axes,
+    /// `(v, ω)` with `v` the velocity of the body point at the world origin; see
+    /// [`algorithms`]).
     pub v: Vec<Vector6<f64>>,
     /// Joint-space inertia matrix M (n×n), from [`crba`].
     pub m: DMatrix<f64>,

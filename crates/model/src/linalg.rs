@@ -1,1 +1,250 @@
-//! Small in-place dense linear algebra that never allocates (Cholesky, solves, QR, ...).
+//! Small in-place dense linear algebra that never allocates.
+//!
+//! Every routine works on caller-provided storage and returns a [`LinalgError`]
+//! instead of panicking on bad input (wrong sizes, a matrix that is not
+//! positive definite). The routines are generic over nalgebra storage, so they
+//! accept `DMatrix`/`DVector` as well as views into larger preallocated buffers
+//! (`DMatrixViewMut`, `DVectorViewMut`) and fixed-size matrices.
+//!
+//! The Cholesky factorisation is the textbook column-by-column
+//! (Cholesky–Banachiewicz/Crout) variant, Golub & Van Loan, "Matrix
+//! Computations", Alg. 4.2.1: `A = L Lᵀ` with `L` lower triangular and a
+//! strictly positive diagonal.
+//!
+//! Typical real-time use (all buffers allocated once beforehand):
+//! ```
+//! use hcc_model::linalg::{cholesky_in_place, cholesky_solve_in_place};
+//! use nalgebra::{DMatrix, DVector};
+//! let a = DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0]);
+//! let mut l = DMatrix::zeros(2, 2);
+//! let mut x = DVector::from_vec(vec![2.0, 1.0]);
+//! l.copy_from(&a);
+//! cholesky_in_place(&mut l).unwrap();
+//! cholesky_solve_in_place(&l, &mut x).unwrap(); // x = A⁻¹ b
+//! assert!((&a * &x - DVector::from_vec(vec![2.0, 1.0])).norm() < 1e-12);
+//! ```
+
+use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};
+
+/// Errors of the dense routines.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum LinalgError {
+    /// The matrix is not (numerically) positive definite: the pivot of row/column
+    /// `index` was `pivot` (≤ 0 or not finite).
+    #[error("matrix is not positive definite: pivot {index} is {pivot}")]
+    NotPositiveDefinite { index: usize, pivot: f64 },
+    /// Operand sizes do not fit together.
+    #[error("dimension mismatch in {operation}: expected {expected}, got {got}")]
+    DimensionMismatch {
+        operation: &'static str,
+        expected: usize,
+        got: usize,
+    },
+}
+
+fn check(operation: &'static str, expected: usize, got: usize) -> Result<(), LinalgError> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(LinalgError::DimensionMismatch {
+            operation,
+            expected,
+            got,
+        })
+    }
+}
+
+/// Cholesky factorisation in place: on entry `a` holds a symmetric positive
+/// definite matrix (only its lower triangle is read), on success it holds the
+/// lower-triangular factor `L` with `A = L Lᵀ` (strict upper triangle set to 0).
+///
+/// Fails with [`LinalgError::NotPositiveDefinite`] if a pivot is ≤ 0 or not
+/// finite (then `a` is partially overwritten), or
+/// [`LinalgError::DimensionMismatch`] if `a` is not square. O(n³/3), no allocation.
+pub fn cholesky_in_place<R: Dim, C: Dim, S: RawStorageMut<f64, R, C>>(
+    a: &mut Matrix<f64, R, C, S>,
+) -> Result<(), LinalgError> {
+    let n = a.nrows();
+    check("cholesky_in_place (square)", n, a.ncols())?;
+    for j in 0..n {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            let l = a[(j, k)];
+            d -= l * l;
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(LinalgError::NotPositiveDefinite { index: j, pivot: d });
+        }
+        let ljj = d.sqrt();
+        a[(j, j)] = ljj;
+        for i in (j + 1)..n {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = s / ljj;
+        }
+        for i in 0..j {
+            a[(i, j)] = 0.0;
+        }
+    }
+    Ok(())
+}
+
+/// Solves `A x = b` in place given the Cholesky factor `l` of `A` (from
+/// [`cholesky_in_place`]): on entry `b` is the right-hand side, on return the
+/// solution. Forward substitution with `L`, back substitution with `Lᵀ`.
+/// Only the lower triangle of `l` is read. No allocation.
+pub fn cholesky_solve_in_place<
+    R: Dim,
+    C: Dim,
+    S: RawStorage<f64, R, C>,
+    RB: Dim,
+    CB: Dim,
+    SB: RawStorageMut<f64, RB, CB>,
+>(
+    l: &Matrix<f64, R, C, S>,
+    b: &mut Matrix<f64, RB, CB, SB>,
+) -> Result<(), LinalgError> {
+    let n = l.nrows();
+    check("cholesky_solve_in_place (square factor)", n, l.ncols())?;
+    check("cholesky_solve_in_place (rhs rows)", n, b.nrows())?;
+    for col in 0..b.ncols() {
+        // L y = b
+        for i in 0..n {
+            let mut s = b[(i, col)];
+            for k in 0..i {
+                s -= l[(i, k)] * b[(k, col)];
+            }
+            b[(i, col)] = s / l[(i, i)];
+        }
+        // Lᵀ x = y
+        for i in (0..n).rev() {
+            let mut s = b[(i, col)];
+            for k in (i + 1)..n {
+                s -= l[(k, i)] * b[(k, col)];
+            }
+            b[(i, col)] = s / l[(i, i)];
+        }
+    }
+    Ok(())
+}
+
+/// Solves `A X = B` in place for a matrix right-hand side `B` (every column
+/// separately), given the Cholesky factor `l` of `A`. Same as
+/// [`cholesky_solve_in_place`], which already accepts matrices; kept as an
+/// explicit name for readability at call sites.
+pub fn cholesky_solve_matrix_in_place<
+    R: Dim,
+    C: Dim,
+    S: RawStorage<f64, R, C>,
+    RB: Dim,
+    CB: Dim,
+    SB: RawStorageMut<f64, RB, CB>,
+>(
+    l: &Matrix<f64, R, C, S>,
+    b: &mut Matrix<f64, RB, CB, SB>,
+) -> Result<(), LinalgError> {
+    cholesky_solve_in_place(l, b)
+}
+
+/// Inverse of a symmetric positive definite matrix `a` into `out`, using
+/// `factor` (same size as `a`) as workspace; on success `factor` holds the
+/// Cholesky factor of `a` and `out` = `A⁻¹` (exactly symmetric). No allocation.
+pub fn spd_inverse<
+    R: Dim,
+    C: Dim,
+    S: RawStorage<f64, R, C>,
+    RF: Dim,
+    CF: Dim,
+    SF: RawStorageMut<f64, RF, CF>,
+    RO: Dim,
+    CO: Dim,
+    SO: RawStorageMut<f64, RO, CO>,
+>(
+    a: &Matrix<f64, R, C, S>,
+    factor: &mut Matrix<f64, RF, CF, SF>,
+    out: &mut Matrix<f64, RO, CO, SO>,
+) -> Result<(), LinalgError> {
+    let n = a.nrows();
+    check("spd_inverse (square)", n, a.ncols())?;
+    check("spd_inverse (factor rows)", n, factor.nrows())?;
+    check("spd_inverse (factor cols)", n, factor.ncols())?;
+    check("spd_inverse (out rows)", n, out.nrows())?;
+    check("spd_inverse (out cols)", n, out.ncols())?;
+    for j in 0..n {
+        for i in 0..n {
+            factor[(i, j)] = a[(i, j)];
+        }
+    }
+    cholesky_in_place(factor)?;
+    for j in 0..n {
+        for i in 0..n {
+            out[(i, j)] = if i == j { 1.0 } else { 0.0 };
+        }
+    }
+    cholesky_solve_in_place(factor, out)?;
+    // Symmetrise away rounding differences between the two triangles.
+    for j in 0..n {
+        for i in (j + 1)..n {
+            let s = 0.5 * (out[(i, j)] + out[(j, i)]);
+            out[(i, j)] = s;
+            out[(j, i)] = s;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    fn spd(n: usize) -> DMatrix<f64> {
+        let b = DMatrix::from_fn(n, n, |i, j| {
+            ((i * 7 + j * 3) % 5) as f64 - 2.0 + 0.1 * i as f64
+        });
+        &b * b.transpose() + DMatrix::identity(n, n)
+    }
+
+    #[test]
+    fn factor_solve_inverse() {
+        for n in 1..8 {
+            let a = spd(n);
+            let mut l = a.clone();
+            cholesky_in_place(&mut l).unwrap();
+            assert!((&l * l.transpose() - &a).norm() < 1e-10);
+            let b = DVector::from_fn(n, |i, _| i as f64 - 1.5);
+            let mut x = b.clone();
+            cholesky_solve_in_place(&l, &mut x).unwrap();
+            assert!((&a * &x - &b).norm() < 1e-10);
+            let mut bm = DMatrix::from_fn(n, 3, |i, j| (i + j) as f64);
+            let rhs = bm.clone();
+            cholesky_solve_matrix_in_place(&l, &mut bm).unwrap();
+            assert!((&a * &bm - rhs).norm() < 1e-10);
+            let mut f = DMatrix::zeros(n, n);
+            let mut inv = DMatrix::zeros(n, n);
+            spd_inverse(&a, &mut f, &mut inv).unwrap();
+            assert!((&a * &inv - DMatrix::identity(n, n)).norm() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn rejects_indefinite_and_bad_sizes() {
+        let mut a = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+        assert!(matches!(
+            cholesky_in_place(&mut a),
+            Err(LinalgError::NotPositiveDefinite { index: 1, .. })
+        ));
+        let mut r = DMatrix::<f64>::zeros(2, 3);
+        assert!(matches!(
+            cholesky_in_place(&mut r),
+            Err(LinalgError::DimensionMismatch { .. })
+        ));
+        let l = DMatrix::<f64>::identity(2, 2);
+        let mut b = DVector::<f64>::zeros(3);
+        assert!(cholesky_solve_in_place(&l, &mut b).is_err());
+        let mut nan = DMatrix::from_row_slice(1, 1, &[f64::NAN]);
+        assert!(cholesky_in_place(&mut nan).is_err());
+    }
+}
