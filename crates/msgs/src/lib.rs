@@ -1,1 +1,188 @@
-//! See the crate description.
+//! # hcc-msgs — the message contract between the hcc controller and a robot driver
+//!
+//! This crate is the complete interface between the hcc controller (the
+//! hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer,
+//! "Multi-Objective Compliance Control of Redundant Manipulators: Hierarchy,
+//! Control, and Stability", IROS 2013) and whatever moves the joints: the
+//! hcc plant simulator or a real robot driver. A driver can be written
+//! against this crate alone.
+//!
+//! ## Transport
+//!
+//! Messages travel zero-copy over iceoryx2 publish-subscribe services
+//! (`ipc::Service`). All payload types are `#[repr(C)]`, fixed-size, `Copy`,
+//! pointer-free and derive `ZeroCopySend`.
+//!
+//! | service (see [`ServiceNames`])   | payload           | publisher        | subscribers            |
+//! |----------------------------------|-------------------|------------------|------------------------|
+//! | `hcc/<ns>/joint_state`           | [`JointState`]    | driver/simulator | controller, loggers    |
+//! | `hcc/<ns>/torque_command`        | [`TorqueCommand`] | controller       | driver/simulator, loggers |
+//! | `hcc/<ns>/telemetry`             | [`Telemetry`]     | controller       | loggers, `hcc` tools   |
+//! | `hcc/<ns>/state_ready` (event)   | —                 | driver notifies [`EVENT_STATE_PUBLISHED`] | controller (optional wake-up) |
+//! | `hcc/<ns>/command_ready` (event) | —                 | controller notifies [`EVENT_COMMAND_PUBLISHED`] | driver (optional wake-up) |
+//!
+//! `<ns>` is a per-robot namespace ([`validate_namespace`]: 1–64 characters
+//! of `[A-Za-z0-9_-]`), so two robots or two tests never share a service.
+//! Exactly one publisher per service. Subscribers should use a small buffer
+//! with safe overflow (the newest sample wins) and read until empty each
+//! cycle, keeping the newest sample.
+//!
+//! ## Rates and sequence/echo semantics
+//!
+//! * The driver publishes one [`JointState`] per control period (nominally
+//!   1 kHz), `header.seq` +1 per state, `header.stamp_ns` = sampling instant.
+//! * The controller answers every state it accepts with exactly one
+//!   [`TorqueCommand`]: its own `header.seq` (+1 per command), and the echo
+//!   `state_seq`/`state_stamp_ns` of the state it answers
+//!   ([`TorqueCommand::answer`]). It publishes one [`Telemetry`] per cycle.
+//! * Receivers check the stream with a [`SequenceChecker`]: `Next` or
+//!   `Gap { missed }` are used, `Duplicate`/`Backwards` are dropped (a
+//!   restarted peer shows up as repeated `Backwards`; reset the checker then).
+//!
+//! ## Timing contract of a driver
+//!
+//! Per period, the driver: (1) samples the joints and publishes a
+//! [`JointState`] (optionally notifies `state_ready`); (2) before applying a
+//! torque it takes the newest received [`TorqueCommand`] and applies it only
+//! if [`TorqueCommand::validate`] passes, its gravity flag agrees
+//! ([`check_gravity_agreement`]), and it answers the latest published state
+//! ([`command_freshness`] = `Current`), or — per the driver's documented
+//! timing tolerance — a state at most `L` periods older (`Late { cycles ≤ L }`;
+//! a driver that applies at the start of the next period uses `L = 1`).
+//! `Future` commands are never applied.
+//!
+//! **Missed command** (none applicable this period): increment
+//! `missed_commands`; the driver runs its fallback (e.g. hold/gravity
+//! compensation plus joint damping −D q̇; never an extrapolated controller
+//! torque), sets status `FallbackActive`, increments `fallback_cycles` per
+//! period in fallback; it returns to `Ok` with the next applicable command.
+//! After a driver-specific timeout in fallback (e.g. 100 ms) it stops.
+//!
+//! **Mode** ([`CommandMode`]): `Normal` and `Singular` (valid τ, degraded
+//! hierarchy) and `SafeHold` (the controller's defined safe command after
+//! invalid input) are applied. `Stop`: the driver must not apply τ, performs
+//! its own safe stop (brakes / stop category of the robot), publishes status
+//! `Stopping` then `Stopped` and does not resume within this session.
+//!
+//! ## Units, order, time
+//!
+//! * Revolute joints: q in rad, q̇ in rad/s, τ in N·m. Prismatic joints: m,
+//!   m/s, N.
+//! * Joint order: the order of the actuated joints along the URDF chain from
+//!   the root link to the tip link (fixed joints skipped). `header.n_joints`
+//!   must equal the robot model's joint count.
+//! * Timestamps: `CLOCK_MONOTONIC` in ns ([`monotonic_now_ns`]), valid
+//!   between processes on the same host.
+//!
+//! ## Gravity
+//!
+//! The control law τ = Σ τ_i + τ_μ + g (paper Eq. (19)) contains the gravity
+//! torque g(q). Whether the controller sends it is a per-robot setting:
+//! [`COMMAND_FLAG_GRAVITY_INCLUDED`] in [`TorqueCommand::flags`] says it did.
+//! A driver that adds gravity compensation itself (many commercial arms do)
+//! sets [`STATE_FLAG_DRIVER_GRAVITY_COMPENSATION`] in [`JointState::flags`].
+//! Exactly one side adds g; a driver rejects commands that disagree
+//! ([`check_gravity_agreement`]).
+//!
+//! ## Versions
+//!
+//! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
+//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema1`), so
+//! iceoryx2 itself refuses to connect peers of different schemas when a
+//! service is opened (`IncompatibleTypes`; size and alignment are compared
+//! too). iceoryx2's own version must match exactly between peers as well:
+//! every service records the iceoryx2 version that created it, and opening it
+//! from another version fails (`VersionMismatch`). Build all peers of one
+//! robot against the same hcc-msgs and iceoryx2 versions.
+//!
+//! ## Real-time use
+//!
+//! Nothing in this crate allocates except building service names and
+//! formatting errors. Validation, setters, accessors and the sequence checker
+//! are meant for the control loop. Entries beyond `n_joints` are kept zero by
+//! writers and ignored by readers.
+
+mod error;
+mod sequence;
+mod service;
+mod types;
+
+pub use error::{MsgError, NamespaceError};
+pub use sequence::{CommandFreshness, SeqEvent, SequenceChecker, command_freshness};
+pub use service::{
+    EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, MAX_NAMESPACE_LEN, Namespace, SERVICE_PREFIX,
+    ServiceNames, validate_namespace,
+};
+pub use types::{
+    COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
+    JOINT_STATE, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAGS_KNOWN, TELEMETRY,
+    TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
+};
+
+/// Version of this message schema. Bump it on any change of a type's layout
+/// or meaning, together with the `@schema<N>` suffix of every `type_name`
+/// (a unit test checks they agree).
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// Joint capacity. 32 covers single and dual 7-DOF arms, mobile manipulators
+/// and humanoid upper bodies, and keeps [`JointState`] (816 B) and
+/// [`TorqueCommand`] (304 B) well inside one 4 KiB page.
+pub const MAX_JOINTS: usize = 32;
+
+/// Capacity of hierarchy levels r in [`Telemetry`].
+pub const MAX_LEVELS: usize = 8;
+
+/// Capacity of one level's task dimension m_i in [`Telemetry`]. Equal to
+/// [`MAX_JOINTS`] because a joint-space (posture) task has dimension n.
+pub const MAX_TASK_DIM: usize = MAX_JOINTS;
+
+/// Checks a received schema version against [`SCHEMA_VERSION`].
+pub const fn check_schema(msg: &'static str, found: u32) -> Result<(), MsgError> {
+    if found == SCHEMA_VERSION {
+        Ok(())
+    } else {
+        Err(MsgError::SchemaMismatch {
+            msg,
+            found,
+            expected: SCHEMA_VERSION,
+        })
+    }
+}
+
+/// Checks that exactly one side adds gravity: the command includes g(q) iff
+/// the driver does not compensate gravity itself.
+pub fn check_gravity_agreement(
+    state: &JointState,
+    command: &TorqueCommand,
+) -> Result<(), MsgError> {
+    let command_includes = command.gravity_included();
+    let driver_compensates = state.driver_compensates_gravity();
+    if command_includes != driver_compensates {
+        Ok(())
+    } else {
+        Err(MsgError::GravityConflict {
+            command_includes,
+            driver_compensates,
+        })
+    }
+}
+
+/// Current `CLOCK_MONOTONIC` time in ns (0 if the clock cannot be read,
+/// which Linux never does for this clock). Allocation-free.
+pub fn monotonic_now_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    (ts.tv_sec as u64)
+        .saturating_mul(1_000_000_000)
+        .saturating_add(ts.tv_nsec as u64)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,352 @@
+//! Unit tests: layout, validation, schema, gravity agreement.
+
+use core::mem::{align_of, offset_of, size_of};
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use super::*;
+
+#[test]
+fn layout_has_no_hidden_padding() {
+    assert_eq!(size_of::<Header>(), 24);
+    assert_eq!(align_of::<Header>(), 8);
+    // Header, status, flags, 2 counters, 3 joint vectors.
+    assert_eq!(
+        size_of::<JointState>(),
+        24 + 4 + 4 + 8 + 8 + 3 * 8 * MAX_JOINTS
+    );
+    assert_eq!(size_of::<JointState>(), 816);
+    assert_eq!(offset_of!(JointState, q), 48);
+    // Header, two echoes, mode, flags, tau.
+    assert_eq!(
+        size_of::<TorqueCommand>(),
+        24 + 8 + 8 + 4 + 4 + 8 * MAX_JOINTS
+    );
+    assert_eq!(size_of::<TorqueCommand>(), 304);
+    assert_eq!(offset_of!(TorqueCommand, tau), 48);
+    let telemetry_fields = 24
+        + 8
+        + 8
+        + 4
+        + 4
+        + 4 * MAX_LEVELS
+        + 4
+        + 4
+        + 8 * MAX_JOINTS * (3 + MAX_LEVELS)
+        + 8 * MAX_TASK_DIM * MAX_LEVELS
+        + 8 * MAX_LEVELS * 2
+        + 8
+        + size_of::<TelemetryCounters>()
+        + size_of::<TelemetryTimings>();
+    assert_eq!(size_of::<Telemetry>(), telemetry_fields);
+    assert_eq!(size_of::<TelemetryCounters>(), 9 * 8);
+    assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
+    for a in [
+        align_of::<JointState>(),
+        align_of::<TorqueCommand>(),
+        align_of::<Telemetry>(),
+    ] {
+        assert_eq!(a, 8);
+    }
+    // The torque path fits in a page each.
+    assert!(size_of::<JointState>() <= 4096 && size_of::<TorqueCommand>() <= 4096);
+    const { assert!(MAX_JOINTS >= 32) };
+}
+
+#[test]
+fn schema_version_is_encoded_in_every_type_name() {
+    let suffix = format!("@schema{SCHEMA_VERSION}");
+    // SAFETY: type_name only returns a static string.
+    let names = unsafe {
+        [
+            <Header as ZeroCopySend>::type_name(),
+            <JointState as ZeroCopySend>::type_name(),
+            <TorqueCommand as ZeroCopySend>::type_name(),
+            <Telemetry as ZeroCopySend>::type_name(),
+            <TelemetryCounters as ZeroCopySend>::type_name(),
+            <TelemetryTimings as ZeroCopySend>::type_name(),
+        ]
+    };
+    for name in names {
+        assert!(name.starts_with("hcc_msgs::"), "{name}");
+        assert!(name.ends_with(&suffix), "{name} lacks {suffix}");
+    }
+}
+
+#[test]
+fn schema_check() {
+    assert_eq!(check_schema(JOINT_STATE, SCHEMA_VERSION), Ok(()));
+    let e = check_schema(JOINT_STATE, SCHEMA_VERSION + 1).unwrap_err();
+    assert_eq!(
+        e,
+        MsgError::SchemaMismatch {
+            msg: JOINT_STATE,
+            found: SCHEMA_VERSION + 1,
+            expected: SCHEMA_VERSION
+        }
+    );
+    assert!(e.to_string().contains("joint_state.header.schema_version"));
+    let mut s = valid_state(7);
+    s.header.schema_version = 0;
+    assert!(matches!(
+        s.validate(7),
+        Err(MsgError::SchemaMismatch { found: 0, .. })
+    ));
+}
+
+fn valid_state(n: usize) -> JointState {
+    let mut s = JointState::zeroed();
+    let q: Vec<f64> = (0..n).map(|i| 0.1 * i as f64).collect();
+    let qd: Vec<f64> = (0..n).map(|i| -0.01 * i as f64).collect();
+    let tau = vec![1.5; n];
+    s.set_joints(&q, &qd, &tau).unwrap();
+    s
+}
+
+#[test]
+fn zeroed_messages_are_valid_and_empty() {
+    let s = JointState::zeroed();
+    assert_eq!(s.header.schema_version, SCHEMA_VERSION);
+    assert_eq!(s.q().len(), 0);
+    assert_eq!(s.validate(0), Ok(()));
+    assert_eq!(TorqueCommand::zeroed().validate(0), Ok(()));
+    assert_eq!(Telemetry::zeroed().validate(0), Ok(()));
+    assert_eq!(JointState::default(), s);
+}
+
+#[test]
+fn state_setters_and_accessors() {
+    let s = valid_state(7);
+    assert_eq!(s.n(), 7);
+    assert_eq!(s.q().len(), 7);
+    assert_eq!(s.qd()[3], -0.03);
+    assert_eq!(s.tau_measured(), &[1.5; 7]);
+    assert_eq!(s.validate(7), Ok(()));
+    assert_eq!(s.status(), Ok(DriverStatus::Ok));
+
+    // Shrinking n zeroes the tail.
+    let mut t = s;
+    t.set_n_joints(3).unwrap();
+    assert!(t.q[3..].iter().all(|&x| x == 0.0));
+    assert_eq!(t.q(), &s.q()[..3]);
+
+    // A setter with the wrong length or a non-finite value leaves q unchanged.
+    let mut u = s;
+    assert_eq!(
+        u.set_q(&[0.0; 6]),
+        Err(MsgError::LengthMismatch {
+            msg: JOINT_STATE,
+            field: "q",
+            len: 6,
+            expected: 7
+        })
+    );
+    let mut bad = [0.0; 7];
+    bad[4] = f64::NAN;
+    assert!(matches!(
+        u.set_qd(&bad),
+        Err(MsgError::NonFinite {
+            field: "qd",
+            index: 4,
+            ..
+        })
+    ));
+    assert_eq!(u, s);
+    assert!(matches!(
+        u.set_joints(&[0.0; 33], &[0.0; 33], &[0.0; 33]),
+        Err(MsgError::TooManyJoints { n: 33, .. })
+    ));
+    assert!(matches!(
+        u.set_n_joints(MAX_JOINTS + 1),
+        Err(MsgError::TooManyJoints { .. })
+    ));
+    assert_eq!(u, s);
+}
+
+#[test]
+fn state_validation_cases() {
+    let s = valid_state(7);
+
+    let mut nan = s;
+    nan.q[2] = f64::NAN;
+    let e = nan.validate(7).unwrap_err();
+    assert!(matches!(
+        e,
+        MsgError::NonFinite {
+            field: "q",
+            index: 2,
+            ..
+        }
+    ));
+    assert!(e.to_string().contains("joint_state.q[2]"), "{e}");
+
+    let mut inf = s;
+    inf.tau_measured[6] = f64::NEG_INFINITY;
+    assert!(matches!(
+        inf.validate(7),
+        Err(MsgError::NonFinite {
+            field: "tau_measured",
+            index: 6,
+            ..
+        })
+    ));
+
+    // Non-finite values beyond n are ignored.
+    let mut tail = s;
+    tail.qd[20] = f64::INFINITY;
+    assert_eq!(tail.validate(7), Ok(()));
+
+    assert_eq!(
+        s.validate(6),
+        Err(MsgError::JointCountMismatch {
+            msg: JOINT_STATE,
+            n: 7,
+            expected: 6
+        })
+    );
+
+    // A corrupt n beyond the capacity is an error, and accessors stay in bounds.
+    let mut big = s;
+    big.header.n_joints = 1000;
+    assert_eq!(
+        big.validate(7),
+        Err(MsgError::TooManyJoints {
+            msg: JOINT_STATE,
+            n: 1000,
+            capacity: MAX_JOINTS
+        })
+    );
+    assert_eq!(big.q().len(), MAX_JOINTS);
+
+    let mut status = s;
+    status.status = 99;
+    assert!(matches!(
+        status.validate(7),
+        Err(MsgError::UnknownCode {
+            field: "status",
+            value: 99,
+            ..
+        })
+    ));
+    let mut flags = s;
+    flags.flags = 0x80;
+    assert!(matches!(
+        flags.validate(7),
+        Err(MsgError::UnknownCode { field: "flags", .. })
+    ));
+}
+
+#[test]
+fn command_roundtrip_and_validation() {
+    let state = {
+        let mut s = valid_state(7);
+        s.header.seq = 41;
+        s.header.stamp_ns = 123;
+        s
+    };
+    let mut c = TorqueCommand::zeroed();
+    c.set_n_joints(7).unwrap();
+    c.set_tau(&[2.0; 7]).unwrap();
+    c.answer(&state);
+    c.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
+    assert_eq!((c.state_seq, c.state_stamp_ns), (41, 123));
+    assert_eq!(c.validate(7), Ok(()));
+    assert_eq!(c.tau(), &[2.0; 7]);
+    assert_eq!(c.mode(), Ok(CommandMode::Normal));
+    assert_eq!(
+        command_freshness(c.state_seq, state.header.seq),
+        CommandFreshness::Current
+    );
+
+    let mut nan = c;
+    nan.tau[0] = f64::NAN;
+    assert!(matches!(
+        nan.validate(7),
+        Err(MsgError::NonFinite { field: "tau", .. })
+    ));
+    assert!(nan.set_tau(&[f64::INFINITY; 7]).is_err());
+    let mut mode = c;
+    mode.mode = 7;
+    assert!(matches!(
+        mode.validate(7),
+        Err(MsgError::UnknownCode { field: "mode", .. })
+    ));
+    assert!(c.validate(8).is_err());
+    for (code, mode) in [
+        (0, CommandMode::Normal),
+        (1, CommandMode::SafeHold),
+        (2, CommandMode::Singular),
+        (3, CommandMode::Stop),
+    ] {
+        assert_eq!(CommandMode::from_code(code), Ok(mode));
+        assert_eq!(mode.code(), code);
+        assert_eq!(mode.applies_torque(), mode != CommandMode::Stop);
+    }
+    for code in 0..4 {
+        assert_eq!(DriverStatus::from_code(code).map(|s| s.code()), Ok(code));
+    }
+    assert!(DriverStatus::from_code(4).is_err());
+}
+
+#[test]
+fn gravity_agreement() {
+    let mut s = valid_state(7);
+    let mut c = TorqueCommand::zeroed();
+    c.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
+    assert_eq!(check_gravity_agreement(&s, &c), Ok(()));
+    s.flags = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
+    assert!(matches!(
+        check_gravity_agreement(&s, &c),
+        Err(MsgError::GravityConflict {
+            command_includes: true,
+            driver_compensates: true
+        })
+    ));
+    c.flags = 0;
+    assert_eq!(check_gravity_agreement(&s, &c), Ok(()));
+    s.flags = 0;
+    assert!(check_gravity_agreement(&s, &c).is_err());
+}
+
+#[test]
+fn telemetry_shape() {
+    let mut t = Telemetry::zeroed();
+    t.tau_level[5][0] = 9.0;
+    t.task_error[0][5] = 9.0;
+    t.set_shape(7, &[3, 3, 7]).unwrap();
+    assert_eq!(t.levels(), 3);
+    assert_eq!(t.tau_level(0).len(), 7);
+    assert_eq!(t.task_error(2).len(), 7);
+    assert_eq!(t.task_error(0), &[0.0; 3]);
+    assert_eq!(t.tau_level(5), &[] as &[f64]);
+    assert_eq!(t.tau_level[5][0], 0.0);
+    assert_eq!(t.task_error[0][5], 0.0);
+    assert_eq!(t.validate(7), Ok(()));
+    t.singular_levels = 0b100;
+    assert!(t.is_singular(2) && !t.is_singular(1) && !t.is_singular(40));
+    assert!(matches!(
+        t.set_shape(7, &[1; 9]),
+        Err(MsgError::CapacityExceeded {
+            field: "n_levels",
+            ..
+        })
+    ));
+    assert!(matches!(
+        t.set_shape(7, &[MAX_TASK_DIM + 1]),
+        Err(MsgError::CapacityExceeded {
+            field: "task_dims",
+            ..
+        })
+    ));
+    assert!(t.set_shape(MAX_JOINTS + 1, &[1]).is_err());
+    let mut bad = t;
+    bad.n_levels = 9;
+    assert!(bad.validate(7).is_err());
+}
+
+#[test]
+fn monotonic_clock_advances() {
+    let a = monotonic_now_ns();
+    let b = monotonic_now_ns();
+    assert!(a > 0 && b >= a);
+}

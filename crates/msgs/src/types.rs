@@ -1,0 +1,754 @@
+//! The wire types: [`JointState`], [`TorqueCommand`], [`Telemetry`].
+//!
+//! All types are `#[repr(C)]`, `Copy`, contain no pointers and derive
+//! iceoryx2's `ZeroCopySend`, so they live directly in shared memory. Their
+//! iceoryx2 type names carry the schema version (`…@schema<N>`), which makes
+//! iceoryx2 refuse to connect peers built against different schemas.
+//!
+//! Status and mode fields are raw `u32` codes, not Rust enums: a peer (possibly
+//! written in another language) may put any bit pattern there, and reading an
+//! invalid discriminant of a Rust enum would be undefined behaviour. Decode
+//! them with [`DriverStatus::from_code`] / [`CommandMode::from_code`].
+//!
+//! Joint vectors hold [`MAX_JOINTS`] entries of which the first
+//! `header.n_joints` are meaningful. Writers keep the tail zero; readers ignore it.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::error::MsgError;
+use crate::{MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM, SCHEMA_VERSION};
+
+/// Name of [`JointState`] in error messages.
+pub const JOINT_STATE: &str = "joint_state";
+/// Name of [`TorqueCommand`] in error messages.
+pub const TORQUE_COMMAND: &str = "torque_command";
+/// Name of [`Telemetry`] in error messages.
+pub const TELEMETRY: &str = "telemetry";
+
+/// [`JointState::flags`] bit: the driver itself adds gravity compensation
+/// g(q) to every commanded torque, so commands must NOT contain it.
+pub const STATE_FLAG_DRIVER_GRAVITY_COMPENSATION: u32 = 1 << 0;
+/// All [`JointState::flags`] bits defined by this schema.
+pub const STATE_FLAGS_KNOWN: u32 = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
+
+/// [`TorqueCommand::flags`] bit: τ already contains the gravity torque g(q)
+/// (term g of the control law, paper Eq. (19)).
+pub const COMMAND_FLAG_GRAVITY_INCLUDED: u32 = 1 << 0;
+/// All [`TorqueCommand::flags`] bits defined by this schema.
+pub const COMMAND_FLAGS_KNOWN: u32 = COMMAND_FLAG_GRAVITY_INCLUDED;
+
+/// Header shared by all messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("hcc_msgs::Header@schema1")]
+#[repr(C)]
+pub struct Header {
+    /// [`SCHEMA_VERSION`] of the writer.
+    pub schema_version: u32,
+    /// Number of valid joints `n` (≤ [`MAX_JOINTS`]).
+    pub n_joints: u32,
+    /// Sequence number of this message stream; +1 per message.
+    pub seq: u64,
+    /// CLOCK_MONOTONIC time in ns when the content was produced
+    /// (state: sampling instant; command: computation end).
+    pub stamp_ns: u64,
+}
+
+impl Header {
+    /// A header with the current schema, `n = 0`, `seq = 0`, `stamp_ns = 0`.
+    pub const fn new() -> Self {
+        Self {
+            schema_version: SCHEMA_VERSION,
+            n_joints: 0,
+            seq: 0,
+            stamp_ns: 0,
+        }
+    }
+
+    /// Checks the schema version and that `n_joints` fits the capacity and
+    /// equals `expected_n` (the robot model's joint count).
+    pub fn check(&self, msg: &'static str, expected_n: usize) -> Result<usize, MsgError> {
+        crate::check_schema(msg, self.schema_version)?;
+        let n = self.n_joints as usize;
+        if n > MAX_JOINTS {
+            return Err(MsgError::TooManyJoints {
+                msg,
+                n,
+                capacity: MAX_JOINTS,
+            });
+        }
+        if n != expected_n {
+            return Err(MsgError::JointCountMismatch {
+                msg,
+                n,
+                expected: expected_n,
+            });
+        }
+        Ok(n)
+    }
+
+    /// `n_joints` clamped to the capacity (never panics on a corrupt value).
+    #[inline]
+    pub fn n(&self) -> usize {
+        (self.n_joints as usize).min(MAX_JOINTS)
+    }
+}
+
+impl Default for Header {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Status of the robot driver (or simulator), published in [`JointState::status`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum DriverStatus {
+    /// Commands are applied normally.
+    Ok = 0,
+    /// No valid command answered recent states; the driver runs its own
+    /// fallback (holding torque / damping) and counts `fallback_cycles`.
+    FallbackActive = 1,
+    /// The driver is stopping (Stop command received, or shutdown): it no
+    /// longer applies commands.
+    Stopping = 2,
+    /// The driver has stopped; no further commands are applied.
+    Stopped = 3,
+}
+
+impl DriverStatus {
+    /// Decodes a raw code; unknown codes are an error naming the field.
+    pub const fn from_code(code: u32) -> Result<Self, MsgError> {
+        match code {
+            0 => Ok(Self::Ok),
+            1 => Ok(Self::FallbackActive),
+            2 => Ok(Self::Stopping),
+            3 => Ok(Self::Stopped),
+            value => Err(MsgError::UnknownCode {
+                msg: JOINT_STATE,
+                field: "status",
+                value,
+            }),
+        }
+    }
+
+    /// The raw code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+/// Mode of a [`TorqueCommand`], in [`TorqueCommand::mode`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum CommandMode {
+    /// τ is the regular control law, paper Eq. (19).
+    Normal = 0,
+    /// The controller received invalid input (non-finite state, wrong joint
+    /// count, stale data) and sends its defined safe command instead
+    /// (gravity compensation if included, plus joint damping). Drivers apply it.
+    SafeHold = 1,
+    /// τ is valid but at least one task Jacobian is (near) singular, so the
+    /// hierarchy is degraded (see telemetry). Drivers apply it like Normal.
+    Singular = 2,
+    /// The controller requests a stop: the driver must not apply τ and must
+    /// enter its own stop behaviour (brakes / its safe stop), then publish
+    /// status Stopping/Stopped.
+    Stop = 3,
+}
+
+impl CommandMode {
+    /// Decodes a raw code; unknown codes are an error naming the field.
+    pub const fn from_code(code: u32) -> Result<Self, MsgError> {
+        match code {
+            0 => Ok(Self::Normal),
+            1 => Ok(Self::SafeHold),
+            2 => Ok(Self::Singular),
+            3 => Ok(Self::Stop),
+            value => Err(MsgError::UnknownCode {
+                msg: TORQUE_COMMAND,
+                field: "mode",
+                value,
+            }),
+        }
+    }
+
+    /// The raw code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// Whether a driver applies τ in this mode (all but [`CommandMode::Stop`]).
+    pub const fn applies_torque(self) -> bool {
+        !matches!(self, Self::Stop)
+    }
+}
+
+/// Checks that every one of the first `n` entries is finite.
+#[inline]
+fn check_finite(
+    msg: &'static str,
+    field: &'static str,
+    values: &[f64],
+    n: usize,
+) -> Result<(), MsgError> {
+    for (index, &value) in values.iter().take(n).enumerate() {
+        if !value.is_finite() {
+            return Err(MsgError::NonFinite {
+                msg,
+                field,
+                index,
+                value,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Copies `src` into the first `n` entries of `dst` after checking its length
+/// and finiteness; on error `dst` is unchanged.
+#[inline]
+fn set_checked(
+    msg: &'static str,
+    field: &'static str,
+    dst: &mut [f64],
+    n: usize,
+    src: &[f64],
+) -> Result<(), MsgError> {
+    if src.len() != n {
+        return Err(MsgError::LengthMismatch {
+            msg,
+            field,
+            len: src.len(),
+            expected: n,
+        });
+    }
+    check_finite(msg, field, src, n)?;
+    dst[..n].copy_from_slice(src);
+    Ok(())
+}
+
+/// Sets `header.n_joints`, zeroing all joint entries at index ≥ `n` in `vectors`.
+fn set_n(
+    msg: &'static str,
+    header: &mut Header,
+    vectors: &mut [&mut [f64; MAX_JOINTS]],
+    n: usize,
+) -> Result<(), MsgError> {
+    if n > MAX_JOINTS {
+        return Err(MsgError::TooManyJoints {
+            msg,
+            n,
+            capacity: MAX_JOINTS,
+        });
+    }
+    header.n_joints = n as u32;
+    for v in vectors.iter_mut() {
+        v[n..].fill(0.0);
+    }
+    Ok(())
+}
+
+/// Joint state, published by the driver/simulator once per cycle (1 kHz).
+///
+/// Units: q in rad (prismatic: m), q̇ in rad/s (m/s), τ in N·m (N).
+/// Joint order: the URDF chain order from root to tip (actuated joints only).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hcc_msgs::JointState@schema1")]
+#[repr(C)]
+pub struct JointState {
+    /// `seq`: state counter (+1 per cycle); `stamp_ns`: sampling instant.
+    pub header: Header,
+    /// [`DriverStatus`] code.
+    pub status: u32,
+    /// `STATE_FLAG_*` bits.
+    pub flags: u32,
+    /// Total cycles in which no applicable command was available.
+    pub missed_commands: u64,
+    /// Total cycles spent in the driver's fallback.
+    pub fallback_cycles: u64,
+    /// Joint positions q.
+    pub q: [f64; MAX_JOINTS],
+    /// Joint velocities q̇.
+    pub qd: [f64; MAX_JOINTS],
+    /// Measured joint torques (zero if the driver has no torque sensing).
+    pub tau_measured: [f64; MAX_JOINTS],
+}
+
+impl JointState {
+    /// All-zero state with the current schema, `n = 0` and status Ok.
+    pub const fn zeroed() -> Self {
+        Self {
+            header: Header::new(),
+            status: DriverStatus::Ok as u32,
+            flags: 0,
+            missed_commands: 0,
+            fallback_cycles: 0,
+            q: [0.0; MAX_JOINTS],
+            qd: [0.0; MAX_JOINTS],
+            tau_measured: [0.0; MAX_JOINTS],
+        }
+    }
+
+    /// Number of valid joints (clamped to the capacity).
+    #[inline]
+    pub fn n(&self) -> usize {
+        self.header.n()
+    }
+
+    /// Joint positions, length `n`.
+    #[inline]
+    pub fn q(&self) -> &[f64] {
+        &self.q[..self.n()]
+    }
+
+    /// Joint velocities, length `n`.
+    #[inline]
+    pub fn qd(&self) -> &[f64] {
+        &self.qd[..self.n()]
+    }
+
+    /// Measured torques, length `n`.
+    #[inline]
+    pub fn tau_measured(&self) -> &[f64] {
+        &self.tau_measured[..self.n()]
+    }
+
+    /// Decoded driver status.
+    pub fn status(&self) -> Result<DriverStatus, MsgError> {
+        DriverStatus::from_code(self.status)
+    }
+
+    /// Sets `n` and zeroes all entries at index ≥ `n`.
+    pub fn set_n_joints(&mut self, n: usize) -> Result<(), MsgError> {
+        set_n(
+            JOINT_STATE,
+            &mut self.header,
+            &mut [&mut self.q, &mut self.qd, &mut self.tau_measured],
+            n,
+        )
+    }
+
+    /// Sets q (length must equal `n`, values finite).
+    pub fn set_q(&mut self, q: &[f64]) -> Result<(), MsgError> {
+        let n = self.n();
+        set_checked(JOINT_STATE, "q", &mut self.q, n, q)
+    }
+
+    /// Sets q̇ (length must equal `n`, values finite).
+    pub fn set_qd(&mut self, qd: &[f64]) -> Result<(), MsgError> {
+        let n = self.n();
+        set_checked(JOINT_STATE, "qd", &mut self.qd, n, qd)
+    }
+
+    /// Sets the measured torques (length must equal `n`, values finite).
+    pub fn set_tau_measured(&mut self, tau: &[f64]) -> Result<(), MsgError> {
+        let n = self.n();
+        set_checked(JOINT_STATE, "tau_measured", &mut self.tau_measured, n, tau)
+    }
+
+    /// Sets `n = q.len()` and q, q̇, τ_measured at once (tail zeroed).
+    /// Everything is checked first, so on error the message is unchanged.
+    pub fn set_joints(&mut self, q: &[f64], qd: &[f64], tau: &[f64]) -> Result<(), MsgError> {
+        let n = q.len();
+        if n > MAX_JOINTS {
+            return Err(MsgError::TooManyJoints {
+                msg: JOINT_STATE,
+                n,
+                capacity: MAX_JOINTS,
+            });
+        }
+        for (field, v) in [("q", q), ("qd", qd), ("tau_measured", tau)] {
+            if v.len() != n {
+                return Err(MsgError::LengthMismatch {
+                    msg: JOINT_STATE,
+                    field,
+                    len: v.len(),
+                    expected: n,
+                });
+            }
+            check_finite(JOINT_STATE, field, v, n)?;
+        }
+        self.set_n_joints(n)?;
+        self.q[..n].copy_from_slice(q);
+        self.qd[..n].copy_from_slice(qd);
+        self.tau_measured[..n].copy_from_slice(tau);
+        Ok(())
+    }
+
+    /// Full receiver-side check: schema, `n` within capacity and equal to
+    /// `expected_n`, known status and flags, all n entries of q, q̇, τ finite.
+    pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
+        let n = self.header.check(JOINT_STATE, expected_n)?;
+        self.status()?;
+        if self.flags & !STATE_FLAGS_KNOWN != 0 {
+            return Err(MsgError::UnknownCode {
+                msg: JOINT_STATE,
+                field: "flags",
+                value: self.flags,
+            });
+        }
+        check_finite(JOINT_STATE, "q", &self.q, n)?;
+        check_finite(JOINT_STATE, "qd", &self.qd, n)?;
+        check_finite(JOINT_STATE, "tau_measured", &self.tau_measured, n)
+    }
+
+    /// Whether the driver adds gravity compensation itself.
+    pub fn driver_compensates_gravity(&self) -> bool {
+        self.flags & STATE_FLAG_DRIVER_GRAVITY_COMPENSATION != 0
+    }
+}
+
+impl Default for JointState {
+    fn default() -> Self {
+        Self::zeroed()
+    }
+}
+
+/// Torque command, published by the controller once per received state.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hcc_msgs::TorqueCommand@schema1")]
+#[repr(C)]
+pub struct TorqueCommand {
+    /// `seq`: command counter (+1 per command); `stamp_ns`: when τ was computed.
+    pub header: Header,
+    /// Echo of the `header.seq` of the [`JointState`] this command answers.
+    pub state_seq: u64,
+    /// Echo of the `header.stamp_ns` of that state (round-trip latency).
+    pub state_stamp_ns: u64,
+    /// [`CommandMode`] code.
+    pub mode: u32,
+    /// `COMMAND_FLAG_*` bits.
+    pub flags: u32,
+    /// Commanded joint torques τ (N·m; prismatic N).
+    pub tau: [f64; MAX_JOINTS],
+}
+
+impl TorqueCommand {
+    /// All-zero command with the current schema, `n = 0` and mode Normal.
+    pub const fn zeroed() -> Self {
+        Self {
+            header: Header::new(),
+            state_seq: 0,
+            state_stamp_ns: 0,
+            mode: CommandMode::Normal as u32,
+            flags: 0,
+            tau: [0.0; MAX_JOINTS],
+        }
+    }
+
+    /// Number of valid joints (clamped to the capacity).
+    #[inline]
+    pub fn n(&self) -> usize {
+        self.header.n()
+    }
+
+    /// Commanded torques, length `n`.
+    #[inline]
+    pub fn tau(&self) -> &[f64] {
+        &self.tau[..self.n()]
+    }
+
+    /// Decoded mode.
+    pub fn mode(&self) -> Result<CommandMode, MsgError> {
+        CommandMode::from_code(self.mode)
+    }
+
+    /// Sets `n` and zeroes τ at index ≥ `n`.
+    pub fn set_n_joints(&mut self, n: usize) -> Result<(), MsgError> {
+        set_n(TORQUE_COMMAND, &mut self.header, &mut [&mut self.tau], n)
+    }
+
+    /// Sets τ (length must equal `n`, values finite).
+    pub fn set_tau(&mut self, tau: &[f64]) -> Result<(), MsgError> {
+        let n = self.n();
+        set_checked(TORQUE_COMMAND, "tau", &mut self.tau, n, tau)
+    }
+
+    /// Fills the echo fields from the state this command answers.
+    pub fn answer(&mut self, state: &JointState) {
+        self.state_seq = state.header.seq;
+        self.state_stamp_ns = state.header.stamp_ns;
+    }
+
+    /// Whether τ contains the gravity torque g(q).
+    pub fn gravity_included(&self) -> bool {
+        self.flags & COMMAND_FLAG_GRAVITY_INCLUDED != 0
+    }
+
+    /// Full receiver-side check: schema, `n`, known mode and flags, τ finite.
+    pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
+        let n = self.header.check(TORQUE_COMMAND, expected_n)?;
+        self.mode()?;
+        if self.flags & !COMMAND_FLAGS_KNOWN != 0 {
+            return Err(MsgError::UnknownCode {
+                msg: TORQUE_COMMAND,
+                field: "flags",
+                value: self.flags,
+            });
+        }
+        check_finite(TORQUE_COMMAND, "tau", &self.tau, n)
+    }
+}
+
+impl Default for TorqueCommand {
+    fn default() -> Self {
+        Self::zeroed()
+    }
+}
+
+/// Per-cycle event counters of the controller (totals since start).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("hcc_msgs::TelemetryCounters@schema1")]
+#[repr(C)]
+pub struct TelemetryCounters {
+    /// Control cycles run.
+    pub cycles: u64,
+    /// States rejected by validation (answered with SafeHold).
+    pub invalid_states: u64,
+    /// Cycles in which at least one torque was saturated.
+    pub saturations: u64,
+    /// Cycles in which a level was flagged singular.
+    pub singular_cycles: u64,
+    /// Wake-ups without a new state within the stale timeout.
+    pub stale_events: u64,
+    /// Times the peer (driver) was detected dead/gone.
+    pub peer_lost_events: u64,
+    /// States missed according to the sequence checker (sum of gaps).
+    pub missed_states: u64,
+    /// Duplicate or backwards state sequence numbers.
+    pub sequence_errors: u64,
+    /// Commands that could not be sent (loan/send failure).
+    pub send_failures: u64,
+}
+
+/// Timing of one controller cycle, in ns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("hcc_msgs::TelemetryTimings@schema1")]
+#[repr(C)]
+pub struct TelemetryTimings {
+    /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
+    /// only with broken clocks).
+    pub wakeup_latency_ns: i64,
+    /// Time to compute τ (read state → command sent).
+    pub compute_ns: u64,
+    /// Time since the previous cycle's wake-up.
+    pub period_ns: u64,
+    /// Worst `compute_ns` seen so far.
+    pub max_compute_ns: u64,
+}
+
+/// Per-cycle diagnostics of the controller, published at the control rate.
+///
+/// Paper quantities: τ_i per level (Eqs. (20), (21)), τ_μ (Eq. (22)), g and
+/// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
+/// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hcc_msgs::Telemetry@schema1")]
+#[repr(C)]
+pub struct Telemetry {
+    /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
+    pub header: Header,
+    /// `seq` of the state this cycle consumed.
+    pub state_seq: u64,
+    /// `seq` of the command this cycle sent.
+    pub command_seq: u64,
+    /// [`CommandMode`] code of that command.
+    pub mode: u32,
+    /// Number of hierarchy levels r (≤ [`MAX_LEVELS`]).
+    pub n_levels: u32,
+    /// Task dimension m_i of each level (≤ [`MAX_TASK_DIM`]).
+    pub task_dims: [u32; MAX_LEVELS],
+    /// Bit i set: level i (0-based) is singular (σ_min below threshold).
+    pub singular_levels: u32,
+    /// `COMMAND_FLAG_*` bits of the command sent.
+    pub flags: u32,
+    /// Total commanded τ, Eq. (19).
+    pub tau: [f64; MAX_JOINTS],
+    /// Task torques τ_i per level, Eqs. (20), (21).
+    pub tau_level: [[f64; MAX_JOINTS]; MAX_LEVELS],
+    /// Coupling compensation τ_μ, Eq. (22).
+    pub tau_mu: [f64; MAX_JOINTS],
+    /// Gravity torque g(q) (zero when gravity is not included).
+    pub tau_gravity: [f64; MAX_JOINTS],
+    /// Task errors x̃_i per level (first m_i entries valid).
+    pub task_error: [[f64; MAX_TASK_DIM]; MAX_LEVELS],
+    /// Storage functions S_i per level, Eqs. (26), (28).
+    pub storage: [f64; MAX_LEVELS],
+    /// Smallest singular value of each level's (projected) Jacobian.
+    pub min_singular_value: [f64; MAX_LEVELS],
+    /// Power of the coupling compensation P_μ = τ_μᵀ q̇ (≈ 0).
+    pub p_mu: f64,
+    /// Event counters.
+    pub counters: TelemetryCounters,
+    /// Cycle timings.
+    pub timings: TelemetryTimings,
+}
+
+impl Telemetry {
+    /// All-zero telemetry with the current schema.
+    pub const fn zeroed() -> Self {
+        Self {
+            header: Header::new(),
+            state_seq: 0,
+            command_seq: 0,
+            mode: CommandMode::Normal as u32,
+            n_levels: 0,
+            task_dims: [0; MAX_LEVELS],
+            singular_levels: 0,
+            flags: 0,
+            tau: [0.0; MAX_JOINTS],
+            tau_level: [[0.0; MAX_JOINTS]; MAX_LEVELS],
+            tau_mu: [0.0; MAX_JOINTS],
+            tau_gravity: [0.0; MAX_JOINTS],
+            task_error: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
+            storage: [0.0; MAX_LEVELS],
+            min_singular_value: [0.0; MAX_LEVELS],
+            p_mu: 0.0,
+            counters: TelemetryCounters {
+                cycles: 0,
+                invalid_states: 0,
+                saturations: 0,
+                singular_cycles: 0,
+                stale_events: 0,
+                peer_lost_events: 0,
+                missed_states: 0,
+                sequence_errors: 0,
+                send_failures: 0,
+            },
+            timings: TelemetryTimings {
+                wakeup_latency_ns: 0,
+                compute_ns: 0,
+                period_ns: 0,
+                max_compute_ns: 0,
+            },
+        }
+    }
+
+    /// Number of valid joints (clamped to the capacity).
+    #[inline]
+    pub fn n(&self) -> usize {
+        self.header.n()
+    }
+
+    /// Number of valid levels (clamped to the capacity).
+    #[inline]
+    pub fn levels(&self) -> usize {
+        (self.n_levels as usize).min(MAX_LEVELS)
+    }
+
+    /// Sets n (joints), r (levels) and each level's task dimension, zeroing
+    /// everything outside the valid ranges.
+    pub fn set_shape(&mut self, n: usize, task_dims: &[usize]) -> Result<(), MsgError> {
+        if n > MAX_JOINTS {
+            return Err(MsgError::TooManyJoints {
+                msg: TELEMETRY,
+                n,
+                capacity: MAX_JOINTS,
+            });
+        }
+        if task_dims.len() > MAX_LEVELS {
+            return Err(MsgError::CapacityExceeded {
+                msg: TELEMETRY,
+                field: "n_levels",
+                value: task_dims.len(),
+                capacity: MAX_LEVELS,
+            });
+        }
+        if let Some(&m) = task_dims.iter().find(|&&m| m > MAX_TASK_DIM) {
+            return Err(MsgError::CapacityExceeded {
+                msg: TELEMETRY,
+                field: "task_dims",
+                value: m,
+                capacity: MAX_TASK_DIM,
+            });
+        }
+        let r = task_dims.len();
+        self.header.n_joints = n as u32;
+        self.n_levels = r as u32;
+        self.task_dims = [0; MAX_LEVELS];
+        for (dst, &m) in self.task_dims.iter_mut().zip(task_dims) {
+            *dst = m as u32;
+        }
+        for v in [&mut self.tau, &mut self.tau_mu, &mut self.tau_gravity] {
+            v[n..].fill(0.0);
+        }
+        for (i, v) in self.tau_level.iter_mut().enumerate() {
+            if i < r {
+                v[n..].fill(0.0);
+            } else {
+                v.fill(0.0);
+            }
+        }
+        for (i, e) in self.task_error.iter_mut().enumerate() {
+            let m = if i < r { task_dims[i] } else { 0 };
+            e[m..].fill(0.0);
+        }
+        self.storage[r..].fill(0.0);
+        self.min_singular_value[r..].fill(0.0);
+        Ok(())
+    }
+
+    /// Total τ, length n.
+    pub fn tau(&self) -> &[f64] {
+        &self.tau[..self.n()]
+    }
+
+    /// τ_i of level `level` (0-based), length n; empty if out of range.
+    pub fn tau_level(&self, level: usize) -> &[f64] {
+        if level < self.levels() {
+            &self.tau_level[level][..self.n()]
+        } else {
+            &[]
+        }
+    }
+
+    /// Task error of level `level` (0-based), length m_i; empty if out of range.
+    pub fn task_error(&self, level: usize) -> &[f64] {
+        if level < self.levels() {
+            let m = (self.task_dims[level] as usize).min(MAX_TASK_DIM);
+            &self.task_error[level][..m]
+        } else {
+            &[]
+        }
+    }
+
+    /// Whether level `level` (0-based) is flagged singular.
+    pub fn is_singular(&self, level: usize) -> bool {
+        level < 32 && self.singular_levels & (1 << level) != 0
+    }
+
+    /// Receiver-side check of the shape fields (schema, n, r, m_i, mode);
+    /// values are diagnostics and may legitimately be non-finite.
+    pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
+        self.header.check(TELEMETRY, expected_n)?;
+        let r = self.n_levels as usize;
+        if r > MAX_LEVELS {
+            return Err(MsgError::CapacityExceeded {
+                msg: TELEMETRY,
+                field: "n_levels",
+                value: r,
+                capacity: MAX_LEVELS,
+            });
+        }
+        if let Some(&m) = self.task_dims.iter().find(|&&m| m as usize > MAX_TASK_DIM) {
+            return Err(MsgError::CapacityExceeded {
+                msg: TELEMETRY,
+                field: "task_dims",
+                value: m as usize,
+                capacity: MAX_TASK_DIM,
+            });
+        }
+        CommandMode::from_code(self.mode).map_err(|_| MsgError::UnknownCode {
+            msg: TELEMETRY,
+            field: "mode",
+            value: self.mode,
+        })?;
+        Ok(())
+    }
+}
+
+impl Default for Telemetry {
+    fn default() -> Self {
+        Self::zeroed()
+    }
+}

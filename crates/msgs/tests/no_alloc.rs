@@ -1,0 +1,75 @@
+//! The per-cycle helpers (validation, setters, sequence checks) do not
+//! allocate: a counting global allocator must see zero allocations.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use hcc_msgs::{
+    JointState, MsgError, SequenceChecker, Telemetry, TorqueCommand, check_gravity_agreement,
+    command_freshness, monotonic_now_ns,
+};
+
+struct Counting;
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn hot_path_helpers_do_not_allocate() {
+    let q = [0.3; 7];
+    let mut state = JointState::zeroed();
+    let mut command = TorqueCommand::zeroed();
+    let mut telemetry = Telemetry::zeroed();
+    let mut checker = SequenceChecker::new();
+    let mut errors = 0usize;
+
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    for k in 0..1000u64 {
+        state.header.seq = k;
+        state.header.stamp_ns = monotonic_now_ns();
+        state.set_joints(&q, &q, &q).unwrap_or_else(|_| errors += 1);
+        let mut bad = state;
+        bad.qd[3] = f64::NAN;
+        if let Err(MsgError::NonFinite { .. }) = bad.validate(7) {
+        } else {
+            errors += 1;
+        }
+        state.validate(7).unwrap_or_else(|_| errors += 1);
+        let event = checker.observe(k);
+        if !event.is_accepted() || event.to_result("joint_state", k).is_err() {
+            errors += 1;
+        }
+        if checker.observe(k).to_result("joint_state", k).is_ok() {
+            errors += 1;
+        }
+        command.set_n_joints(7).unwrap_or_else(|_| errors += 1);
+        command.set_tau(state.q()).unwrap_or_else(|_| errors += 1);
+        command.answer(&state);
+        command.flags = hcc_msgs::COMMAND_FLAG_GRAVITY_INCLUDED;
+        command.validate(7).unwrap_or_else(|_| errors += 1);
+        check_gravity_agreement(&state, &command).unwrap_or_else(|_| errors += 1);
+        let _ = command_freshness(command.state_seq, k);
+        telemetry
+            .set_shape(7, &[3, 3, 7])
+            .unwrap_or_else(|_| errors += 1);
+        telemetry.validate(7).unwrap_or_else(|_| errors += 1);
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(errors, 0);
+    assert_eq!(after - before, 0, "allocations in the hot path");
+}
