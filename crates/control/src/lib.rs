@@ -1,1 +1,61 @@
-//! See the crate description.
+//! The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer,
+//! "Multi-Objective Compliance Control of Redundant Manipulators: Hierarchy,
+//! Control, and Stability" (IROS 2013), as a library a 1 kHz loop calls.
+//!
+//! A hierarchy of r levels, each a spring–damper task x_i = f_i(q) with
+//! stiffness K_i, damping D_i and goal x_{i,d} ([`spec`]). Per cycle
+//! ([`Controller::step`]):
+//! - the local null-space velocities v_i = J̄_i q̇ (eq. 3) with J̄_1 = J_1 and the
+//!   dynamically consistent J̄_i = (Z_i M Z_iᵀ)⁻¹ Z_i M (eq. 5), Z_i = J_i V_{i−1}
+//!   (V_{i−1}ᵀ M V_{i−1})⁻¹ V_{i−1}ᵀ (eq. 12) for 2 ≤ i < r and Z_r = V_{r−1}ᵀ for the
+//!   lowest level, V_{i−1} an orthonormal basis of the null space of the augmented
+//!   Jacobian (eq. 6) from a Householder QR;
+//! - the block-diagonal inertia Λ_i (eqs. 16, 18) and the Coriolis matrix μ (eq. 17),
+//!   with J̄̇ computed analytically from J̇_i, Ṁ = C + Cᵀ and the parallel-transport
+//!   derivative of the basis, V̇ = −J⁺ J̇ V;
+//! - τ = Σ τ_i + τ_μ + g (eq. 19) with τ_1 = −J_1ᵀ F_1 (eq. 20),
+//!   τ_i = −J̄_iᵀ Z_i J_iᵀ F_i (eq. 21), F_i = ∂V_i/∂x_iᵀ + D_i ẋ_i, and the
+//!   power-conserving τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22).
+//!
+//! **Basis continuity.** Z_i for i < r does not depend on the choice of V_{i−1}
+//! (only on the subspace), but Z_r = V_{r−1}ᵀ does, and a QR basis is not a
+//! continuous function of q. The lowest level's basis is therefore aligned every
+//! cycle to the previous one by an orthogonal Procrustes step (the polar factor of
+//! V_newᵀ V_prev), a first-order approximation of parallel transport, whose
+//! derivative V̇ = −J⁺ J̇ V is the one used in J̄̇ — so no derivative ever straddles a
+//! sign flip. [`Controller::reset`] forgets the basis after a jump of the state.
+//!
+//! **Singularities.** Every Gram matrix that is inverted (J_1 M⁻¹ J_1ᵀ, J_aug J_augᵀ,
+//! Z_i M Z_iᵀ) goes through a damped inverse `(A + δI)⁻¹` whose damping δ rises
+//! smoothly from 0 as the eigenvalue ratio λ_min/λ_max falls below
+//! `singular_ratio` (damped least squares on the Gram matrix). Away from
+//! singularities the law is exact; near one the torques stay finite and bounded and
+//! [`Output::singular`] flags the level. The strict hierarchy and the zero power of τ_μ
+//! are then only approximate.
+//!
+//! **Allocation.** [`Controller::new`] allocates every buffer (an own
+//! `hcc_model::Data` included); [`Controller::step`] allocates nothing.
+
+pub mod controller;
+pub mod dense;
+pub mod spec;
+
+pub use controller::{Controller, Diagnostics, Output};
+pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec};
+
+/// Errors of construction and of a cycle.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlError {
+    /// A level of the hierarchy is invalid (which level and why).
+    #[error("level {level}: {why}")]
+    Level { level: String, why: String },
+    /// The hierarchy as a whole is invalid.
+    #[error("{0}")]
+    Spec(String),
+    /// A cycle's input was rejected (the output is left untouched).
+    #[error("input rejected: {0}")]
+    BadInput(&'static str),
+    /// A numerical failure in a cycle (τ falls back to g, or 0).
+    #[error("numerical failure: {0}")]
+    Numerical(&'static str),
+}

@@ -1,0 +1,970 @@
+//! The controller: workspace, construction checks and the per-cycle law.
+
+use crate::ControlError;
+use crate::dense::{
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemv, gemv_t,
+    null_space_basis, procrustes_align,
+};
+use crate::spec::{ControllerSpec, Form, TaskSpec};
+use hcc_model::{Data, Model};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// Smallest eigenvalue that counts as "not vanished" for a Gram matrix.
+const GRAM_FLOOR: f64 = 1e-12;
+
+/// What one control cycle produced (all preallocated; valid after [`Controller::step`]).
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// τ = Σ τ_i + τ_μ + g (eq. 19); g only with gravity compensation.
+    pub tau: DVector<f64>,
+    /// τ_i of each level (eqs. 20, 21).
+    pub tau_level: Vec<DVector<f64>>,
+    /// τ_μ (eq. 22); zero when the cancellation is off.
+    pub tau_mu: DVector<f64>,
+    /// g(q) (also when it is not added to τ).
+    pub gravity: DVector<f64>,
+    /// x_i − x_{i,d} per level (orientation: 2·R_d·ε ≈ the rotation vector, world axes).
+    pub task_error: Vec<DVector<f64>>,
+    /// v_i = J̄_i q̇ (eq. 3); the lowest level has n − Σ_{j<r} m_j entries.
+    pub v: Vec<DVector<f64>>,
+    /// V_i(x̃_i), the potential of each level.
+    pub potential: Vec<f64>,
+    /// S_i = ½ v_iᵀ Λ_i v_i + V_i (eqs. 26, 28).
+    pub storage: Vec<f64>,
+    /// P_μ = τ_μᵀ q̇ (zero in theory).
+    pub p_mu: f64,
+    /// Per level: an inversion of this level was damped (kinematic or algorithmic singularity).
+    pub singular: Vec<bool>,
+    /// Any level singular.
+    pub any_singular: bool,
+    /// Per level: the smallest eigenvalue ratio of the Gram matrices inverted for it.
+    pub conditioning: Vec<f64>,
+}
+
+/// Per-level workspace.
+#[derive(Clone, Debug)]
+struct Level {
+    m: usize,
+    /// Dimension of v_i: m_i, or n − Σ_{j<r} m_j for the lowest null-space level.
+    d: usize,
+    stiffness: DMatrix<f64>,
+    damping: DMatrix<f64>,
+    goal: DVector<f64>,
+    goal_rotation: Rotation3<f64>,
+    // task
+    j: DMatrix<f64>,
+    jdot: DMatrix<f64>,
+    err: DVector<f64>,
+    grad: DVector<f64>,
+    xdot: DVector<f64>,
+    f: DVector<f64>,
+    potential: f64,
+    // decomposition
+    z: DMatrix<f64>,
+    zdot: DMatrix<f64>,
+    zm: DMatrix<f64>,
+    zmdot: DMatrix<f64>,
+    lambda: DMatrix<f64>,
+    lambda_inv: DMatrix<f64>,
+    lambda_dot: DMatrix<f64>,
+    jbar: DMatrix<f64>,
+    jbar_dot: DMatrix<f64>,
+    /// The block column of J̄⁻¹ belonging to this level (eq. 13), n × d.
+    jbar_inv: DMatrix<f64>,
+    w_dn: DMatrix<f64>,
+    v: DVector<f64>,
+    y_d: DVector<f64>,
+    y_d2: DVector<f64>,
+    spd: SpdWork,
+}
+
+/// Null space of the augmented Jacobian of the levels above level i (eq. 6–9).
+#[derive(Clone, Debug)]
+struct NullSpace {
+    k: usize,
+    jaug: DMatrix<f64>,
+    jaug_dot: DMatrix<f64>,
+    qr_work: DMatrix<f64>,
+    qr_q: DMatrix<f64>,
+    /// V_{i−1}: orthonormal basis (n × (n − k)).
+    v: DMatrix<f64>,
+    v_prev: DMatrix<f64>,
+    has_prev: bool,
+    vdot: DMatrix<f64>,
+    gram: DMatrix<f64>,
+    gram_inv: DMatrix<f64>,
+    t1: DMatrix<f64>,
+    t2: DMatrix<f64>,
+    mv: DMatrix<f64>,
+    mdv: DMatrix<f64>,
+    vs: DMatrix<f64>,
+    tmp_nd: DMatrix<f64>,
+    s: DMatrix<f64>,
+    s_inv_src: DMatrix<f64>,
+    sdot: DMatrix<f64>,
+    x: DMatrix<f64>,
+    tmp_dd: DMatrix<f64>,
+    /// P = V (VᵀMV)⁻¹ Vᵀ = M⁻¹ N_i (eq. 9), n × n, and its time derivative.
+    p: DMatrix<f64>,
+    pdot: DMatrix<f64>,
+    spd_k: SpdWork,
+    spd_d: SpdWork,
+    align: AlignWork,
+    gram_cond: Conditioning,
+}
+
+/// The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer (IROS 2013).
+///
+/// Built once by [`Controller::new`] (which allocates everything), then driven by
+/// [`Controller::step`], one call from the measured state to the torque command, which
+/// never allocates.
+#[derive(Clone, Debug)]
+pub struct Controller {
+    model: Model,
+    data: Data,
+    spec: ControllerSpec,
+    n: usize,
+    levels: Vec<Level>,
+    /// `null[i]` is the null space used by level i (index 0 unused).
+    null: Vec<NullSpace>,
+    q: DVector<f64>,
+    qd: DVector<f64>,
+    minv: DMatrix<f64>,
+    chol: DMatrix<f64>,
+    mdot: DMatrix<f64>,
+    frame_j: DMatrix<f64>,
+    frame_jdot: DMatrix<f64>,
+    jminv: DMatrix<f64>,
+    tmp_n: DVector<f64>,
+    tmp_n2: DVector<f64>,
+    tmp_n3: DVector<f64>,
+    out: Output,
+}
+
+fn level_dims(spec: &ControllerSpec, n: usize) -> Vec<usize> {
+    spec.levels
+        .iter()
+        .map(|l| match &l.task {
+            TaskSpec::Position { axes, .. } => axes.len(),
+            TaskSpec::Orientation { .. } => 3,
+            TaskSpec::PlanarOrientation { .. } => 1,
+            TaskSpec::Joints { indices } => indices.len(),
+            TaskSpec::JointCombination { weights } => weights.nrows(),
+            TaskSpec::Posture => n,
+        })
+        .collect()
+}
+
+fn check_spd(name: &str, what: &str, a: &DMatrix<f64>, m: usize) -> Result<(), ControlError> {
+    let bad = |why: String| ControlError::Level {
+        level: name.to_string(),
+        why: format!("{what}: {why}"),
+    };
+    if a.shape() != (m, m) {
+        return Err(bad(format!(
+            "must be {m}×{m}, is {}×{}",
+            a.nrows(),
+            a.ncols()
+        )));
+    }
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err(bad("has a non-finite entry".into()));
+    }
+    let scale = a.amax().max(1e-300);
+    for i in 0..m {
+        for j in 0..i {
+            if (a[(i, j)] - a[(j, i)]).abs() > 1e-9 * scale {
+                return Err(bad(format!(
+                    "is not symmetric (entry ({}, {}))",
+                    i + 1,
+                    j + 1
+                )));
+            }
+        }
+    }
+    let mut c = a.clone();
+    hcc_model::linalg::cholesky_in_place(&mut c)
+        .map_err(|_| bad("is not positive definite".into()))?;
+    Ok(())
+}
+
+impl Controller {
+    /// Checks the hierarchy against the model and the initial configuration `q0`, and
+    /// allocates every buffer. Errors name the level and the reason.
+    pub fn new(
+        model: &Model,
+        spec: ControllerSpec,
+        q0: &DVector<f64>,
+    ) -> Result<Controller, ControlError> {
+        let n = model.nq();
+        let r = spec.levels.len();
+        if r == 0 {
+            return Err(ControlError::Spec("the hierarchy has no level".into()));
+        }
+        if q0.len() != n || q0.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::Spec(format!(
+                "initial configuration must be {n} finite values, got {}",
+                q0.len()
+            )));
+        }
+        if !(spec.singular_ratio > 0.0 && spec.singular_ratio < 1.0) {
+            return Err(ControlError::Spec(
+                "singular_ratio must be in (0, 1)".into(),
+            ));
+        }
+        let dims = level_dims(&spec, n);
+        for (i, l) in spec.levels.iter().enumerate() {
+            let m = dims[i];
+            let bad = |why: String| ControlError::Level {
+                level: format!("{} ({})", i + 1, l.name),
+                why,
+            };
+            if m == 0 {
+                return Err(bad("the task has dimension 0".into()));
+            }
+            match &l.task {
+                TaskSpec::Position { frame, axes } => {
+                    if *frame >= model.frames.len() {
+                        return Err(bad(format!("unknown frame index {frame}")));
+                    }
+                    for (a, ax) in axes.iter().enumerate() {
+                        if *ax > 2 || axes[..a].contains(ax) {
+                            return Err(bad("position axes must be distinct values 0..=2".into()));
+                        }
+                    }
+                }
+                TaskSpec::Orientation { frame } | TaskSpec::PlanarOrientation { frame, .. } => {
+                    if *frame >= model.frames.len() {
+                        return Err(bad(format!("unknown frame index {frame}")));
+                    }
+                    if let TaskSpec::PlanarOrientation { axis, .. } = &l.task
+                        && *axis > 2
+                    {
+                        return Err(bad("planar orientation axis must be 0..=2".into()));
+                    }
+                }
+                TaskSpec::Joints { indices } => {
+                    for (a, ix) in indices.iter().enumerate() {
+                        if *ix >= n || indices[..a].contains(ix) {
+                            return Err(bad(format!(
+                                "joint indices must be distinct values below {n}"
+                            )));
+                        }
+                    }
+                }
+                TaskSpec::JointCombination { weights } => {
+                    if weights.ncols() != n || weights.iter().any(|x| !x.is_finite()) {
+                        return Err(bad(format!("weights must be finite, with {n} columns")));
+                    }
+                }
+                TaskSpec::Posture => {}
+            }
+            let goal_len = m;
+            if l.goal.len() != goal_len || l.goal.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!(
+                    "goal must be {goal_len} finite values, got {}",
+                    l.goal.len()
+                )));
+            }
+            let name = format!("{} ({})", i + 1, l.name);
+            check_spd(&name, "stiffness", &l.stiffness, m)?;
+            check_spd(&name, "damping", &l.damping, m)?;
+        }
+        let above: usize = dims[..r - 1].iter().sum();
+        if r > 1 && above >= n {
+            return Err(ControlError::Spec(format!(
+                "the levels above the lowest have {above} task dimensions in all; they must be fewer than the {n} joints (Σ_{{j<r}} m_j < n)"
+            )));
+        }
+
+        let mut levels = Vec::with_capacity(r);
+        let mut null = Vec::with_capacity(r);
+        let mut k = 0;
+        for (i, l) in spec.levels.iter().enumerate() {
+            let m = dims[i];
+            let d = if i == 0 {
+                m
+            } else if i == r - 1 {
+                n - k
+            } else {
+                m
+            };
+            let goal_rotation = match &l.task {
+                TaskSpec::Orientation { .. } => {
+                    Rotation3::from_euler_angles(l.goal[0], l.goal[1], l.goal[2])
+                }
+                _ => Rotation3::identity(),
+            };
+            levels.push(Level {
+                m,
+                d,
+                stiffness: l.stiffness.clone(),
+                damping: l.damping.clone(),
+                goal: l.goal.clone(),
+                goal_rotation,
+                j: DMatrix::zeros(m, n),
+                jdot: DMatrix::zeros(m, n),
+                err: DVector::zeros(m),
+                grad: DVector::zeros(m),
+                xdot: DVector::zeros(m),
+                f: DVector::zeros(m),
+                potential: 0.0,
+                z: DMatrix::zeros(d, n),
+                zdot: DMatrix::zeros(d, n),
+                zm: DMatrix::zeros(d, n),
+                zmdot: DMatrix::zeros(d, n),
+                lambda: DMatrix::zeros(d, d),
+                lambda_inv: DMatrix::zeros(d, d),
+                lambda_dot: DMatrix::zeros(d, d),
+                jbar: DMatrix::zeros(d, n),
+                jbar_dot: DMatrix::zeros(d, n),
+                jbar_inv: DMatrix::zeros(n, d),
+                w_dn: DMatrix::zeros(d, n),
+                v: DVector::zeros(d),
+                y_d: DVector::zeros(d),
+                y_d2: DVector::zeros(d),
+                spd: SpdWork::new(d),
+            });
+            let nd = n - k;
+            null.push(NullSpace {
+                k,
+                jaug: DMatrix::zeros(k, n),
+                jaug_dot: DMatrix::zeros(k, n),
+                qr_work: DMatrix::zeros(n, k),
+                qr_q: DMatrix::zeros(n, n),
+                v: DMatrix::zeros(n, nd),
+                v_prev: DMatrix::zeros(n, nd),
+                has_prev: false,
+                vdot: DMatrix::zeros(n, nd),
+                gram: DMatrix::zeros(k, k),
+                gram_inv: DMatrix::zeros(k, k),
+                t1: DMatrix::zeros(k, nd),
+                t2: DMatrix::zeros(k, nd),
+                mv: DMatrix::zeros(n, nd),
+                mdv: DMatrix::zeros(n, nd),
+                vs: DMatrix::zeros(n, nd),
+                tmp_nd: DMatrix::zeros(n, nd),
+                s: DMatrix::zeros(nd, nd),
+                s_inv_src: DMatrix::zeros(nd, nd),
+                sdot: DMatrix::zeros(nd, nd),
+                x: DMatrix::zeros(nd, nd),
+                tmp_dd: DMatrix::zeros(nd, nd),
+                p: DMatrix::zeros(n, n),
+                pdot: DMatrix::zeros(n, n),
+                spd_k: SpdWork::new(k),
+                spd_d: SpdWork::new(nd),
+                align: AlignWork::new(n, nd),
+                gram_cond: Conditioning::default(),
+            });
+            k += m;
+        }
+        let m1 = dims[0];
+        let out = Output {
+            tau: DVector::zeros(n),
+            tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
+            tau_mu: DVector::zeros(n),
+            gravity: DVector::zeros(n),
+            task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
+            v: levels.iter().map(|l| DVector::zeros(l.d)).collect(),
+            potential: vec![0.0; r],
+            storage: vec![0.0; r],
+            p_mu: 0.0,
+            singular: vec![false; r],
+            any_singular: false,
+            conditioning: vec![1.0; r],
+        };
+        let mut c = Controller {
+            data: Data::new(model),
+            model: model.clone(),
+            spec,
+            n,
+            levels,
+            null,
+            q: DVector::zeros(n),
+            qd: DVector::zeros(n),
+            minv: DMatrix::zeros(n, n),
+            chol: DMatrix::zeros(n, n),
+            mdot: DMatrix::zeros(n, n),
+            frame_j: DMatrix::zeros(6, n),
+            frame_jdot: DMatrix::zeros(6, n),
+            jminv: DMatrix::zeros(m1, n),
+            tmp_n: DVector::zeros(n),
+            tmp_n2: DVector::zeros(n),
+            tmp_n3: DVector::zeros(n),
+            out,
+        };
+        c.check_initial(q0)?;
+        c.reset();
+        Ok(c)
+    }
+
+    /// Rank checks at the initial configuration (Sec. II: full row rank of every J_i and
+    /// of the augmented Jacobians; the lowest level must fill the remaining null space).
+    fn check_initial(&mut self, q0: &DVector<f64>) -> Result<(), ControlError> {
+        let zero = DVector::zeros(self.n);
+        self.compute(q0, &zero)
+            .map_err(|e| ControlError::Spec(format!("at the initial configuration: {e}")))?;
+        let r = self.levels.len();
+        let eps = self.spec.singular_ratio;
+        for i in 0..r {
+            let name = format!("{} ({})", i + 1, self.spec.levels[i].name);
+            let lv = &self.levels[i];
+            // J_i J_iᵀ full rank (not required of the lowest level, which may be larger than
+            // the remaining null space).
+            if i < r - 1 || r == 1 {
+                let mut g = DMatrix::zeros(lv.m, lv.m);
+                gemm_nt(&mut g, 1.0, &lv.j, &lv.j, 0.0);
+                let mut inv = g.clone();
+                let c = damped_spd_inverse(&g, &mut inv, &mut SpdWork::new(lv.m), eps, GRAM_FLOOR);
+                if c.damping > 0.0 || c.ratio < eps {
+                    return Err(ControlError::Level {
+                        level: name,
+                        why: format!(
+                            "its Jacobian is singular at the initial configuration (eigenvalue ratio of J Jᵀ {:.3e})",
+                            c.ratio
+                        ),
+                    });
+                }
+            }
+            if i > 0 {
+                let ns = &self.null[i];
+                if ns.gram_cond.ratio < eps {
+                    return Err(ControlError::Level {
+                        level: name,
+                        why: format!(
+                            "the Jacobians of the levels above it are not independent at the initial configuration (augmented Jacobian eigenvalue ratio {:.3e})",
+                            ns.gram_cond.ratio
+                        ),
+                    });
+                }
+                if self.out.singular[i] {
+                    let why = if i == r - 1 {
+                        "it cannot fill the remaining null space: J_r V_{r-1} is rank deficient at the initial configuration"
+                    } else {
+                        "algorithmic singularity at the initial configuration: its task conflicts with the levels above (Z_i M Z_iᵀ singular)"
+                    };
+                    return Err(ControlError::Level {
+                        level: name,
+                        why: why.into(),
+                    });
+                }
+            }
+            if i == r - 1 && r > 1 {
+                // The lowest level must span the remaining null space: J_r V_{r-1} of full column rank.
+                let ns = &self.null[i];
+                let d = ns.v.ncols();
+                let mut jv = DMatrix::zeros(lv.m, d);
+                gemm(&mut jv, 1.0, &lv.j, &ns.v, 0.0);
+                let mut g = DMatrix::zeros(d, d);
+                gemm_tn(&mut g, 1.0, &jv, &jv, 0.0);
+                let mut inv = g.clone();
+                let c = damped_spd_inverse(&g, &mut inv, &mut SpdWork::new(d), eps, GRAM_FLOOR);
+                if c.ratio < eps || lv.m < d {
+                    return Err(ControlError::Level {
+                        level: name,
+                        why: format!(
+                            "the lowest level cannot fill the remaining {d}-dimensional null space (its task has {} dimensions; ratio {:.3e})",
+                            lv.m, c.ratio
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Forgets the null-space basis of the previous cycle (call when the state jumps,
+    /// e.g. a new robot connection). The next cycle picks a fresh basis.
+    pub fn reset(&mut self) {
+        for ns in &mut self.null {
+            ns.has_prev = false;
+        }
+    }
+
+    /// Number of joints.
+    pub fn nq(&self) -> usize {
+        self.n
+    }
+
+    /// Number of levels r.
+    pub fn levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Task dimension m_i of level `i` (0-based).
+    pub fn task_dim(&self, i: usize) -> usize {
+        self.levels[i].m
+    }
+
+    /// The model the controller was built with.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The spec the controller was built with.
+    pub fn spec(&self) -> &ControllerSpec {
+        &self.spec
+    }
+
+    /// Result of the last cycle.
+    pub fn output(&self) -> &Output {
+        &self.out
+    }
+
+    /// Switches τ_μ (eq. 22) on or off (the ablation).
+    pub fn set_coriolis_cancellation(&mut self, on: bool) {
+        self.spec.coriolis_cancellation = on;
+    }
+
+    /// Chooses eq. (21) or the classical projector form (eqs. 8, 9).
+    pub fn set_form(&mut self, form: Form) {
+        self.spec.form = form;
+    }
+
+    /// Sets the virtual equilibrium x_{i,d} of level `i` without allocating.
+    pub fn set_goal(&mut self, i: usize, goal: &[f64]) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        if goal.len() != l.goal.len() || goal.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::BadInput(
+                "goal has the wrong length or a non-finite value",
+            ));
+        }
+        l.goal.as_mut_slice().copy_from_slice(goal);
+        if let TaskSpec::Orientation { .. } = self.spec.levels[i].task {
+            l.goal_rotation = Rotation3::from_euler_angles(goal[0], goal[1], goal[2]);
+        }
+        Ok(())
+    }
+
+    /// One control cycle: from the measured (q, q̇) to the torque command in
+    /// [`Output::tau`]. Allocation-free. On non-finite input it returns an error and
+    /// leaves the previous output untouched; a numerical failure (which the damping
+    /// should prevent) returns an error with τ set to g (or 0 without gravity compensation).
+    pub fn step(&mut self, q: &[f64], qd: &[f64]) -> Result<&Output, ControlError> {
+        if q.len() != self.n || qd.len() != self.n {
+            return Err(ControlError::BadInput(
+                "state has the wrong number of joints",
+            ));
+        }
+        if q.iter().chain(qd.iter()).any(|x| !x.is_finite()) {
+            return Err(ControlError::BadInput("state has a non-finite value"));
+        }
+        self.q.as_mut_slice().copy_from_slice(q);
+        self.qd.as_mut_slice().copy_from_slice(qd);
+        let (q, qd) = (std::mem::take(&mut self.q), std::mem::take(&mut self.qd));
+        let res = self.compute(&q, &qd);
+        self.q = q;
+        self.qd = qd;
+        match res {
+            Ok(()) => Ok(&self.out),
+            Err(e) => {
+                let gc = self.spec.gravity_compensation
+                    && self.out.gravity.iter().all(|x| x.is_finite());
+                for i in 0..self.n {
+                    self.out.tau[i] = if gc { self.out.gravity[i] } else { 0.0 };
+                }
+                Err(e)
+            }
+        }
+    }
+
+    fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
+        let n = self.n;
+        let r = self.levels.len();
+        let eps = self.spec.singular_ratio;
+        hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
+        // M⁻¹ and Ṁ = C + Cᵀ (Sec. II).
+        self.chol.copy_from(&self.data.m);
+        hcc_model::linalg::cholesky_in_place(&mut self.chol)
+            .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
+        self.minv.fill_with_identity();
+        hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.minv)
+            .map_err(|_| ControlError::Numerical("M⁻¹"))?;
+        for j in 0..n {
+            for i in 0..n {
+                self.mdot[(i, j)] = self.data.c[(i, j)] + self.data.c[(j, i)];
+            }
+        }
+        self.out.gravity.copy_from(&self.data.g);
+
+        // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
+        for i in 0..r {
+            self.evaluate_task(i, q, qd);
+        }
+
+        // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
+        {
+            let l = &mut self.levels[0];
+            gemm(&mut self.jminv, 1.0, &l.j, &self.minv, 0.0);
+            gemm_nt(&mut l.lambda_inv, 1.0, &self.jminv, &l.j, 0.0);
+            let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
+            self.out.conditioning[0] = c.ratio;
+            self.out.singular[0] = c.damping > 0.0;
+            l.jbar.copy_from(&l.j);
+            l.jbar_dot.copy_from(&l.jdot);
+            // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
+            gemm_tn(&mut l.jbar_inv, 1.0, &self.jminv, &l.lambda, 0.0);
+        }
+
+        // Null-space levels (eqs. 5–13, 16–18).
+        for i in 1..r {
+            let lowest = i == r - 1;
+            self.null_space(i, lowest)?;
+            let (upper, rest) = self.levels.split_at_mut(i);
+            let _ = upper;
+            let l = &mut rest[0];
+            let ns = &mut self.null[i];
+            if lowest {
+                // Z_r = V_{r−1}ᵀ.
+                for a in 0..l.d {
+                    for b in 0..n {
+                        l.z[(a, b)] = ns.v[(b, a)];
+                        l.zdot[(a, b)] = ns.vdot[(b, a)];
+                    }
+                }
+            } else {
+                // Z_i = J_i V (VᵀMV)⁻¹ Vᵀ = J_i P (eq. 12), Ż_i = J̇_i P + J_i Ṗ.
+                gemm(&mut l.z, 1.0, &l.j, &ns.p, 0.0);
+                gemm(&mut l.zdot, 1.0, &l.jdot, &ns.p, 0.0);
+                gemm(&mut l.zdot, 1.0, &l.j, &ns.pdot, 1.0);
+            }
+            // Λ_i = Z M Zᵀ (eq. 18) and its derivative.
+            gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
+            gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
+            gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
+            let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+            let gc = ns.gram_cond;
+            self.out.conditioning[i] = c.ratio.min(gc.ratio);
+            self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
+            // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
+            gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
+            // J̄̇_i = Λ_i⁻¹ (Ż M + Z Ṁ − Λ̇_i J̄_i).
+            gemm(&mut l.w_dn, 1.0, &l.zdot, &self.data.m, 0.0);
+            l.w_dn += &l.zmdot;
+            gemm(&mut l.w_dn, -1.0, &l.lambda_dot, &l.jbar, 1.0);
+            gemm(&mut l.jbar_dot, 1.0, &l.lambda_inv, &l.w_dn, 0.0);
+            // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+            for a in 0..l.d {
+                for b in 0..n {
+                    l.jbar_inv[(b, a)] = l.z[(a, b)];
+                }
+            }
+        }
+        self.out.any_singular = self.out.singular.iter().any(|&s| s);
+
+        // Torques of the levels (eqs. 20, 21) and the local velocities v_i (eq. 3).
+        for i in 0..r {
+            let l = &mut self.levels[i];
+            gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
+            let tau_i = &mut self.out.tau_level[i];
+            if i == 0 {
+                gemv_t(tau_i, -1.0, &l.j, &l.f, 0.0);
+            } else {
+                gemv_t(&mut self.tmp_n, 1.0, &l.j, &l.f, 0.0);
+                match self.spec.form {
+                    Form::Extended => {
+                        gemv(&mut l.y_d, 1.0, &l.z, &self.tmp_n, 0.0);
+                        gemv_t(tau_i, -1.0, &l.jbar, &l.y_d, 0.0);
+                    }
+                    Form::ClassicalProjector => {
+                        // N_i J_iᵀ F_i with N_i = M P (eq. 9).
+                        gemv(&mut self.tmp_n2, 1.0, &self.null[i].p, &self.tmp_n, 0.0);
+                        gemv(tau_i, -1.0, &self.data.m, &self.tmp_n2, 0.0);
+                    }
+                }
+            }
+            self.out.v[i].copy_from(&l.v);
+            self.out.task_error[i].copy_from(&l.err);
+            self.out.potential[i] = l.potential;
+            // S_i = ½ v_iᵀ Λ_i v_i + V_i (eqs. 26, 28).
+            gemv(&mut l.y_d2, 1.0, &l.lambda, &l.v, 0.0);
+            self.out.storage[i] = 0.5 * l.v.dot(&l.y_d2) + l.potential;
+        }
+
+        // τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22) with μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17):
+        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i, so each level needs one matrix-vector chain.
+        self.out.tau_mu.fill(0.0);
+        if self.spec.coriolis_cancellation {
+            for i in 0..r {
+                let l = &mut self.levels[i];
+                self.tmp_n.copy_from(qd);
+                gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                gemv(&mut self.tmp_n2, 1.0, &self.data.c, &self.tmp_n, 0.0);
+                gemv(&mut self.tmp_n3, 1.0, &self.minv, &self.tmp_n2, 0.0);
+                gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
+                gemv(&mut l.y_d, -1.0, &l.jbar_dot, &self.tmp_n, 1.0);
+                gemv(&mut l.y_d2, 1.0, &l.lambda, &l.y_d, 0.0);
+                gemv_t(&mut self.out.tau_mu, 1.0, &l.jbar, &l.y_d2, 1.0);
+            }
+        }
+        self.out.p_mu = self.out.tau_mu.dot(qd);
+
+        // τ = Σ τ_i + τ_μ + g (eq. 19).
+        self.out.tau.copy_from(&self.out.tau_mu);
+        for t in &self.out.tau_level {
+            self.out.tau += t;
+        }
+        if self.spec.gravity_compensation {
+            self.out.tau += &self.data.g;
+        }
+        if self.out.tau.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::Numerical("non-finite torque"));
+        }
+        Ok(())
+    }
+
+    /// Null space of the augmented Jacobian above level `i`: V, V̇ = −J⁺ J̇ V (parallel
+    /// transport), P = V (VᵀMV)⁻¹ Vᵀ and Ṗ. For the lowest level the basis is kept
+    /// continuous in time by a Procrustes alignment to the previous cycle's basis.
+    fn null_space(&mut self, i: usize, lowest: bool) -> Result<(), ControlError> {
+        let n = self.n;
+        let eps = self.spec.singular_ratio;
+        let ns = &mut self.null[i];
+        // Stack J_1..J_{i−1} and their derivatives (eq. 6).
+        let mut row = 0;
+        for l in &self.levels[..i] {
+            for a in 0..l.m {
+                for b in 0..n {
+                    ns.jaug[(row + a, b)] = l.j[(a, b)];
+                    ns.jaug_dot[(row + a, b)] = l.jdot[(a, b)];
+                }
+            }
+            row += l.m;
+        }
+        null_space_basis(&ns.jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
+        if lowest {
+            if ns.has_prev {
+                procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
+            }
+            ns.v_prev.copy_from(&ns.v);
+            ns.has_prev = true;
+        }
+        // V̇ = −J⁺ J̇ V with J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
+        gemm_nt(&mut ns.gram, 1.0, &ns.jaug, &ns.jaug, 0.0);
+        ns.gram_cond =
+            damped_spd_inverse(&ns.gram, &mut ns.gram_inv, &mut ns.spd_k, eps, GRAM_FLOOR);
+        gemm(&mut ns.t1, 1.0, &ns.jaug_dot, &ns.v, 0.0);
+        gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
+        gemm_tn(&mut ns.vdot, -1.0, &ns.jaug, &ns.t2, 0.0);
+        // S = (VᵀMV)⁻¹ (always positive definite), Ṡ = −S (V̇ᵀMV + VᵀṀV + VᵀMV̇) S.
+        gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
+        gemm_tn(&mut ns.s_inv_src, 1.0, &ns.v, &ns.mv, 0.0);
+        damped_spd_inverse(&ns.s_inv_src, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
+        gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
+        gemm_tn(&mut ns.x, 1.0, &ns.v, &ns.mdv, 0.0);
+        gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
+        for a in 0..ns.x.nrows() {
+            for b in 0..ns.x.ncols() {
+                ns.x[(a, b)] += ns.tmp_dd[(a, b)] + ns.tmp_dd[(b, a)];
+            }
+        }
+        gemm(&mut ns.tmp_dd, 1.0, &ns.x, &ns.s, 0.0);
+        gemm(&mut ns.sdot, -1.0, &ns.s, &ns.tmp_dd, 0.0);
+        if !lowest || self.spec.form == Form::ClassicalProjector {
+            // P = V S Vᵀ; Ṗ = V̇ S Vᵀ + V Ṡ Vᵀ + V S V̇ᵀ.
+            gemm(&mut ns.vs, 1.0, &ns.v, &ns.s, 0.0);
+            gemm_nt(&mut ns.p, 1.0, &ns.vs, &ns.v, 0.0);
+            gemm(&mut ns.tmp_nd, 1.0, &ns.vdot, &ns.s, 0.0);
+            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 0.0);
+            gemm(&mut ns.tmp_nd, 1.0, &ns.v, &ns.sdot, 0.0);
+            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 1.0);
+            gemm_nt(&mut ns.pdot, 1.0, &ns.vs, &ns.vdot, 1.0);
+        }
+        Ok(())
+    }
+
+    /// x̃_i, J_i, J̇_i, the potential V_i and its gradient, ẋ_i and F_i.
+    fn evaluate_task(&mut self, i: usize, q: &DVector<f64>, qd: &DVector<f64>) {
+        let n = self.n;
+        let l = &mut self.levels[i];
+        let task = &self.spec.levels[i].task;
+        match task {
+            TaskSpec::Position { frame, axes } => {
+                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
+                hcc_model::frame_jacobian_time_variation(
+                    &self.model,
+                    &self.data,
+                    *frame,
+                    &mut self.frame_jdot,
+                );
+                let p = hcc_model::frame_placement(&self.model, &self.data, *frame)
+                    .translation
+                    .vector;
+                for (a, &ax) in axes.iter().enumerate() {
+                    l.err[a] = p[ax] - l.goal[a];
+                    for b in 0..n {
+                        l.j[(a, b)] = self.frame_j[(ax, b)];
+                        l.jdot[(a, b)] = self.frame_jdot[(ax, b)];
+                    }
+                }
+                quadratic(l);
+            }
+            TaskSpec::PlanarOrientation { frame, axis } => {
+                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
+                hcc_model::frame_jacobian_time_variation(
+                    &self.model,
+                    &self.data,
+                    *frame,
+                    &mut self.frame_jdot,
+                );
+                let rot = hcc_model::frame_placement(&self.model, &self.data, *frame)
+                    .rotation
+                    .to_rotation_matrix();
+                let m = rot.matrix();
+                let angle = match axis {
+                    0 => m[(2, 1)].atan2(m[(1, 1)]),
+                    1 => m[(0, 2)].atan2(m[(2, 2)]),
+                    _ => m[(1, 0)].atan2(m[(0, 0)]),
+                };
+                l.err[0] = wrap_angle(angle - l.goal[0]);
+                for b in 0..n {
+                    l.j[(0, b)] = self.frame_j[(3 + axis, b)];
+                    l.jdot[(0, b)] = self.frame_jdot[(3 + axis, b)];
+                }
+                quadratic(l);
+            }
+            TaskSpec::Orientation { frame } => {
+                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
+                hcc_model::frame_jacobian_time_variation(
+                    &self.model,
+                    &self.data,
+                    *frame,
+                    &mut self.frame_jdot,
+                );
+                let rot = hcc_model::frame_placement(&self.model, &self.data, *frame)
+                    .rotation
+                    .to_rotation_matrix();
+                let re = l.goal_rotation.inverse() * rot;
+                let quat = UnitQuaternion::from_rotation_matrix(&re);
+                let (mut eta, mut eps) = (quat.w, quat.imag());
+                if eta < 0.0 {
+                    eta = -eta;
+                    eps = -eps;
+                }
+                let k = Matrix3::from_fn(|a, b| l.stiffness[(a, b)]);
+                let keps = k * eps;
+                // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
+                l.potential = 2.0 * eps.dot(&keps);
+                let f_goal = 2.0 * (eta * keps + eps.cross(&keps));
+                let grad = l.goal_rotation * f_goal;
+                let err: Vector3<f64> = l.goal_rotation * (2.0 * eps);
+                for a in 0..3 {
+                    l.err[a] = err[a];
+                    l.grad[a] = grad[a];
+                    for b in 0..n {
+                        l.j[(a, b)] = self.frame_j[(3 + a, b)];
+                        l.jdot[(a, b)] = self.frame_jdot[(3 + a, b)];
+                    }
+                }
+            }
+            TaskSpec::Joints { indices } => {
+                l.j.fill(0.0);
+                l.jdot.fill(0.0);
+                for (a, &ix) in indices.iter().enumerate() {
+                    l.err[a] = q[ix] - l.goal[a];
+                    l.j[(a, ix)] = 1.0;
+                }
+                quadratic(l);
+            }
+            TaskSpec::JointCombination { weights } => {
+                l.j.copy_from(weights);
+                l.jdot.fill(0.0);
+                gemv(&mut l.err, 1.0, weights, q, 0.0);
+                l.err -= &l.goal;
+                quadratic(l);
+            }
+            TaskSpec::Posture => {
+                l.j.fill_with_identity();
+                l.jdot.fill(0.0);
+                l.err.copy_from(q);
+                l.err -= &l.goal;
+                quadratic(l);
+            }
+        }
+        gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
+        // F_i = (∂V_i/∂x_i)ᵀ + D_i ẋ_i.
+        l.f.copy_from(&l.grad);
+        gemv(&mut l.f, 1.0, &l.damping, &l.xdot, 1.0);
+    }
+
+    /// Diagnostics (not for the control loop: allocates). The stacked J̄ (eq. 4), J̄̇,
+    /// J̄⁻¹ (eq. 13), Λ (eq. 16, block-diagonal by construction of eq. 18) and
+    /// μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17) of the last cycle, plus M, M⁻¹, C and the
+    /// level sizes d_i. Meaningful when the lowest level is a null-space level
+    /// (Σ d_i = n).
+    pub fn diagnostics(&self) -> Diagnostics {
+        let n = self.n;
+        let total: usize = self.levels.iter().map(|l| l.d).sum();
+        let mut jbar = DMatrix::zeros(total, n);
+        let mut jbar_dot = DMatrix::zeros(total, n);
+        let mut jbar_inv = DMatrix::zeros(n, total);
+        let mut lambda = DMatrix::zeros(total, total);
+        let mut row = 0;
+        for l in &self.levels {
+            jbar.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar);
+            jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar_dot);
+            jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&l.jbar_inv);
+            lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
+            row += l.d;
+        }
+        let mu = if total == n {
+            &lambda * (&jbar * &self.minv * &self.data.c - &jbar_dot) * &jbar_inv
+        } else {
+            DMatrix::zeros(total, total)
+        };
+        Diagnostics {
+            dims: self.levels.iter().map(|l| l.d).collect(),
+            jacobians: self.levels.iter().map(|l| l.j.clone()).collect(),
+            z: self.levels.iter().map(|l| l.z.clone()).collect(),
+            jbar,
+            jbar_dot,
+            jbar_inv,
+            lambda,
+            mu,
+            m: self.data.m.clone(),
+            minv: self.minv.clone(),
+            c: self.data.c.clone(),
+        }
+    }
+}
+
+/// Stacked matrices of one cycle, for checks and debugging.
+#[derive(Clone, Debug)]
+pub struct Diagnostics {
+    /// d_i = dim v_i per level.
+    pub dims: Vec<usize>,
+    /// J_i per level.
+    pub jacobians: Vec<DMatrix<f64>>,
+    /// Z_i per level (J_1 for level 1).
+    pub z: Vec<DMatrix<f64>>,
+    pub jbar: DMatrix<f64>,
+    pub jbar_dot: DMatrix<f64>,
+    pub jbar_inv: DMatrix<f64>,
+    pub lambda: DMatrix<f64>,
+    pub mu: DMatrix<f64>,
+    pub m: DMatrix<f64>,
+    pub minv: DMatrix<f64>,
+    pub c: DMatrix<f64>,
+}
+
+/// V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
+fn quadratic(l: &mut Level) {
+    gemv(&mut l.grad, 1.0, &l.stiffness, &l.err, 0.0);
+    l.potential = 0.5 * l.err.dot(&l.grad);
+}
+
+fn wrap_angle(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    let mut x = a % two_pi;
+    if x > std::f64::consts::PI {
+        x -= two_pi;
+    } else if x <= -std::f64::consts::PI {
+        x += two_pi;
+    }
+    x
+}
