@@ -81,7 +81,6 @@ struct Level {
 /// Null space of the augmented Jacobian of the levels above level i (eq. 6–9).
 #[derive(Clone, Debug)]
 struct NullSpace {
-    k: usize,
     jaug: DMatrix<f64>,
     jaug_dot: DMatrix<f64>,
     qr_work: DMatrix<f64>,
@@ -327,7 +326,6 @@ impl Controller {
             });
             let nd = n - k;
             null.push(NullSpace {
-                k,
                 jaug: DMatrix::zeros(k, n),
                 jaug_dot: DMatrix::zeros(k, n),
                 qr_work: DMatrix::zeros(n, k),

@@ -332,7 +332,7 @@ pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut Al
     for i in 0..d {
         smin = smin.min(work.evals[i].max(0.0).sqrt());
     }
-    if !(smin > 1e-6) {
+    if smin.is_nan() || smin <= 1e-6 {
         return smin;
     }
     // (XᵀX)^{-1/2} = U diag(1/sqrt(λ)) Uᵀ, then R = X (XᵀX)^{-1/2}.
