@@ -31,8 +31,8 @@ pub struct ModelArgs {
     pub states: PathBuf,
 }
 
+/// Other top-level keys (e.g. those of a reference file) are ignored.
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
 struct StatesFile {
     states: Vec<StateIn>,
 }

@@ -9,7 +9,7 @@ use crate::linalg::LinalgError;
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
     /// The URDF file could not be read.
-    #[error("{file}: cannot read URDF file: {source}")]
+    #[error("{file}: cannot read URDF file")]
     Io {
         file: String,
         #[source]
