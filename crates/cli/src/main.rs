@@ -4,6 +4,8 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod model_cmd;
+mod plot_cmd;
+mod simulate_cmd;
 
 #[derive(Parser)]
 #[command(
@@ -18,14 +20,20 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a scenario in-process (controller at 1 kHz, plant RK4 at 0.1 ms) and write its results.
+    Simulate(simulate_cmd::SimulateArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
     Model(model_cmd::ModelArgs),
+    /// Redraw the plots of a results directory from its trajectory.csv and metrics.json.
+    Plot(plot_cmd::PlotArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Simulate(args) => simulate_cmd::run(args),
         Command::Model(args) => model_cmd::run(args),
+        Command::Plot(args) => plot_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,878 @@
-//! See the crate description.
+//! Scenario configuration of the hierarchical compliance controller (Dietrich,
+//! Ott & Albu-Schäffer, IROS 2013): one TOML file describes the robot, the task
+//! hierarchy (levels in priority order with stiffness K_i, damping D_i and
+//! virtual equilibrium x_{i,d}, eqs. 20–21), the controller options, the initial
+//! state, the in-process simulation, and the settings of the daemons.
+//!
+//! [`Scenario::load`] parses the file (unknown fields are errors), checks every
+//! value against the robot model built from the URDF, and returns the model
+//! together with the resolved levels. Errors name the file, the dotted field
+//! path and the line.
+//!
+//! ```toml
+//! [robot]
+//! urdf = "planar4.urdf"          # relative to this file
+//! tip_link = "tcp"
+//! gravity = [0.0, -9.81, 0.0]
+//!
+//! [[level]]                      # level 1 = highest priority
+//! task = "position"
+//! axes = ["x", "y"]
+//! stiffness = [1000.0, 1000.0]   # scalar, diagonal or full matrix
+//! damping = [40.0, 40.0]
+//! goal = [0.90, 0.80]
+//!
+//! [[level]]
+//! task = "orientation"
+//! axes = ["z"]                   # planar: rotation angle about z
+//! stiffness = 800.0
+//! damping = 5.0
+//! goal = [-1.57]
+//!
+//! [initial]
+//! q0 = [0.4, -0.5, -1.6, 0.4]
+//! ```
+
+pub mod error;
+pub mod schema;
+
+pub use error::ConfigError;
+pub use schema::*;
+
+use error::{from_toml, invalid};
+use hcc_control::{ControllerSpec, Form, LevelSpec, TaskSpec};
+use hcc_model::{FrameId, Model};
+use nalgebra::{DMatrix, DVector, Vector3};
+use std::path::{Path, PathBuf};
+
+/// Unit of a level's task coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskUnit {
+    /// Metres.
+    Length,
+    /// Radians.
+    Angle,
+}
+
+/// A resolved task (frames and joints looked up in the model).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Task {
+    /// Position of a frame origin along the listed world axes (0 = x, 1 = y, 2 = z).
+    Position {
+        frame: String,
+        frame_id: FrameId,
+        axes: Vec<usize>,
+    },
+    /// Full 3-D orientation of a frame; goal given as roll-pitch-yaw.
+    Orientation { frame: String, frame_id: FrameId },
+    /// Rotation angle of a frame about one world axis (planar arms).
+    PlanarOrientation {
+        frame: String,
+        frame_id: FrameId,
+        axis: usize,
+    },
+    /// Positions of the listed joints (0-based indices).
+    Joint { joints: Vec<usize> },
+    /// The whole joint vector (a `joint` task without a `joints` list).
+    Posture { n: usize },
+    /// x = W q.
+    JointCombination { weights: DMatrix<f64> },
+}
+
+impl Task {
+    /// Task dimension m_i.
+    pub fn dim(&self) -> usize {
+        match self {
+            Task::Position { axes, .. } => axes.len(),
+            Task::Orientation { .. } => 3,
+            Task::PlanarOrientation { .. } => 1,
+            Task::Joint { joints } => joints.len(),
+            Task::Posture { n } => *n,
+            Task::JointCombination { weights } => weights.nrows(),
+        }
+    }
+
+    /// Unit of the task coordinates.
+    pub fn unit(&self) -> TaskUnit {
+        match self {
+            Task::Position { .. } => TaskUnit::Length,
+            _ => TaskUnit::Angle,
+        }
+    }
+
+    /// The control crate's task description.
+    pub fn to_spec(&self) -> TaskSpec {
+        match self {
+            Task::Position { frame_id, axes, .. } => TaskSpec::Position {
+                frame: *frame_id,
+                axes: axes.clone(),
+            },
+            Task::Orientation { frame_id, .. } => TaskSpec::Orientation { frame: *frame_id },
+            Task::PlanarOrientation { frame_id, axis, .. } => TaskSpec::PlanarOrientation {
+                frame: *frame_id,
+                axis: *axis,
+            },
+            Task::Joint { joints } => TaskSpec::Joints {
+                indices: joints.clone(),
+            },
+            Task::Posture { .. } => TaskSpec::Posture,
+            Task::JointCombination { weights } => TaskSpec::JointCombination {
+                weights: weights.clone(),
+            },
+        }
+    }
+}
+
+/// One resolved level of the hierarchy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Level {
+    pub name: String,
+    pub task: Task,
+    /// K_i (m_i × m_i, symmetric positive definite).
+    pub stiffness: DMatrix<f64>,
+    /// D_i (m_i × m_i, symmetric positive definite).
+    pub damping: DMatrix<f64>,
+    /// x_{i,d} (m_i; roll-pitch-yaw for a 3-D orientation).
+    pub goal: DVector<f64>,
+}
+
+/// An external wrench of the simulation, resolved to a frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wrench {
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub link: String,
+    pub frame_id: FrameId,
+    pub force: Vector3<f64>,
+    pub torque: Vector3<f64>,
+}
+
+/// Resolved `[simulation]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Simulation {
+    pub duration_s: f64,
+    pub control_rate_hz: f64,
+    pub integrator_dt_s: f64,
+    /// Plant steps per control period (control period / integrator dt, an integer).
+    pub substeps: usize,
+    /// Viscous friction per joint.
+    pub joint_friction: DVector<f64>,
+    pub wrenches: Vec<Wrench>,
+}
+
+/// Resolved `[controller_daemon]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControllerDaemon {
+    pub cpu_core: Option<usize>,
+    pub sched_priority: Option<i32>,
+    pub mlock: bool,
+    pub wait_strategy: WaitStrategy,
+    /// Per joint, Nm (URDF effort limits unless configured; may be +inf).
+    pub torque_limits: DVector<f64>,
+    pub stale_timeout_ms: f64,
+}
+
+/// Resolved `[sim_daemon]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimDaemon {
+    pub cpu_core: Option<usize>,
+    pub mode: SimMode,
+    pub hold_cycles: u32,
+    pub fallback_damping: DVector<f64>,
+}
+
+/// A loaded and checked scenario.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    /// The scenario file.
+    pub path: PathBuf,
+    /// Name (from the file or its stem).
+    pub name: String,
+    /// The file as written.
+    pub file: ScenarioFile,
+    /// Resolved URDF path.
+    pub urdf_path: PathBuf,
+    /// The robot model (chain root → tip, with the configured gravity).
+    pub model: Model,
+    /// Levels in priority order.
+    pub levels: Vec<Level>,
+    /// The controller description built from the levels and `[controller]`
+    /// (checked by `hcc_control::Controller::new` at load).
+    pub spec: ControllerSpec,
+    pub gravity_compensation: bool,
+    pub coriolis_cancellation: bool,
+    pub form: FormName,
+    pub singularity: SingularitySection,
+    pub q0: DVector<f64>,
+    pub qd0: DVector<f64>,
+    pub simulation: Simulation,
+    pub ipc: IpcSection,
+    pub controller_daemon: ControllerDaemon,
+    pub sim_daemon: SimDaemon,
+}
+
+/// Loader context: the file, its text, and helpers that build located errors.
+struct Ctx<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, path: &str, message: impl Into<String>) -> ConfigError {
+        invalid(self.file, self.text, path, message)
+    }
+
+    fn finite(&self, path: &str, v: &[f64]) -> Result<(), ConfigError> {
+        match v.iter().position(|x| !x.is_finite()) {
+            Some(k) => Err(self.err(&format!("{path}[{k}]"), "must be a finite number")),
+            None => Ok(()),
+        }
+    }
+
+    fn vector(
+        &self,
+        path: &str,
+        v: &[f64],
+        len: usize,
+        what: &str,
+    ) -> Result<DVector<f64>, ConfigError> {
+        if v.len() != len {
+            return Err(self.err(
+                path,
+                format!("has {} elements, expected {len} ({what})", v.len()),
+            ));
+        }
+        self.finite(path, v)?;
+        Ok(DVector::from_column_slice(v))
+    }
+
+    fn per_joint(
+        &self,
+        path: &str,
+        v: &PerJoint,
+        n: usize,
+        allow_inf: bool,
+    ) -> Result<DVector<f64>, ConfigError> {
+        let out = match v {
+            PerJoint::Scalar(s) => DVector::from_element(n, *s),
+            PerJoint::Vector(v) => {
+                if v.len() != n {
+                    return Err(self.err(
+                        path,
+                        format!(
+                            "has {} elements, expected {n} (one per joint) or a scalar",
+                            v.len()
+                        ),
+                    ));
+                }
+                DVector::from_column_slice(v)
+            }
+        };
+        for (k, x) in out.iter().enumerate() {
+            let p = match v {
+                PerJoint::Scalar(_) => path.to_string(),
+                PerJoint::Vector(_) => format!("{path}[{k}]"),
+            };
+            if x.is_nan() || (!allow_inf && x.is_infinite()) {
+                return Err(self.err(&p, "must be a finite number"));
+            }
+            if *x < 0.0 {
+                return Err(self.err(&p, format!("must not be negative, got {x}")));
+            }
+        }
+        Ok(out)
+    }
+
+    /// A stiffness or damping matrix of size m: symmetric positive definite.
+    fn gain(&self, path: &str, g: &GainValue, m: usize) -> Result<DMatrix<f64>, ConfigError> {
+        let mat = match g {
+            GainValue::Scalar(s) => DMatrix::from_diagonal_element(m, m, *s),
+            GainValue::Diagonal(d) => {
+                if d.len() != m {
+                    return Err(self.err(
+                        path,
+                        format!(
+                            "has {} diagonal elements, expected {m} (the task dimension)",
+                            d.len()
+                        ),
+                    ));
+                }
+                DMatrix::from_diagonal(&DVector::from_column_slice(d))
+            }
+            GainValue::Matrix(rows) => {
+                if rows.len() != m || rows.iter().any(|r| r.len() != m) {
+                    return Err(self.err(
+                        path,
+                        format!(
+                            "must be a {m}×{m} matrix (the task dimension), a diagonal or a scalar"
+                        ),
+                    ));
+                }
+                DMatrix::from_fn(m, m, |i, j| rows[i][j])
+            }
+        };
+        if mat.iter().any(|x| !x.is_finite()) {
+            return Err(self.err(path, "must contain finite numbers only"));
+        }
+        for i in 0..m {
+            for j in 0..i {
+                let (a, b) = (mat[(i, j)], mat[(j, i)]);
+                if (a - b).abs() > 1e-12 * a.abs().max(b.abs()).max(1.0) {
+                    return Err(self.err(
+                        path,
+                        format!("must be symmetric: element ({i},{j}) = {a} but ({j},{i}) = {b}"),
+                    ));
+                }
+            }
+        }
+        let mut l = mat.clone();
+        if hcc_model::linalg::cholesky_in_place(&mut l).is_err() {
+            let what = if (0..m).any(|i| mat[(i, i)] < 0.0) {
+                "must be positive definite (a diagonal element is negative)"
+            } else {
+                "must be positive definite"
+            };
+            return Err(self.err(path, what));
+        }
+        Ok(mat)
+    }
+}
+
+impl Scenario {
+    /// Loads, checks and resolves a scenario file; builds the robot model from its URDF.
+    pub fn load(path: impl AsRef<Path>) -> Result<Scenario, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
+            file: path.to_path_buf(),
+            error,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Like [`Scenario::load`] for TOML text; `path` names the file in errors and is
+    /// the base for the relative URDF path.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Scenario, ConfigError> {
+        let file: ScenarioFile = toml::from_str(text).map_err(|e| from_toml(path, text, &e))?;
+        let cx = Ctx { file: path, text };
+
+        // [robot]
+        let gravity = match &file.robot.gravity {
+            Some(g) => {
+                let v = cx.vector("robot.gravity", g, 3, "x, y, z")?;
+                Some(Vector3::new(v[0], v[1], v[2]))
+            }
+            None => None,
+        };
+        let base = path.parent().unwrap_or(Path::new("."));
+        let urdf_path = base.join(&file.robot.urdf);
+        let model = Model::from_urdf_file(
+            &urdf_path,
+            file.robot.root_link.as_deref(),
+            &file.robot.tip_link,
+            gravity,
+        )
+        .map_err(|error| {
+            let field = match &error {
+                hcc_model::ModelError::UnknownLink { what, .. } if what == "root" => {
+                    "robot.root_link"
+                }
+                hcc_model::ModelError::UnknownLink { what, .. } if what == "tip" => {
+                    "robot.tip_link"
+                }
+                hcc_model::ModelError::TipNotBelowRoot { .. } => "robot.tip_link",
+                _ => "robot.urdf",
+            };
+            ConfigError::Model {
+                file: path.to_path_buf(),
+                line: error::locate_path(text, field),
+                error,
+            }
+        })?;
+        let n = model.nq();
+
+        // [[level]]
+        if file.levels.is_empty() {
+            return Err(cx.err("level", "at least one [[level]] is required"));
+        }
+        let mut levels = Vec::with_capacity(file.levels.len());
+        for (i, l) in file.levels.iter().enumerate() {
+            levels.push(resolve_level(&cx, &model, i, l)?);
+        }
+        check_hierarchy(&cx, &levels, n)?;
+
+        // [controller]
+        let ratio = file.controller.singularity.singular_ratio;
+        if !(ratio > 0.0 && ratio < 1.0) {
+            return Err(cx.err(
+                "controller.singularity.singular_ratio",
+                format!("must be in (0, 1), got {ratio}"),
+            ));
+        }
+
+        // [initial]
+        let q0 = cx.vector("initial.q0", &file.initial.q0, n, "one per joint")?;
+        let qd0 = match &file.initial.qd0 {
+            Some(v) => cx.vector("initial.qd0", v, n, "one per joint")?,
+            None => DVector::zeros(n),
+        };
+        for (k, j) in model.joints.iter().enumerate() {
+            if q0[k] < j.lower - 1e-9 || q0[k] > j.upper + 1e-9 {
+                return Err(cx.err(
+                    &format!("initial.q0[{k}]"),
+                    format!(
+                        "{} is outside the limits [{}, {}] of joint '{}'",
+                        q0[k], j.lower, j.upper, j.name
+                    ),
+                ));
+            }
+        }
+
+        let simulation = resolve_simulation(&cx, &model, &file.simulation)?;
+
+        // [ipc]
+        let ns = &file.ipc.namespace;
+        if ns.is_empty()
+            || !ns
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(cx.err(
+                "ipc.namespace",
+                format!("{ns:?} must be non-empty and use only letters, digits, '_' and '-'"),
+            ));
+        }
+
+        let spec = ControllerSpec {
+            levels: levels
+                .iter()
+                .map(|l| LevelSpec {
+                    name: l.name.clone(),
+                    task: l.task.to_spec(),
+                    stiffness: l.stiffness.clone(),
+                    damping: l.damping.clone(),
+                    goal: l.goal.clone(),
+                })
+                .collect(),
+            gravity_compensation: file.robot.gravity_compensation,
+            coriolis_cancellation: file.controller.coriolis_cancellation,
+            form: match file.controller.form {
+                FormName::Extended => Form::Extended,
+                FormName::Projector => Form::ClassicalProjector,
+            },
+            singular_ratio: ratio,
+        };
+        // Let the controller check the hierarchy as it will run it.
+        if let Err(e) = hcc_control::Controller::new(&model, spec.clone(), &q0) {
+            let field = match &e {
+                hcc_control::ControlError::Level { level, .. } => level
+                    .split_whitespace()
+                    .next()
+                    .and_then(|k| k.parse::<usize>().ok())
+                    .map(|k| format!("level[{}]", k.saturating_sub(1)))
+                    .unwrap_or_else(|| "level".to_string()),
+                hcc_control::ControlError::Spec(_) => "level".to_string(),
+                _ => "initial.q0".to_string(),
+            };
+            return Err(cx.err(&field, format!("rejected by the controller: {e}")));
+        }
+
+        let controller_daemon = resolve_controller_daemon(&cx, &model, &file.controller_daemon)?;
+        let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
+
+        let name = file.name.clone().unwrap_or_else(|| {
+            path.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scenario".to_string())
+        });
+        Ok(Scenario {
+            path: path.to_path_buf(),
+            name,
+            urdf_path,
+            levels,
+            spec,
+            gravity_compensation: file.robot.gravity_compensation,
+            coriolis_cancellation: file.controller.coriolis_cancellation,
+            form: file.controller.form,
+            singularity: file.controller.singularity.clone(),
+            q0,
+            qd0,
+            simulation,
+            ipc: file.ipc.clone(),
+            controller_daemon,
+            sim_daemon,
+            model,
+            file,
+        })
+    }
+}
+
+impl Scenario {
+    /// Overrides the simulated duration (e.g. from the command line).
+    pub fn set_duration(&mut self, duration_s: f64) -> Result<(), ConfigError> {
+        let cycles = duration_s * self.simulation.control_rate_hz;
+        if !(duration_s.is_finite() && (1.0..=1e8).contains(&cycles)) {
+            return Err(ConfigError::Invalid {
+                file: self.path.clone(),
+                line: None,
+                path: "simulation.duration_s".into(),
+                message: format!(
+                    "override {duration_s} s must be finite and cover 1 to 1e8 control periods"
+                ),
+            });
+        }
+        self.simulation.duration_s = duration_s;
+        Ok(())
+    }
+
+    /// Switches the Coriolis cancellation τ_μ (eq. 22) on or off (e.g. for the ablation).
+    pub fn set_coriolis_cancellation(&mut self, on: bool) -> Result<(), ConfigError> {
+        self.coriolis_cancellation = on;
+        self.spec.coriolis_cancellation = on;
+        Ok(())
+    }
+}
+
+fn frame_of(
+    cx: &Ctx,
+    model: &Model,
+    path: &str,
+    name: Option<&String>,
+) -> Result<(String, FrameId), ConfigError> {
+    let name = name.cloned().unwrap_or_else(|| model.tip_link.clone());
+    match model.frame_id(&name) {
+        Some(id) => Ok((name, id)),
+        None => Err(cx.err(
+            path,
+            format!("unknown link '{name}' (not on the chain of the robot model)"),
+        )),
+    }
+}
+
+fn resolve_level(
+    cx: &Ctx,
+    model: &Model,
+    i: usize,
+    l: &LevelSection,
+) -> Result<Level, ConfigError> {
+    let p = |f: &str| format!("level[{i}].{f}");
+    let unused = |field: &str, present: bool| -> Result<(), ConfigError> {
+        if present {
+            Err(cx.err(
+                &p(field),
+                format!("is not used by a task of kind {:?}", l.task),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    let task = match l.task {
+        TaskKind::Position => {
+            unused("joints", l.joints.is_some())?;
+            unused("weights", l.weights.is_some())?;
+            let (frame, frame_id) = frame_of(cx, model, &p("frame"), l.frame.as_ref())?;
+            let axes: Vec<usize> = match &l.axes {
+                None => vec![0, 1, 2],
+                Some(a) => a.iter().map(|a| a.index()).collect(),
+            };
+            if axes.is_empty() {
+                return Err(cx.err(&p("axes"), "must list at least one axis"));
+            }
+            for (k, a) in axes.iter().enumerate() {
+                if axes[..k].contains(a) {
+                    return Err(cx.err(&p("axes"), "lists an axis twice"));
+                }
+            }
+            Task::Position {
+                frame,
+                frame_id,
+                axes,
+            }
+        }
+        TaskKind::Orientation => {
+            unused("joints", l.joints.is_some())?;
+            unused("weights", l.weights.is_some())?;
+            let (frame, frame_id) = frame_of(cx, model, &p("frame"), l.frame.as_ref())?;
+            match &l.axes {
+                None => Task::Orientation { frame, frame_id },
+                Some(a) if a.len() == 1 => Task::PlanarOrientation {
+                    frame,
+                    frame_id,
+                    axis: a[0].index(),
+                },
+                Some(_) => {
+                    return Err(cx.err(
+                        &p("axes"),
+                        "an orientation task takes either no axes (3-D) or exactly one (planar)",
+                    ));
+                }
+            }
+        }
+        TaskKind::JointCombination => {
+            unused("frame", l.frame.is_some())?;
+            unused("axes", l.axes.is_some())?;
+            unused("joints", l.joints.is_some())?;
+            let n = model.nq();
+            let rows = l
+                .weights
+                .as_ref()
+                .ok_or_else(|| cx.err(&p("weights"), "is required for a joint_combination task"))?;
+            if rows.is_empty() {
+                return Err(cx.err(&p("weights"), "must have at least one row"));
+            }
+            for (k, row) in rows.iter().enumerate() {
+                if row.len() != n {
+                    return Err(cx.err(
+                        &format!("level[{i}].weights[{k}]"),
+                        format!("has {} elements, expected {n} (one per joint)", row.len()),
+                    ));
+                }
+                cx.finite(&format!("level[{i}].weights[{k}]"), row)?;
+            }
+            Task::JointCombination {
+                weights: DMatrix::from_fn(rows.len(), n, |a, b| rows[a][b]),
+            }
+        }
+        TaskKind::Joint => {
+            unused("frame", l.frame.is_some())?;
+            unused("axes", l.axes.is_some())?;
+            unused("weights", l.weights.is_some())?;
+            match &l.joints {
+                None => Task::Posture { n: model.nq() },
+                Some(names) => {
+                    let mut idx = Vec::with_capacity(names.len());
+                    for (k, name) in names.iter().enumerate() {
+                        match model.joints.iter().position(|j| &j.name == name) {
+                            Some(j) if !idx.contains(&j) => idx.push(j),
+                            Some(_) => {
+                                return Err(cx.err(
+                                    &format!("level[{i}].joints[{k}]"),
+                                    format!("joint '{name}' is listed twice"),
+                                ));
+                            }
+                            None => {
+                                return Err(cx.err(
+                                    &format!("level[{i}].joints[{k}]"),
+                                    format!(
+                                        "unknown joint '{name}' (not a movable joint of the chain)"
+                                    ),
+                                ));
+                            }
+                        }
+                    }
+                    if idx.is_empty() {
+                        return Err(cx.err(&p("joints"), "must list at least one joint"));
+                    }
+                    Task::Joint { joints: idx }
+                }
+            }
+        }
+    };
+    let m = task.dim();
+    let stiffness = cx.gain(&p("stiffness"), &l.stiffness, m)?;
+    let damping = cx.gain(&p("damping"), &l.damping, m)?;
+    let goal = cx.vector(&p("goal"), &l.goal, m, "the task dimension")?;
+    let name = l.name.clone().unwrap_or_else(|| default_name(model, &task));
+    Ok(Level {
+        name,
+        task,
+        stiffness,
+        damping,
+        goal,
+    })
+}
+
+fn default_name(model: &Model, task: &Task) -> String {
+    const AX: [&str; 3] = ["x", "y", "z"];
+    match task {
+        Task::Position { frame, axes, .. } => {
+            let a: String = axes.iter().map(|&k| AX[k]).collect();
+            format!("{frame} position {a}")
+        }
+        Task::Orientation { frame, .. } => format!("{frame} orientation"),
+        Task::PlanarOrientation { frame, axis, .. } => {
+            format!("{frame} rotation about {}", AX[*axis])
+        }
+        Task::Posture { .. } => "joint posture".to_string(),
+        Task::JointCombination { .. } => "joint combination".to_string(),
+        Task::Joint { joints } => {
+            let names: Vec<&str> = joints
+                .iter()
+                .map(|&j| model.joints[j].name.as_str())
+                .collect();
+            format!("joint {}", names.join(", "))
+        }
+    }
+}
+
+/// Dimension rules of the hierarchy (Sec. II): every level but the last must leave a
+/// null space, Σ_{i<r} m_i < n; the last level may be of any dimension.
+fn check_hierarchy(cx: &Ctx, levels: &[Level], n: usize) -> Result<(), ConfigError> {
+    let mut sum = 0;
+    let r = levels.len();
+    for (i, l) in levels.iter().enumerate() {
+        let m = l.task.dim();
+        if m > n {
+            return Err(cx.err(
+                &format!("level[{i}]"),
+                format!("task dimension {m} exceeds the {n} joints of the robot"),
+            ));
+        }
+        sum += m;
+        if i + 1 < r && sum >= n {
+            return Err(cx.err(
+                &format!("level[{}]", i + 1),
+                format!(
+                    "no null space left: levels 1..{} already use {sum} of {n} degrees of freedom; only the last level may exhaust them",
+                    i + 1
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn resolve_simulation(
+    cx: &Ctx,
+    model: &Model,
+    s: &SimulationSection,
+) -> Result<Simulation, ConfigError> {
+    let positive = |name: &str, v: f64| -> Result<(), ConfigError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(cx.err(
+                &format!("simulation.{name}"),
+                format!("must be a positive finite number, got {v}"),
+            ))
+        }
+    };
+    positive("duration_s", s.duration_s)?;
+    positive("control_rate_hz", s.control_rate_hz)?;
+    positive("integrator_dt_s", s.integrator_dt_s)?;
+    let period = 1.0 / s.control_rate_hz;
+    let ratio = period / s.integrator_dt_s;
+    let substeps = ratio.round();
+    if substeps < 1.0 || (ratio - substeps).abs() > 1e-6 * ratio {
+        return Err(cx.err(
+            "simulation.integrator_dt_s",
+            format!(
+                "{} s must divide the control period 1/{} Hz = {period} s into a whole number of steps",
+                s.integrator_dt_s, s.control_rate_hz
+            ),
+        ));
+    }
+    if s.duration_s * s.control_rate_hz < 1.0 {
+        return Err(cx.err(
+            "simulation.duration_s",
+            "is shorter than one control period",
+        ));
+    }
+    if s.duration_s * s.control_rate_hz > 1e8 {
+        return Err(cx.err(
+            "simulation.duration_s",
+            "is too long (more than 1e8 control cycles)",
+        ));
+    }
+    let n = model.nq();
+    let joint_friction = match &s.joint_friction {
+        Some(f) => cx.per_joint("simulation.joint_friction", f, n, false)?,
+        None => DVector::zeros(n),
+    };
+    let mut wrenches = Vec::with_capacity(s.wrench.len());
+    for (i, w) in s.wrench.iter().enumerate() {
+        let p = |f: &str| format!("simulation.wrench[{i}].{f}");
+        if !(w.start_s.is_finite() && w.start_s >= 0.0) {
+            return Err(cx.err(&p("start_s"), "must be a finite non-negative time"));
+        }
+        if !(w.duration_s.is_finite() && w.duration_s >= 0.0) {
+            return Err(cx.err(&p("duration_s"), "must be a finite non-negative duration"));
+        }
+        let frame_id = model.frame_id(&w.link).ok_or_else(|| {
+            cx.err(
+                &p("link"),
+                format!("unknown link '{}' (not a link of the robot model)", w.link),
+            )
+        })?;
+        let v3 = |name: &str, v: &Option<Vec<f64>>| -> Result<Vector3<f64>, ConfigError> {
+            match v {
+                None => Ok(Vector3::zeros()),
+                Some(v) => {
+                    let d = cx.vector(&p(name), v, 3, "x, y, z in world axes")?;
+                    Ok(Vector3::new(d[0], d[1], d[2]))
+                }
+            }
+        };
+        wrenches.push(Wrench {
+            start_s: w.start_s,
+            duration_s: w.duration_s,
+            link: w.link.clone(),
+            frame_id,
+            force: v3("force", &w.force)?,
+            torque: v3("torque", &w.torque)?,
+        });
+    }
+    Ok(Simulation {
+        duration_s: s.duration_s,
+        control_rate_hz: s.control_rate_hz,
+        integrator_dt_s: s.integrator_dt_s,
+        substeps: substeps as usize,
+        joint_friction,
+        wrenches,
+    })
+}
+
+fn resolve_controller_daemon(
+    cx: &Ctx,
+    model: &Model,
+    d: &ControllerDaemonSection,
+) -> Result<ControllerDaemon, ConfigError> {
+    if let Some(p) = d.sched_priority
+        && !(1..=99).contains(&p)
+    {
+        return Err(cx.err(
+            "controller_daemon.sched_priority",
+            format!("must be in 1..=99 (SCHED_FIFO), got {p}"),
+        ));
+    }
+    let torque_limits = match &d.torque_limits {
+        Some(t) => {
+            let v = cx.per_joint("controller_daemon.torque_limits", t, model.nq(), true)?;
+            if let Some(k) = v.iter().position(|x| *x == 0.0) {
+                return Err(cx.err(
+                    &format!("controller_daemon.torque_limits[{k}]"),
+                    "must be positive",
+                ));
+            }
+            v
+        }
+        None => model.effort_limits(),
+    };
+    let stale_timeout_ms = d.stale_timeout_ms.unwrap_or(5.0);
+    if !(stale_timeout_ms.is_finite() && stale_timeout_ms > 0.0) {
+        return Err(cx.err(
+            "controller_daemon.stale_timeout_ms",
+            format!("must be a positive finite number, got {stale_timeout_ms}"),
+        ));
+    }
+    Ok(ControllerDaemon {
+        cpu_core: d.cpu_core,
+        sched_priority: d.sched_priority,
+        mlock: d.mlock,
+        wait_strategy: d.wait_strategy,
+        torque_limits,
+        stale_timeout_ms,
+    })
+}
+
+fn resolve_sim_daemon(cx: &Ctx, n: usize, d: &SimDaemonSection) -> Result<SimDaemon, ConfigError> {
+    let fallback_damping = match &d.fallback_damping {
+        Some(f) => cx.per_joint("sim_daemon.fallback_damping", f, n, false)?,
+        None => DVector::from_element(n, 2.0),
+    };
+    Ok(SimDaemon {
+        cpu_core: d.cpu_core,
+        mode: d.mode,
+        hold_cycles: d.hold_cycles.unwrap_or(3),
+        fallback_damping,
+    })
+}

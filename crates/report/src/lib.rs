@@ -1,1 +1,91 @@
-//! See the crate description.
+//! Results of a run of the hierarchical compliance controller: the trajectory
+//! table (`trajectory.csv`), metrics (`metrics.json`) and PNG plots in the
+//! spirit of Figs. 3–7 of Dietrich, Ott & Albu-Schäffer (IROS 2013).
+//!
+//! The crate knows nothing about how a run was produced (in-process simulation
+//! or the daemons): its inputs are a [`Trajectory`] with the columns described
+//! in [`columns`] and a [`RunDescription`].
+//!
+//! ```no_run
+//! # use hcc_report::*;
+//! # fn f(traj: Trajectory, run: RunDescription) -> Result<(), ReportError> {
+//! let out = write_run(std::path::Path::new("out/sim1"), &traj, &run)?;
+//! print!("{}", out.metrics.summary());
+//! # Ok(()) }
+//! ```
+
+pub mod columns;
+pub mod metrics;
+pub mod plots;
+pub mod trajectory;
+
+pub use metrics::{ErrorUnit, LevelDescription, LevelMetrics, Metrics, RunDescription};
+pub use plots::plot_all;
+pub use trajectory::Trajectory;
+
+use std::path::{Path, PathBuf};
+
+/// File name of the trajectory table in a run directory.
+pub const TRAJECTORY_FILE: &str = "trajectory.csv";
+/// File name of the metrics in a run directory.
+pub const METRICS_FILE: &str = "metrics.json";
+
+/// Errors of this crate; each names the file or column concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("{}: {error}", path.display())]
+    Io {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("{}: invalid JSON: {error}", path.display())]
+    Json {
+        path: PathBuf,
+        error: serde_json::Error,
+    },
+    #[error("{origin}: line {line}: {message}")]
+    Parse {
+        origin: String,
+        line: usize,
+        message: String,
+    },
+    #[error("trajectory: {0}")]
+    Table(String),
+    #[error("{}: plotting failed: {message}", path.display())]
+    Plot { path: PathBuf, message: String },
+}
+
+/// What [`write_run`] produced.
+#[derive(Clone, Debug)]
+pub struct RunOutputs {
+    pub metrics: Metrics,
+    /// Every file written (CSV, JSON, PNGs).
+    pub files: Vec<PathBuf>,
+}
+
+/// Writes `trajectory.csv`, `metrics.json` and the plots into `dir` (created if missing).
+pub fn write_run(
+    dir: &Path,
+    traj: &Trajectory,
+    run: &RunDescription,
+) -> Result<RunOutputs, ReportError> {
+    std::fs::create_dir_all(dir).map_err(|e| ReportError::Io {
+        path: dir.to_path_buf(),
+        error: e,
+    })?;
+    let csv = dir.join(TRAJECTORY_FILE);
+    traj.write_csv(&csv)?;
+    let metrics = Metrics::compute(traj, run)?;
+    let json = dir.join(METRICS_FILE);
+    metrics.write_json(&json)?;
+    let mut files = vec![csv, json];
+    files.extend(plot_all(dir, traj, &metrics)?);
+    Ok(RunOutputs { metrics, files })
+}
+
+/// Regenerates the plots of a run directory from its `trajectory.csv` and `metrics.json`.
+pub fn replot(dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let traj = Trajectory::read_csv(&dir.join(TRAJECTORY_FILE))?;
+    let metrics = Metrics::read_json(&dir.join(METRICS_FILE))?;
+    plot_all(dir, &traj, &metrics)
+}

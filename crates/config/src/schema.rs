@@ -1,0 +1,323 @@
+//! The scenario file as written (serde view of the TOML). Every table rejects
+//! unknown fields. Values are checked and resolved against the robot model in
+//! [`crate::Scenario::load`].
+
+use serde::Deserialize;
+
+/// Root of a scenario file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Scenario name (default: the file stem).
+    pub name: Option<String>,
+    /// Free text.
+    pub description: Option<String>,
+    pub robot: RobotSection,
+    /// Levels in priority order: the first `[[level]]` has the highest priority.
+    #[serde(rename = "level")]
+    pub levels: Vec<LevelSection>,
+    #[serde(default)]
+    pub controller: ControllerSection,
+    pub initial: InitialSection,
+    #[serde(default)]
+    pub simulation: SimulationSection,
+    #[serde(default)]
+    pub ipc: IpcSection,
+    #[serde(default)]
+    pub controller_daemon: ControllerDaemonSection,
+    #[serde(default)]
+    pub sim_daemon: SimDaemonSection,
+}
+
+/// `[robot]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSection {
+    /// URDF path, relative to the scenario file.
+    pub urdf: String,
+    /// Root link of the chain (default: the URDF's root link).
+    pub root_link: Option<String>,
+    /// Tip link of the chain.
+    pub tip_link: String,
+    /// Gravity in world coordinates, m/s² (default (0, 0, −9.81)).
+    pub gravity: Option<Vec<f64>>,
+    /// Whether the controller adds the gravity torque g(q) (eq. 19). Set to false for
+    /// robots whose torque interface compensates gravity itself.
+    #[serde(default = "yes")]
+    pub gravity_compensation: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A task-space gain (stiffness or damping): a scalar (times identity), the
+/// diagonal, or the full symmetric matrix (rows).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum GainValue {
+    Scalar(f64),
+    Diagonal(Vec<f64>),
+    Matrix(Vec<Vec<f64>>),
+}
+
+/// A per-joint quantity: one value for every joint, or one per joint.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum PerJoint {
+    Scalar(f64),
+    Vector(Vec<f64>),
+}
+
+/// Kind of task of a level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TaskKind {
+    /// Cartesian position of a frame origin (world axes), optionally a subset of axes.
+    Position,
+    /// Orientation of a frame: 3-D (goal as roll-pitch-yaw in rad), or the rotation
+    /// angle about one world axis for planar arms (`axes = ["z"]`, goal one angle).
+    Orientation,
+    /// Joint positions of the listed joints (default: all joints, the posture).
+    Joint,
+    /// A linear combination of joint positions, x = W q (`weights`: m rows of n).
+    JointCombination,
+}
+
+/// A Cartesian axis name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AxisName {
+    X,
+    Y,
+    Z,
+}
+
+impl AxisName {
+    /// Index 0, 1, 2.
+    pub fn index(self) -> usize {
+        match self {
+            AxisName::X => 0,
+            AxisName::Y => 1,
+            AxisName::Z => 2,
+        }
+    }
+}
+
+/// `[[level]]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LevelSection {
+    /// Name for reports (default from the task).
+    pub name: Option<String>,
+    pub task: TaskKind,
+    /// Frame (link) of a Cartesian task (default: the tip link).
+    pub frame: Option<String>,
+    /// Axes of a position task (default x, y, z), or the single rotation axis of a
+    /// planar orientation task.
+    pub axes: Option<Vec<AxisName>>,
+    /// Joints of a joint task (default: all).
+    pub joints: Option<Vec<String>>,
+    /// Rows of W for a joint-combination task (each of length n).
+    pub weights: Option<Vec<Vec<f64>>>,
+    /// Stiffness K_i (N/m, Nm/rad): scalar, diagonal or full symmetric positive definite.
+    pub stiffness: GainValue,
+    /// Damping D_i (Ns/m, Nms/rad): scalar, diagonal or full symmetric positive definite.
+    pub damping: GainValue,
+    /// Virtual equilibrium x_{i,d} (task dimension; roll-pitch-yaw for 3-D orientation).
+    pub goal: Vec<f64>,
+}
+
+/// Form of the null-space projection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum FormName {
+    /// J̄_iᵀ Z_i J_iᵀ with the extended Jacobian (eqs. 5, 12, 21).
+    #[default]
+    Extended,
+    /// N_i J_iᵀ with the classical projector (eqs. 8, 9, 10).
+    Projector,
+}
+
+/// `[controller]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerSection {
+    /// Add the power-conserving Coriolis cancellation τ_μ (eq. 22).
+    #[serde(default = "yes")]
+    pub coriolis_cancellation: bool,
+    #[serde(default)]
+    pub form: FormName,
+    #[serde(default)]
+    pub singularity: SingularitySection,
+}
+
+impl Default for ControllerSection {
+    fn default() -> Self {
+        ControllerSection {
+            coriolis_cancellation: true,
+            form: FormName::Extended,
+            singularity: SingularitySection::default(),
+        }
+    }
+}
+
+/// `[controller.singularity]`: handling of (near-)singular task Jacobians.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SingularitySection {
+    /// Eigenvalue ratio λ_min/λ_max of a Gram matrix (J M⁻¹ Jᵀ, J Jᵀ, Z M Zᵀ) below
+    /// which its inversion is damped and the level flagged singular; in (0, 1).
+    #[serde(default = "default_singular_ratio")]
+    pub singular_ratio: f64,
+}
+
+fn default_singular_ratio() -> f64 {
+    1e-6
+}
+
+impl Default for SingularitySection {
+    fn default() -> Self {
+        SingularitySection {
+            singular_ratio: default_singular_ratio(),
+        }
+    }
+}
+
+/// `[initial]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialSection {
+    /// Initial joint positions (n).
+    pub q0: Vec<f64>,
+    /// Initial joint velocities (n, default 0).
+    pub qd0: Option<Vec<f64>>,
+}
+
+/// `[simulation]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSection {
+    #[serde(default = "default_duration")]
+    pub duration_s: f64,
+    #[serde(default = "default_rate")]
+    pub control_rate_hz: f64,
+    #[serde(default = "default_dt")]
+    pub integrator_dt_s: f64,
+    /// Viscous joint friction in the plant, Nms/rad (scalar or per joint, default 0).
+    pub joint_friction: Option<PerJoint>,
+    /// External wrenches (`[[simulation.wrench]]`), applied in the plant only.
+    #[serde(default)]
+    pub wrench: Vec<WrenchSection>,
+}
+
+fn default_duration() -> f64 {
+    3.0
+}
+fn default_rate() -> f64 {
+    1000.0
+}
+fn default_dt() -> f64 {
+    1e-4
+}
+
+impl Default for SimulationSection {
+    fn default() -> Self {
+        SimulationSection {
+            duration_s: default_duration(),
+            control_rate_hz: default_rate(),
+            integrator_dt_s: default_dt(),
+            joint_friction: None,
+            wrench: Vec::new(),
+        }
+    }
+}
+
+/// `[[simulation.wrench]]`: force/torque at a link frame origin, world axes.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WrenchSection {
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub link: String,
+    /// N, world axes (default 0).
+    pub force: Option<Vec<f64>>,
+    /// Nm, world axes (default 0).
+    pub torque: Option<Vec<f64>>,
+}
+
+/// `[ipc]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IpcSection {
+    /// Namespace prefixed to every shared-memory service name.
+    #[serde(default = "default_namespace")]
+    pub namespace: String,
+}
+
+fn default_namespace() -> String {
+    "hcc".to_string()
+}
+
+impl Default for IpcSection {
+    fn default() -> Self {
+        IpcSection {
+            namespace: default_namespace(),
+        }
+    }
+}
+
+/// How the controller daemon waits for a new joint state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WaitStrategy {
+    /// Block on an IPC event.
+    Event,
+    /// Sleep until shortly before the expected sample, then spin.
+    #[default]
+    Hybrid,
+}
+
+/// `[controller_daemon]`
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerDaemonSection {
+    /// CPU core to pin the control thread to.
+    pub cpu_core: Option<usize>,
+    /// SCHED_FIFO priority 1..=99 (none: normal scheduling).
+    pub sched_priority: Option<i32>,
+    /// Lock memory (mlockall).
+    #[serde(default)]
+    pub mlock: bool,
+    #[serde(default)]
+    pub wait_strategy: WaitStrategy,
+    /// Torque limits, Nm (scalar or per joint; default: the URDF effort limits).
+    pub torque_limits: Option<PerJoint>,
+    /// A joint state older than this is stale, ms (default 5).
+    pub stale_timeout_ms: Option<f64>,
+}
+
+/// Pacing of the simulator daemon.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SimMode {
+    /// Advance with the wall clock at the control rate.
+    #[default]
+    Realtime,
+    /// Advance one control period per received torque command.
+    Lockstep,
+}
+
+/// `[sim_daemon]`
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SimDaemonSection {
+    /// CPU core to pin the simulator thread to.
+    pub cpu_core: Option<usize>,
+    #[serde(default)]
+    pub mode: SimMode,
+    /// Control periods the last torque is held when no new command arrives (default 3).
+    pub hold_cycles: Option<u32>,
+    /// After that, τ = g(q) − D q̇ with this damping, Nms/rad (scalar or per joint, default 2).
+    pub fallback_damping: Option<PerJoint>,
+}
