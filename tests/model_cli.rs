@@ -1,9 +1,8 @@
 //! `hcc model` as a user runs it: the Panda reference states in, the same keys out,
 //! equal to the Pinocchio values; bad input gives an error naming the file.
 
-mod support;
+use hcc_system_tests::*;
 use std::process::Command;
-use support::*;
 
 fn matrix_rows(v: &serde_json::Value) -> Vec<f64> {
     match v {
