@@ -783,16 +783,14 @@ impl Controller {
         let task = &self.spec.levels[i].task;
         match task {
             TaskSpec::Position { frame, axes } => {
-                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
-                hcc_model::frame_jacobian_time_variation(
+                let placement = frame_terms(
                     &self.model,
                     &self.data,
                     *frame,
+                    &mut self.frame_j,
                     &mut self.frame_jdot,
                 );
-                let p = hcc_model::frame_placement(&self.model, &self.data, *frame)
-                    .translation
-                    .vector;
+                let p = placement.translation.vector;
                 for (a, &ax) in axes.iter().enumerate() {
                     l.err[a] = p[ax] - l.goal[a];
                     for b in 0..n {
@@ -803,16 +801,14 @@ impl Controller {
                 quadratic(l);
             }
             TaskSpec::PlanarOrientation { frame, axis } => {
-                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
-                hcc_model::frame_jacobian_time_variation(
+                let placement = frame_terms(
                     &self.model,
                     &self.data,
                     *frame,
+                    &mut self.frame_j,
                     &mut self.frame_jdot,
                 );
-                let rot = hcc_model::frame_placement(&self.model, &self.data, *frame)
-                    .rotation
-                    .to_rotation_matrix();
+                let rot = placement.rotation.to_rotation_matrix();
                 let m = rot.matrix();
                 let angle = match axis {
                     0 => m[(2, 1)].atan2(m[(1, 1)]),
@@ -827,16 +823,14 @@ impl Controller {
                 quadratic(l);
             }
             TaskSpec::Orientation { frame } => {
-                hcc_model::frame_jacobian(&self.model, &self.data, *frame, &mut self.frame_j);
-                hcc_model::frame_jacobian_time_variation(
+                let placement = frame_terms(
                     &self.model,
                     &self.data,
                     *frame,
+                    &mut self.frame_j,
                     &mut self.frame_jdot,
                 );
-                let rot = hcc_model::frame_placement(&self.model, &self.data, *frame)
-                    .rotation
-                    .to_rotation_matrix();
+                let rot = placement.rotation.to_rotation_matrix();
                 let re = l.goal_rotation.inverse() * rot;
                 let quat = UnitQuaternion::from_rotation_matrix(&re);
                 let (mut eta, mut eps) = (quat.w, quat.imag());
@@ -948,6 +942,20 @@ pub struct Diagnostics {
     pub m: DMatrix<f64>,
     pub minv: DMatrix<f64>,
     pub c: DMatrix<f64>,
+}
+
+/// Frame Jacobian J and its time derivative J̇ (world axes at the frame origin) into
+/// the given buffers, and the frame's world placement.
+fn frame_terms(
+    model: &Model,
+    data: &Data,
+    frame: hcc_model::FrameId,
+    j: &mut DMatrix<f64>,
+    jdot: &mut DMatrix<f64>,
+) -> nalgebra::Isometry3<f64> {
+    hcc_model::frame_jacobian(model, data, frame, j);
+    hcc_model::frame_jacobian_time_variation(model, data, frame, jdot);
+    hcc_model::frame_placement(model, data, frame)
 }
 
 /// V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
