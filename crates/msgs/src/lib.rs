@@ -27,6 +27,10 @@
 //! with safe overflow (the newest sample wins) and read until empty each
 //! cycle, keeping the newest sample.
 //!
+//! Peers open these services through [`ipc`] ([`ipc::create_node`],
+//! [`ipc::Services::open`]), which fixes their capacities, overflow
+//! behaviour and the single publisher per service.
+//!
 //! ## Rates and sequence/echo semantics
 //!
 //! * The driver publishes one [`JointState`] per control period (nominally
@@ -103,6 +107,7 @@
 //! writers and ignored by readers.
 
 mod error;
+pub mod ipc;
 mod sequence;
 mod service;
 mod types;

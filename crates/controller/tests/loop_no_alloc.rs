@@ -1,0 +1,165 @@
+//! The acceptance check of the torque loop: 10 000 cycles of receive →
+//! compute → publish command → publish telemetry against an in-test driver,
+//! through real iceoryx2 shared memory (own namespace and file prefix), with
+//! `RtAllocator` installed as this test binary's global allocator.
+//!
+//! After warm-up the real-time thread makes no call into the system
+//! allocator, the pool occupancy is bounded and constant from cycle to cycle,
+//! and the thread takes no page fault.
+
+use std::path::PathBuf;
+
+use hcc_config::{Scenario, WaitStrategy};
+use hcc_control::Controller;
+use hcc_controller::{Cycle, CycleSettings, Outcome, Ports};
+use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
+use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames};
+use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
+use iceoryx2::prelude::SignalHandlingMode;
+
+#[global_allocator]
+static ALLOCATOR: RtAllocator = RtAllocator::new();
+
+const WARM_UP: u64 = 3_000;
+const CYCLES: u64 = 10_000;
+
+fn scenario() -> Scenario {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    Scenario::load(&path).unwrap()
+}
+
+/// Occupancy of the pool inside one cycle and after it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Occupancy {
+    after: u64,
+}
+
+#[test]
+fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
+    assert!(hcc_rtalloc::pool_active());
+    let prefix = format!("hcctc{}_", std::process::id());
+    {
+        let scenario = scenario();
+        let n = scenario.model.nq();
+        let names = ServiceNames::for_namespace(Namespace::unique("ctl_noalloc").unwrap());
+        let node =
+            ipc::create_node("loop-test", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
+        let services = Services::open(&node, &names).unwrap();
+        let ports = Ports::open(&services).unwrap();
+        // The in-test driver and a recorder.
+        let state_pub = services.joint_state_publisher().unwrap();
+        let state_ready = services.state_ready_notifier().unwrap();
+        let command_sub = services.torque_command_subscriber(2).unwrap();
+        let command_ready = services.command_ready_listener().unwrap();
+        let telemetry_sub = services
+            .telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)
+            .unwrap();
+
+        let controller =
+            Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+        let mut settings = CycleSettings::from_scenario(&scenario);
+        settings.wait = WaitStrategy::Event;
+        let mut cycle = Cycle::new(controller, settings).unwrap();
+
+        let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+        let mut q = [0.0; MAX_JOINTS];
+        let mut qd = [0.0; MAX_JOINTS];
+        let zero = [0.0; MAX_JOINTS];
+
+        // One driver period + one controller cycle; returns (ok, occupancy).
+        let mut one = |k: u64| -> (bool, Occupancy) {
+            let s = (k as f64 * 1e-3).sin();
+            for j in 0..n {
+                q[j] = q0[j] + 0.05 * s;
+                qd[j] = 0.05 * (k as f64 * 1e-3).cos();
+            }
+            let Ok(sample) = state_pub.loan_uninit() else {
+                return (false, Occupancy { after: 0 });
+            };
+            let mut sample = sample.write_payload(JointState::zeroed());
+            let st = sample.payload_mut();
+            st.header.seq = k;
+            st.header.stamp_ns = hcc_msgs::monotonic_now_ns();
+            let mut ok = st.set_joints(&q[..n], &qd[..n], &zero[..n]).is_ok();
+            ok &= sample.send().is_ok();
+            ok &= state_ready.notify().is_ok();
+            ok &= cycle.run_once(&ports) == Outcome::Answered(CommandMode::Normal);
+            let _ = command_ready.try_wait(|_| {});
+            match command_sub.receive() {
+                Ok(Some(c)) => ok &= c.state_seq == k && c.tau().iter().all(|t| t.is_finite()),
+                _ => ok = false,
+            }
+            while let Ok(Some(t)) = telemetry_sub.receive() {
+                ok &= t.state_seq == k;
+            }
+            (
+                ok,
+                Occupancy {
+                    after: stats().pool_in_use,
+                },
+            )
+        };
+
+        hcc_rtalloc::prefault();
+        hcc_rtalloc::prefault_stack(512 * 1024).unwrap();
+        let rt = RtSection::enter();
+        let mut failures = 0u64;
+        for k in 0..WARM_UP {
+            failures += u64::from(!one(k).0);
+        }
+        hcc_rtalloc::reset_high_water();
+        let baseline = stats();
+        let before = thread_stats();
+        let faults_before = page_faults().unwrap();
+        let (ok, first) = one(WARM_UP);
+        failures += u64::from(!ok);
+        let mut varying = 0u64;
+        for k in WARM_UP + 1..WARM_UP + CYCLES {
+            let (ok, occupancy) = one(k);
+            failures += u64::from(!ok);
+            varying += u64::from(occupancy != first);
+        }
+        let faults = page_faults().unwrap().since(faults_before);
+        drop(rt);
+        let during = thread_stats().since(before);
+        let after = stats();
+        let counters = cycle.counters();
+
+        println!(
+            "controller loop, {CYCLES} cycles: {} pool allocs/cycle, {} system allocs, {} fallbacks, \
+             pool in use {} (high-water {}), page faults {faults:?}, counters {counters:?}",
+            during.pool_allocs as f64 / CYCLES as f64,
+            during.system_allocs,
+            during.fallbacks,
+            after.pool_in_use,
+            after.pool_high_water,
+        );
+        assert_eq!(failures, 0, "cycles that did not round-trip correctly");
+        assert_eq!(counters.invalid_states, 0);
+        assert_eq!(counters.missed_states, 0);
+        assert_eq!(counters.send_failures, 0);
+        assert_eq!(during.system_allocs, 0, "{during:?}");
+        assert_eq!(during.system_frees, 0, "{during:?}");
+        assert_eq!(during.fallbacks, 0, "{during:?}");
+        assert_eq!(after.rt_system_allocs, baseline.rt_system_allocs);
+        assert!(
+            during.pool_allocs > 0,
+            "iceoryx2 loans are served by the pool"
+        );
+        assert_eq!(varying, 0, "pool occupancy constant from cycle to cycle");
+        assert_eq!(after.pool_in_use, baseline.pool_in_use);
+        assert!(
+            after.pool_high_water <= baseline.pool_in_use + 4,
+            "bounded pool occupancy: {after:?}"
+        );
+        assert_eq!(faults.minor, 0, "{faults:?}");
+        assert_eq!(faults.major, 0, "{faults:?}");
+    }
+    // Everything dropped: only the per-prefix global management segment remains.
+    let files = ipc::leftover_files(&prefix).unwrap();
+    for f in files.iter().filter(|f| f.global_mgmt) {
+        std::fs::remove_file(&f.path).unwrap();
+    }
+    let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
+    assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
+}

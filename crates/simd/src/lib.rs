@@ -1,0 +1,15 @@
+//! The hcc plant-simulator daemon `hcc-sim`: the simulated robot of `hcc-sim`
+//! (RK4 integration of the rigid-body dynamics, paper Eq. (1), with the torque
+//! held over each control period) acting as a robot driver on the hcc-msgs
+//! services, so that the controller daemon can be run and tested against it
+//! exactly as against a real robot.
+//!
+//! * [`driver`]: the plant behind the driver's timing contract (command
+//!   freshness, hold, fallback, status), allocation-free per period.
+//! * [`daemon`]: the process — real-time (absolute 1 kHz clock) or lockstep
+//!   pacing, start-up, logging and shutdown.
+
+pub mod daemon;
+pub mod driver;
+
+pub use driver::{Applied, DriverCounters, SimDriver};
