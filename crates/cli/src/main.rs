@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 mod model_cmd;
 mod plot_cmd;
+mod run_cmd;
 mod simulate_cmd;
 
 #[derive(Parser)]
@@ -20,6 +21,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a scenario with the daemons over IPC (hcc-sim and hcc-controller as child
+    /// processes), record it and write its results (default: config/paper-sim1.toml).
+    Run(run_cmd::RunArgs),
     /// Run a scenario in-process (controller at 1 kHz, plant RK4 at 0.1 ms) and write its results.
     Simulate(simulate_cmd::SimulateArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
@@ -31,6 +35,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Run(args) => run_cmd::run(args),
         Command::Simulate(args) => simulate_cmd::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),

@@ -1,0 +1,1337 @@
+//! `hcc run CONFIG [--out DIR] [--duration S] [--lockstep] [--namespace NS]`:
+//! the main job over inter-process communication.
+//!
+//! The launcher starts the two daemons as child processes — the plant
+//! simulator `hcc-sim` and the controller `hcc-controller`, found next to the
+//! `hcc` executable — in a namespace of their own (unique unless given), and
+//! records the run from the outside: it subscribes to the joint states, the
+//! torque commands and the controller's telemetry (the services of the
+//! hcc-msgs contract) and writes one row per controller cycle in exactly the
+//! column layout of `hcc simulate` (see `hcc_sim::closed_loop`), then
+//! `trajectory.csv`, `metrics.json` and the plots through hcc-report.
+//!
+//! # Where each column comes from
+//!
+//! A row joins the controller's [`Telemetry`] of one cycle with the
+//! [`JointState`] it consumed (`telemetry.state_seq`):
+//! - `t` = k · T for the state of sequence number k (T = 1 / control rate:
+//!   the simulator numbers its states k = 0, 1, … per control period),
+//! - `q`, `qd` from the state; `tau` (τ of eq. 19, gravity included when
+//!   configured), `e<i>_<k>`, `S<i>` (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>`
+//!   (eqs. 20, 21) and `tau_mu_<k>` (eq. 22) from the telemetry,
+//! - the derived columns are computed here, off the real-time path, from the
+//!   recorded state and the telemetry's torques with the same model code the
+//!   in-process run uses: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖ (hcc-model: CRBA,
+//!   Cholesky, frame Jacobians), `accv<i>_<j>` = ‖J̄_i M⁻¹ τ_j‖ and the split
+//!   of S_i into `S<i>_kin` / `S<i>_pot` with J̄ (eq. 4) and V_i (eq. 28) of a
+//!   shadow copy of the controller (hcc-control) fed with the same states,
+//!   and `E_kin`, `E_pot` from the plant model. The shadow's τ is compared
+//!   with the telemetry's τ as a consistency check (reported, not used).
+//!
+//! # Not disturbing the real-time loops
+//!
+//! Publishers of the contract never block (safe overflow): the recorder's
+//! subscribers have the largest queue the services allow and are drained
+//! before any row is computed, and every stream goes through a
+//! [`SequenceChecker`], so lost samples are counted and reported, never lost
+//! silently.
+//!
+//! # Stopping
+//!
+//! The run ends when the simulator exits after `--duration` (its last state
+//! has status Stopped); the controller is then sent SIGTERM. Ctrl-C (SIGINT)
+//! or SIGTERM to `hcc run` sends SIGTERM to both children (by pid), waits for
+//! them and writes the partial results. If a child fails, the other one is
+//! stopped and `hcc run` exits with an error that includes the tail of the
+//! failed child's stderr. The children run in their own process group (a
+//! Ctrl-C at the terminal reaches only the launcher, which stops them in
+//! order) and receive SIGTERM if the launcher dies.
+
+use anyhow::{Context, anyhow, bail};
+use hcc_config::{Scenario, Task};
+use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
+use hcc_msgs::{
+    CommandMode, DriverStatus, JointState, Namespace, SeqEvent, SequenceChecker, ServiceNames,
+    Telemetry, TorqueCommand,
+};
+use hcc_report::Trajectory;
+use hcc_sim::closed_loop::{ControlLaw, HierarchicalLaw, column_names, describe, plant_for};
+use iceoryx2::prelude::SignalHandlingMode;
+use nalgebra::{DMatrix, DVector};
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::{Duration, Instant};
+
+/// Default scenario of `hcc run`: the paper's simulation #1.
+pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
+
+/// Lines of a child's output kept for error messages.
+const TAIL_LINES: usize = 40;
+/// Time to wait for the first joint state after the start of the children.
+const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
+/// A running simulator that publishes nothing for this long is considered hung.
+const STALL_TIMEOUT: Duration = Duration::from_secs(10);
+/// Time the controller gets to answer the simulator's last state.
+const FINAL_ANSWER_GRACE: Duration = Duration::from_millis(500);
+/// Time a child gets to exit after SIGTERM before it is killed.
+const TERMINATE_GRACE: Duration = Duration::from_secs(5);
+
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Scenario TOML file.
+    #[arg(default_value = DEFAULT_CONFIG)]
+    pub config: PathBuf,
+    /// Output directory (created if missing; default out/<scenario name>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Simulated duration in s (overrides [simulation] duration_s).
+    #[arg(long, allow_negative_numbers = true)]
+    pub duration: Option<f64>,
+    /// Make the simulator wait for each command (deterministic; reproduces `hcc simulate`).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// IPC namespace of the run (default: a unique one, so runs never share services).
+    #[arg(long)]
+    pub namespace: Option<String>,
+    /// iceoryx2 file prefix shared with the children (default: the HCC_IPC_FILE_PREFIX
+    /// environment variable, else iceoryx2's default).
+    #[arg(long)]
+    pub file_prefix: Option<String>,
+    /// Skip the PNG plots (CSV and metrics only).
+    #[arg(long)]
+    pub no_plots: bool,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+// ---------------------------------------------------------------------------
+// Signals
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_signal: libc::c_int) {
+    // Only an atomic store: async-signal-safe.
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
+/// SIGINT and SIGTERM set [`INTERRUPTED`]; the recorder loop then stops the children.
+fn install_signal_handlers() -> anyhow::Result<()> {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: a zeroed sigaction is a valid value; the handler only
+        // stores to an atomic, which is async-signal-safe.
+        let rc = unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            libc::sigemptyset(&mut action.sa_mask);
+            libc::sigaction(signal, &action, std::ptr::null_mut())
+        };
+        if rc != 0 {
+            bail!(
+                "cannot install the handler of signal {signal}: {}",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
+// ---------------------------------------------------------------------------
+// Child processes
+
+type Tail = Arc<Mutex<VecDeque<String>>>;
+
+fn keep_tail<R: Read + Send + 'static>(stream: R, tail: Tail) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let reader = BufReader::new(stream);
+        for line in reader.lines() {
+            let Ok(line) = line else { break };
+            if let Ok(mut t) = tail.lock() {
+                if t.len() == TAIL_LINES {
+                    t.pop_front();
+                }
+                t.push_back(line);
+            }
+        }
+    })
+}
+
+/// A daemon started by the launcher: its pid, exit status and output tails.
+struct Daemon {
+    name: &'static str,
+    child: Child,
+    status: Option<ExitStatus>,
+    stderr: Tail,
+    stdout: Tail,
+    readers: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Daemon {
+    fn spawn(
+        name: &'static str,
+        exe: &Path,
+        args: &[String],
+        file_prefix: Option<&str>,
+    ) -> anyhow::Result<Daemon> {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = Command::new(exe);
+        cmd.args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            // Own process group: a Ctrl-C at the terminal reaches only the
+            // launcher, which then stops the children in order.
+            .process_group(0);
+        if let Some(p) = file_prefix {
+            cmd.env(ipc::FILE_PREFIX_ENV, p);
+        }
+        // SAFETY: getpid before the fork; in the child only async-signal-safe
+        // calls (prctl, getppid) and no allocation.
+        let parent = unsafe { libc::getpid() };
+        unsafe {
+            cmd.pre_exec(move || {
+                // The child gets SIGTERM if the launcher dies.
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                if libc::getppid() != parent {
+                    return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
+                }
+                Ok(())
+            });
+        }
+        let mut child = cmd
+            .spawn()
+            .with_context(|| format!("cannot start {name} ({})", exe.display()))?;
+        let stderr: Tail = Arc::new(Mutex::new(VecDeque::new()));
+        let stdout: Tail = Arc::new(Mutex::new(VecDeque::new()));
+        let mut readers = Vec::new();
+        if let Some(s) = child.stderr.take() {
+            readers.push(keep_tail(s, stderr.clone()));
+        }
+        if let Some(s) = child.stdout.take() {
+            readers.push(keep_tail(s, stdout.clone()));
+        }
+        Ok(Daemon {
+            name,
+            child,
+            status: None,
+            stderr,
+            stdout,
+            readers,
+        })
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// The exit status if the child has exited.
+    fn poll(&mut self) -> Option<ExitStatus> {
+        if self.status.is_none()
+            && let Ok(Some(s)) = self.child.try_wait()
+        {
+            self.status = Some(s);
+        }
+        self.status
+    }
+
+    /// SIGTERM (by pid), wait up to `grace`, then SIGKILL. Returns the exit status.
+    fn terminate(&mut self, grace: Duration) -> Option<ExitStatus> {
+        if let Some(s) = self.poll() {
+            return Some(s);
+        }
+        if let Ok(pid) = libc::pid_t::try_from(self.pid()) {
+            // SAFETY: plain kill(2) on our own, not yet reaped child.
+            unsafe {
+                libc::kill(pid, libc::SIGTERM);
+            }
+        }
+        let start = Instant::now();
+        while start.elapsed() < grace {
+            if let Some(s) = self.poll() {
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        eprintln!(
+            "hcc run: {} (pid {}) did not exit within {:.1} s of SIGTERM; killing it",
+            self.name,
+            self.pid(),
+            grace.as_secs_f64()
+        );
+        let _ = self.child.kill();
+        self.status = self.child.wait().ok();
+        self.status
+    }
+
+    /// The last lines the child wrote to stderr (after it exited, all of them).
+    fn stderr_tail(&mut self) -> String {
+        if self.status.is_some() {
+            for r in self.readers.drain(..) {
+                let _ = r.join();
+            }
+        }
+        let lines: Vec<String> = self
+            .stderr
+            .lock()
+            .map(|t| t.iter().cloned().collect())
+            .unwrap_or_default();
+        if lines.is_empty() {
+            "    (nothing on stderr)".to_string()
+        } else {
+            lines
+                .iter()
+                .map(|l| format!("    {l}"))
+                .collect::<Vec<_>>()
+                .join("\n")
+        }
+    }
+
+    fn stdout_lines(&mut self) -> Vec<String> {
+        if self.status.is_some() {
+            for r in self.readers.drain(..) {
+                let _ = r.join();
+            }
+        }
+        self.stdout
+            .lock()
+            .map(|t| t.iter().cloned().collect())
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if self.poll().is_none() {
+            self.terminate(TERMINATE_GRACE);
+        }
+    }
+}
+
+fn daemon_path(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe().context("cannot locate the hcc executable")?;
+    let path = exe.with_file_name(name);
+    if !path.exists() {
+        bail!(
+            "{name} not found next to {} (build the daemons: cargo build --release --bins)",
+            exe.display()
+        );
+    }
+    Ok(path)
+}
+
+fn describe_status(s: ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (s.code(), s.signal()) {
+        (Some(c), _) => format!("exit code {c}"),
+        (None, Some(sig)) => format!("signal {sig}"),
+        _ => "unknown status".into(),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Rows
+
+/// Task Jacobians J_i of the scenario's levels from the model (the analytic
+/// task Jacobian: selection rows of the frame Jacobian for a position,
+/// angular rows for an orientation, selection/weights for joint tasks).
+struct TaskJacobians {
+    frame_jac: DMatrix<f64>,
+    jac: Vec<DMatrix<f64>>,
+}
+
+impl TaskJacobians {
+    fn new(scenario: &Scenario) -> TaskJacobians {
+        let n = scenario.model.nq();
+        TaskJacobians {
+            frame_jac: DMatrix::zeros(6, n),
+            jac: scenario
+                .levels
+                .iter()
+                .map(|l| DMatrix::zeros(l.task.dim(), n))
+                .collect(),
+        }
+    }
+
+    /// Needs forward kinematics at q in `data`.
+    fn update(&mut self, scenario: &Scenario, data: &hcc_model::Data) {
+        let model = &scenario.model;
+        for (l, jac) in scenario.levels.iter().zip(self.jac.iter_mut()) {
+            jac.fill(0.0);
+            match &l.task {
+                Task::Position { frame_id, axes, .. } => {
+                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
+                    for (r, &a) in axes.iter().enumerate() {
+                        jac.row_mut(r).copy_from(&self.frame_jac.row(a));
+                    }
+                }
+                Task::Orientation { frame_id, .. } => {
+                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
+                    for r in 0..3 {
+                        jac.row_mut(r).copy_from(&self.frame_jac.row(3 + r));
+                    }
+                }
+                Task::PlanarOrientation { frame_id, axis, .. } => {
+                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
+                    jac.row_mut(0).copy_from(&self.frame_jac.row(3 + axis));
+                }
+                Task::Joint { joints } => {
+                    for (r, &j) in joints.iter().enumerate() {
+                        jac[(r, j)] = 1.0;
+                    }
+                }
+                Task::Posture { .. } => jac.fill_with_identity(),
+                Task::JointCombination { weights } => jac.copy_from(weights),
+            }
+        }
+    }
+}
+
+/// The part of a joint state the recorder keeps.
+#[derive(Clone, Debug)]
+struct StateRecord {
+    seq: u64,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+}
+
+/// Builds the rows of `hcc simulate`'s layout from states and telemetry.
+struct RowBuilder<'a> {
+    scenario: &'a Scenario,
+    n: usize,
+    r: usize,
+    dims: Vec<usize>,
+    period: f64,
+    traj: Trajectory,
+    shadow: HierarchicalLaw,
+    shadow_failures: u64,
+    shadow_tau_diff: f64,
+    data: hcc_model::Data,
+    jacs: TaskJacobians,
+    m_chol: DMatrix<f64>,
+    minv_tau: Vec<DVector<f64>>,
+    acc: Vec<DVector<f64>>,
+    energy_plant: hcc_sim::Plant,
+    q: DVector<f64>,
+    qd: DVector<f64>,
+    row: Vec<f64>,
+}
+
+impl<'a> RowBuilder<'a> {
+    fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
+        let n = scenario.model.nq();
+        let r = scenario.levels.len();
+        let s = &scenario.simulation;
+        let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
+        let names = column_names(scenario, true);
+        let traj = Trajectory::with_capacity(names, cycles + 1)?;
+        let width = traj.columns().len();
+        Ok(RowBuilder {
+            scenario,
+            n,
+            r,
+            dims: scenario.levels.iter().map(|l| l.task.dim()).collect(),
+            period: 1.0 / s.control_rate_hz,
+            traj,
+            shadow: HierarchicalLaw::new(scenario)?,
+            shadow_failures: 0,
+            shadow_tau_diff: 0.0,
+            data: hcc_model::Data::new(&scenario.model),
+            jacs: TaskJacobians::new(scenario),
+            m_chol: DMatrix::zeros(n, n),
+            minv_tau: (0..=r).map(|_| DVector::zeros(n)).collect(),
+            acc: scenario
+                .levels
+                .iter()
+                .map(|l| DVector::zeros(l.task.dim()))
+                .collect(),
+            energy_plant: plant_for(scenario)?,
+            q: DVector::zeros(n),
+            qd: DVector::zeros(n),
+            row: Vec::with_capacity(width),
+        })
+    }
+
+    /// Checks that the controller runs the hierarchy of the scenario.
+    fn check_shape(&self, tel: &Telemetry) -> anyhow::Result<()> {
+        tel.validate(self.n)
+            .map_err(|e| anyhow!("telemetry of hcc-controller: {e}"))?;
+        let dims: Vec<usize> = (0..tel.levels())
+            .map(|i| tel.task_dims[i] as usize)
+            .collect();
+        if dims != self.dims {
+            bail!(
+                "hcc-controller runs levels of dimensions {dims:?}, but {} has {:?}",
+                self.scenario.path.display(),
+                self.dims
+            );
+        }
+        Ok(())
+    }
+
+    /// Appends the row of one controller cycle: `tel` answered `state`.
+    fn push(&mut self, state: &StateRecord, tel: &Telemetry) -> anyhow::Result<()> {
+        self.check_shape(tel)?;
+        let (n, r) = (self.n, self.r);
+        // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
+        let t = state.seq as f64 * self.period;
+        self.q.as_mut_slice().copy_from_slice(&state.q);
+        self.qd.as_mut_slice().copy_from_slice(&state.qd);
+
+        // Shadow controller on the same state: J̄ and V_i, and a check of τ.
+        let shadow_ok = self.shadow.compute(&self.q, &self.qd).is_ok();
+        if shadow_ok {
+            let d = self
+                .shadow
+                .tau()
+                .iter()
+                .zip(tel.tau())
+                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+            self.shadow_tau_diff = self.shadow_tau_diff.max(d);
+        } else {
+            self.shadow_failures += 1;
+        }
+
+        let model = &self.scenario.model;
+        hcc_model::crba(model, &mut self.data, &self.q);
+        self.jacs.update(self.scenario, &self.data);
+        self.m_chol.copy_from(&self.data.m);
+        hcc_model::linalg::cholesky_in_place(&mut self.m_chol)
+            .map_err(|e| anyhow!("M(q) at t = {t} s: {e}"))?;
+
+        let row = &mut self.row;
+        row.clear();
+        row.push(t);
+        row.extend_from_slice(&state.q);
+        row.extend_from_slice(&state.qd);
+        row.extend_from_slice(tel.tau());
+        for i in 0..r {
+            row.extend_from_slice(tel.task_error(i));
+        }
+        row.extend_from_slice(&tel.storage[..r]);
+        row.push(tel.p_mu);
+        for i in 0..r {
+            row.extend_from_slice(tel.tau_level(i));
+        }
+        row.extend_from_slice(&tel.tau_mu[..n]);
+        for (j, x) in self.minv_tau.iter_mut().enumerate() {
+            x.as_mut_slice().copy_from_slice(if j < r {
+                tel.tau_level(j)
+            } else {
+                &tel.tau_mu[..n]
+            });
+            hcc_model::linalg::cholesky_solve_in_place(&self.m_chol, x)
+                .map_err(|e| anyhow!("M(q) solve at t = {t} s: {e}"))?;
+        }
+        // ‖J_i M⁻¹ τ_j‖ for every j ≠ i, then for τ_μ.
+        for (i, acc_i) in self.acc.iter_mut().enumerate() {
+            for (j, x) in self.minv_tau.iter().enumerate() {
+                if j != i {
+                    acc_i.gemv(1.0, &self.jacs.jac[i], x, 0.0);
+                    row.push(acc_i.norm());
+                }
+            }
+        }
+        // ‖J̄_i M⁻¹ τ_j‖ in the local null-space coordinates (J̄ of the shadow).
+        let jbar = if shadow_ok {
+            self.shadow.extended_jacobian()
+        } else {
+            None
+        };
+        match jbar {
+            Some((dims, jbar))
+                if dims.len() == r
+                    && jbar.ncols() == n
+                    && dims.iter().sum::<usize>() == jbar.nrows() =>
+            {
+                let mut offset = 0;
+                for (i, &d) in dims.iter().enumerate() {
+                    let block = jbar.rows(offset, d);
+                    for (j, x) in self.minv_tau.iter().enumerate() {
+                        if j != i {
+                            row.push((block * x).norm());
+                        }
+                    }
+                    offset += d;
+                }
+            }
+            _ => row.extend(std::iter::repeat_n(f64::NAN, r * r)),
+        }
+        for i in 0..r {
+            let pot = if shadow_ok {
+                self.shadow.level_potential(i)
+            } else {
+                f64::NAN
+            };
+            row.push(tel.storage[i] - pot);
+            row.push(pot);
+        }
+        self.energy_plant.set_state(t, &self.q, &self.qd)?;
+        let energy = self.energy_plant.energy();
+        row.push(energy.kinetic);
+        row.push(energy.potential);
+        self.traj.push_row(row)?;
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Recording
+
+/// Sequence bookkeeping of one stream.
+#[derive(Default)]
+struct Stream {
+    checker: SequenceChecker,
+    received: u64,
+}
+
+impl Stream {
+    fn observe(&mut self, seq: u64) -> SeqEvent {
+        self.received += 1;
+        self.checker.observe(seq)
+    }
+}
+
+/// Everything the recorder learns during a run.
+struct Recording {
+    states: Stream,
+    commands: Stream,
+    telemetry: Stream,
+    /// Received states not yet joined with telemetry (seq ascending).
+    pending_states: VecDeque<StateRecord>,
+    /// Received telemetry not yet joined (its state may still be in flight).
+    pending_telemetry: VecDeque<Telemetry>,
+    last_state_seq: Option<u64>,
+    last_state: Option<JointState>,
+    last_telemetry: Option<Telemetry>,
+    /// Controller cycles whose state the recorder never received.
+    unmatched_telemetry: u64,
+    /// Telemetry of cycles without a new state (stale events of the controller).
+    stale_telemetry: u64,
+    /// State seq of the last row.
+    last_joined_seq: Option<u64>,
+    /// States the controller did not answer (it skips to the newest state when late).
+    unanswered_states: u64,
+    latencies_ns: Vec<u64>,
+    /// Commands per mode (Normal, SafeHold, Singular, Stop, unknown).
+    modes: [u64; 5],
+    sim_stopped: bool,
+    first_state_at: Option<Instant>,
+    last_sample_at: Instant,
+}
+
+impl Recording {
+    fn new() -> Recording {
+        Recording {
+            states: Stream::default(),
+            commands: Stream::default(),
+            telemetry: Stream::default(),
+            pending_states: VecDeque::new(),
+            pending_telemetry: VecDeque::new(),
+            last_state_seq: None,
+            last_state: None,
+            last_telemetry: None,
+            unmatched_telemetry: 0,
+            stale_telemetry: 0,
+            last_joined_seq: None,
+            unanswered_states: 0,
+            latencies_ns: Vec::new(),
+            modes: [0; 5],
+            sim_stopped: false,
+            first_state_at: None,
+            last_sample_at: Instant::now(),
+        }
+    }
+
+    fn on_state(&mut self, s: &JointState) {
+        if !self.states.observe(s.header.seq).is_accepted() {
+            return;
+        }
+        self.first_state_at.get_or_insert_with(Instant::now);
+        self.last_state_seq = Some(s.header.seq);
+        if s.status() == Ok(DriverStatus::Stopped) {
+            self.sim_stopped = true;
+        }
+        self.pending_states.push_back(StateRecord {
+            seq: s.header.seq,
+            q: s.q().to_vec(),
+            qd: s.qd().to_vec(),
+        });
+        self.last_state = Some(*s);
+    }
+
+    fn on_command(&mut self, c: &TorqueCommand) {
+        if !self.commands.observe(c.header.seq).is_accepted() {
+            return;
+        }
+        self.latencies_ns
+            .push(c.header.stamp_ns.saturating_sub(c.state_stamp_ns));
+        let k = match c.mode() {
+            Ok(CommandMode::Normal) => 0,
+            Ok(CommandMode::SafeHold) => 1,
+            Ok(CommandMode::Singular) => 2,
+            Ok(CommandMode::Stop) => 3,
+            Err(_) => 4,
+        };
+        self.modes[k] += 1;
+    }
+
+    fn on_telemetry(&mut self, t: &Telemetry) {
+        if !self.telemetry.observe(t.header.seq).is_accepted() {
+            return;
+        }
+        self.pending_telemetry.push_back(*t);
+    }
+
+    /// Joins pending telemetry with its states and appends the rows. With
+    /// `flush`, telemetry whose state never arrived is given up.
+    fn join(&mut self, rows: &mut RowBuilder, flush: bool) -> anyhow::Result<()> {
+        while let Some(tel) = self.pending_telemetry.front() {
+            let want = tel.state_seq;
+            if self.last_joined_seq.is_some_and(|last| want <= last) {
+                // Telemetry of a cycle without a new state (the controller's
+                // stale-state event): no row.
+                self.pending_telemetry.pop_front();
+                self.stale_telemetry += 1;
+                continue;
+            }
+            if !flush && self.last_state_seq.is_none_or(|last| want > last) {
+                break; // its state is still in flight
+            }
+            while let Some(s) = self.pending_states.front() {
+                if s.seq < want {
+                    self.pending_states.pop_front();
+                    self.unanswered_states += 1;
+                } else {
+                    break;
+                }
+            }
+            let tel = self
+                .pending_telemetry
+                .pop_front()
+                .unwrap_or_else(Telemetry::zeroed);
+            match self.pending_states.front() {
+                Some(s) if s.seq == want => {
+                    let s = self.pending_states.pop_front().unwrap_or(StateRecord {
+                        seq: want,
+                        q: Vec::new(),
+                        qd: Vec::new(),
+                    });
+                    rows.push(&s, &tel)?;
+                    self.last_joined_seq = Some(want);
+                    self.last_telemetry = Some(tel);
+                }
+                _ => self.unmatched_telemetry += 1,
+            }
+        }
+        if flush {
+            self.unanswered_states += self.pending_states.len() as u64;
+            self.pending_states.clear();
+        }
+        Ok(())
+    }
+}
+
+/// A sample copied out of shared memory by the receiver thread.
+enum Received {
+    State(Box<JointState>),
+    Command(Box<TorqueCommand>),
+    Telemetry(Box<Telemetry>),
+    /// The receiver failed and stopped.
+    Failed(String),
+}
+
+/// The recorder's subscribers, on a thread of their own that does nothing but
+/// copy samples out of the queues into a channel, so that the row
+/// computations never delay the draining (in lockstep the daemons run much
+/// faster than real time).
+struct Receiver {
+    handle: Option<std::thread::JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
+    rx: mpsc::Receiver<Received>,
+}
+
+/// Reads every queued sample of the three streams into `tx`; returns how many.
+fn drain_into(
+    states: &ipc::StateSubscriber,
+    commands: &ipc::CommandSubscriber,
+    telemetry: &ipc::TelemetrySubscriber,
+    tx: &mpsc::Sender<Received>,
+) -> Result<usize, String> {
+    let mut k = 0;
+    // States first: a command or telemetry always follows its state.
+    while let Some(s) = states
+        .receive()
+        .map_err(|e| format!("receive joint_state: {e:?}"))?
+    {
+        let _ = tx.send(Received::State(Box::new(*s)));
+        k += 1;
+    }
+    while let Some(c) = commands
+        .receive()
+        .map_err(|e| format!("receive torque_command: {e:?}"))?
+    {
+        let _ = tx.send(Received::Command(Box::new(*c)));
+        k += 1;
+    }
+    while let Some(t) = telemetry
+        .receive()
+        .map_err(|e| format!("receive telemetry: {e:?}"))?
+    {
+        let _ = tx.send(Received::Telemetry(Box::new(*t)));
+        k += 1;
+    }
+    Ok(k)
+}
+
+impl Receiver {
+    /// Subscribes (on the new thread) and returns once the subscribers exist.
+    fn start(file_prefix: Option<String>, names: ServiceNames) -> anyhow::Result<Receiver> {
+        let (tx, rx) = mpsc::channel();
+        let (ready_tx, ready_rx) = mpsc::sync_channel::<Result<(), String>>(1);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("hcc-run-receiver".into())
+            .spawn(move || {
+                let setup = || -> anyhow::Result<_> {
+                    let node = ipc::create_node(
+                        "hcc-run",
+                        SignalHandlingMode::Disabled,
+                        file_prefix.as_deref(),
+                    )?;
+                    let services = Services::open(&node, &names)?;
+                    let states = services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?;
+                    let commands = services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?;
+                    let telemetry = services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?;
+                    Ok((node, services, states, commands, telemetry))
+                };
+                let (node, services, states, commands, telemetry) = match setup() {
+                    Ok(x) => {
+                        let _ = ready_tx.send(Ok(()));
+                        x
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        return;
+                    }
+                };
+                loop {
+                    // Read the flag before draining: after a stop request
+                    // one more complete drain happens.
+                    let last = stop_flag.load(Ordering::SeqCst);
+                    match drain_into(&states, &commands, &telemetry, &tx) {
+                        Ok(0) if last => break,
+                        Ok(0) => std::thread::sleep(Duration::from_micros(100)),
+                        Ok(_) => {}
+                        Err(e) => {
+                            let _ = tx.send(Received::Failed(e));
+                            break;
+                        }
+                    }
+                }
+                drop((states, commands, telemetry));
+                drop(services);
+                drop(node);
+            })
+            .context("cannot start the receiver thread")?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(Receiver {
+                handle: Some(handle),
+                stop,
+                rx,
+            }),
+            Ok(Err(e)) => {
+                let _ = handle.join();
+                bail!(e)
+            }
+            Err(_) => bail!("the receiver thread ended during start-up"),
+        }
+    }
+
+    /// Hands the samples received so far to `rec` (waiting up to `wait` for
+    /// the first one); returns how many.
+    fn pump(&self, rec: &mut Recording, wait: Duration) -> anyhow::Result<usize> {
+        let mut k = 0;
+        let mut next = self.rx.recv_timeout(wait).ok();
+        while let Some(m) = next {
+            match m {
+                Received::State(s) => rec.on_state(&s),
+                Received::Command(c) => rec.on_command(&c),
+                Received::Telemetry(t) => rec.on_telemetry(&t),
+                Received::Failed(e) => bail!("recorder: {e}"),
+            }
+            k += 1;
+            next = self.rx.try_recv().ok();
+        }
+        if k > 0 {
+            rec.last_sample_at = Instant::now();
+        }
+        Ok(k)
+    }
+
+    /// Stops the thread after a last drain, hands everything to `rec` and
+    /// closes the subscribers (and the node).
+    fn finish(mut self, rec: &mut Recording) -> anyhow::Result<()> {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+        while self.pump(rec, Duration::ZERO)? > 0 {}
+        Ok(())
+    }
+}
+
+impl Drop for Receiver {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Readiness probe of the controller: whether it has created its torque and
+/// telemetry publishers and its joint-state subscriber. Opens the services
+/// with the contract's settings (those of `hcc_msgs::ipc`; an opener must ask
+/// for exactly what the creator provides).
+struct ControllerProbe {
+    joint_state:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Ipc, JointState, ()>,
+    torque_command: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Ipc,
+        TorqueCommand,
+        (),
+    >,
+    telemetry:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Ipc, Telemetry, ()>,
+}
+
+fn probe_service<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
+    node: &ipc::IpcNode,
+    name: &str,
+    max_subscribers: usize,
+) -> anyhow::Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Ipc, T, ()>>
+{
+    let service = iceoryx2::prelude::ServiceName::new(name)
+        .map_err(|e| anyhow!("service {name:?}: invalid name ({e:?})"))?;
+    node.service_builder(&service)
+        .publish_subscribe::<T>()
+        .max_publishers(1)
+        .max_subscribers(max_subscribers)
+        .max_nodes(ipc::MAX_NODES)
+        .history_size(0)
+        .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
+        .subscriber_max_borrowed_samples(ipc::MAX_BORROWED_SAMPLES)
+        .enable_safe_overflow(true)
+        .open()
+        .map_err(|e| anyhow!("service {name:?}: cannot open it to watch the controller ({e:?})"))
+}
+
+impl ControllerProbe {
+    fn new(node: &ipc::IpcNode, names: &ServiceNames) -> anyhow::Result<ControllerProbe> {
+        Ok(ControllerProbe {
+            joint_state: probe_service(node, names.joint_state(), ipc::MAX_STATE_SUBSCRIBERS)?,
+            torque_command: probe_service(
+                node,
+                names.torque_command(),
+                ipc::MAX_COMMAND_SUBSCRIBERS,
+            )?,
+            telemetry: probe_service(node, names.telemetry(), ipc::MAX_TELEMETRY_SUBSCRIBERS)?,
+        })
+    }
+
+    /// The recorder's own joint-state subscriber counts as one.
+    fn ready(&self) -> bool {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        self.torque_command.dynamic_config().number_of_publishers() >= 1
+            && self.telemetry.dynamic_config().number_of_publishers() >= 1
+            && self.joint_state.dynamic_config().number_of_subscribers() >= 2
+    }
+}
+
+/// Nearest-rank percentile of sorted values.
+fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    Some(sorted[rank.clamp(1, sorted.len()) - 1])
+}
+
+fn progress_line(rec: &Recording, rows: &RowBuilder) -> String {
+    let t = rows
+        .traj
+        .n_rows()
+        .checked_sub(1)
+        .map(|i| rows.traj.row(i)[0])
+        .unwrap_or(0.0);
+    let mut s = format!("hcc run: t = {t:7.3} s, {} rows", rows.traj.n_rows());
+    if let Some(tel) = &rec.last_telemetry {
+        let errs: Vec<String> = (0..tel.levels())
+            .map(|i| {
+                let e = tel.task_error(i);
+                format!("{:.2e}", e.iter().map(|x| x * x).sum::<f64>().sqrt())
+            })
+            .collect();
+        s.push_str(&format!(", |e| per level [{}]", errs.join(", ")));
+    }
+    if let Some(st) = &rec.last_state {
+        s.push_str(&format!(", missed commands {}", st.missed_commands));
+    }
+    let gaps = rec.states.checker.missed()
+        + rec.commands.checker.missed()
+        + rec.telemetry.checker.missed();
+    s.push_str(&format!(", recorder gaps {gaps}"));
+    s
+}
+
+/// Why the recording ended.
+enum End {
+    /// The simulator finished its run and exited with success.
+    Finished,
+    /// Ctrl-C or SIGTERM.
+    Interrupted,
+    /// A child failed or hung: the message.
+    Failed(String),
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let mut scenario = Scenario::load(&args.config)?;
+    if let Some(d) = args.duration {
+        scenario
+            .set_duration(d)
+            .with_context(|| format!("--duration {d}"))?;
+    }
+    let duration = scenario.simulation.duration_s;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("out").join(&scenario.name));
+    let namespace = match &args.namespace {
+        Some(ns) => Namespace::new(ns).context("--namespace")?,
+        None => Namespace::unique("hcc_run")?,
+    };
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let sim_exe = daemon_path("hcc-sim")?;
+    let controller_exe = daemon_path("hcc-controller")?;
+
+    // Subscribe before the children start, so that no sample is missed.
+    let names = ServiceNames::for_namespace(namespace.clone());
+    let receiver = Receiver::start(file_prefix.clone(), names.clone())?;
+    let node = ipc::create_node(
+        "hcc-run-probe",
+        SignalHandlingMode::Disabled,
+        file_prefix.as_deref(),
+    )?;
+    let mut rows = RowBuilder::new(&scenario)?;
+    let mut rec = Recording::new();
+    install_signal_handlers()?;
+
+    let config_arg = args.config.display().to_string();
+    let ns_args = ["--namespace".to_string(), namespace.to_string()];
+    let mut controller_args = vec![config_arg.clone()];
+    controller_args.extend(ns_args.iter().cloned());
+    let mut sim_args = vec![config_arg];
+    sim_args.extend(ns_args.iter().cloned());
+    sim_args.extend(["--duration".to_string(), format!("{duration:?}")]);
+    let lockstep = args.lockstep || scenario.sim_daemon.mode == hcc_config::SimMode::Lockstep;
+    if args.lockstep {
+        sim_args.push("--lockstep".into());
+    }
+    if lockstep {
+        // States come as fast as the loop turns, not once per period: the
+        // controller waits on the state_ready event instead of sleeping until
+        // the next expected period.
+        controller_args.extend(["--wait".to_string(), "event".to_string()]);
+    }
+    let mode = if lockstep { "lockstep" } else { "realtime" };
+    if !args.quiet {
+        eprintln!(
+            "hcc run: {} ({mode}, {duration} s) in namespace {namespace}",
+            scenario.name
+        );
+    }
+
+    let mut controller = Daemon::spawn(
+        "hcc-controller",
+        &controller_exe,
+        &controller_args,
+        file_prefix.as_deref(),
+    )?;
+    // Start the simulator once the controller listens, so that control
+    // starts at t = 0 (in real time the plant does not wait).
+    let probe = ControllerProbe::new(&node, &names)?;
+    let waiting = Instant::now();
+    while !probe.ready() {
+        if let Some(s) = controller.poll() {
+            bail!(
+                "hcc-controller (pid {}) exited with {} at start-up; its stderr ends with:\n{}",
+                controller.pid(),
+                describe_status(s),
+                controller.stderr_tail()
+            );
+        }
+        if interrupted() {
+            controller.terminate(TERMINATE_GRACE);
+            bail!("interrupted while starting hcc-controller");
+        }
+        if waiting.elapsed() > STARTUP_TIMEOUT {
+            controller.terminate(TERMINATE_GRACE);
+            bail!(
+                "hcc-controller did not open its services within {} s; its stderr ends with:\n{}",
+                STARTUP_TIMEOUT.as_secs(),
+                controller.stderr_tail()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    drop(probe);
+    drop(node);
+    let mut sim = Daemon::spawn("hcc-sim", &sim_exe, &sim_args, file_prefix.as_deref())?;
+    let started = Instant::now();
+    let mut next_progress = started + Duration::from_secs(1);
+
+    let end = loop {
+        receiver.pump(&mut rec, Duration::from_millis(1))?;
+        rec.join(&mut rows, false)?;
+        if interrupted() {
+            break End::Interrupted;
+        }
+        if let Some(s) = sim.poll() {
+            if s.success() {
+                break End::Finished;
+            }
+            break End::Failed(format!(
+                "hcc-sim (pid {}) failed with {}; its stderr ends with:\n{}",
+                sim.pid(),
+                describe_status(s),
+                sim.stderr_tail()
+            ));
+        }
+        if let Some(s) = controller.poll() {
+            break End::Failed(format!(
+                "hcc-controller (pid {}) exited with {} before the run ended; its stderr ends with:\n{}",
+                controller.pid(),
+                describe_status(s),
+                controller.stderr_tail()
+            ));
+        }
+        let now = Instant::now();
+        match rec.first_state_at {
+            None if now.duration_since(started) > STARTUP_TIMEOUT => {
+                break End::Failed(format!(
+                    "no joint state from hcc-sim within {} s; its stderr ends with:\n{}",
+                    STARTUP_TIMEOUT.as_secs(),
+                    sim.stderr_tail()
+                ));
+            }
+            Some(_) if now.duration_since(rec.last_sample_at) > STALL_TIMEOUT => {
+                break End::Failed(format!(
+                    "no message from the daemons for {} s (hung?); hcc-sim's stderr ends with:\n{}\nhcc-controller's stderr ends with:\n{}",
+                    STALL_TIMEOUT.as_secs(),
+                    sim.stderr_tail(),
+                    controller.stderr_tail()
+                ));
+            }
+            _ => {}
+        }
+        if now >= next_progress {
+            if !args.quiet {
+                eprintln!("{}", progress_line(&rec, &rows));
+            }
+            next_progress += Duration::from_secs(1);
+        }
+    };
+
+    // After the simulator's last state, give the controller a moment to
+    // answer it (its telemetry completes the last row).
+    if matches!(end, End::Finished) {
+        let until = Instant::now() + FINAL_ANSWER_GRACE;
+        while Instant::now() < until && controller.poll().is_none() {
+            receiver.pump(&mut rec, Duration::from_millis(1))?;
+            let answered = rec
+                .pending_telemetry
+                .back()
+                .map(|t| t.state_seq)
+                .or(rec.last_joined_seq);
+            if answered.is_some() && answered >= rec.last_state_seq {
+                break;
+            }
+        }
+    }
+    // Stop what still runs, collecting the samples published meanwhile.
+    let sim_status = sim.terminate(TERMINATE_GRACE);
+    let controller_status = controller.terminate(TERMINATE_GRACE);
+    receiver.finish(&mut rec)?;
+    rec.join(&mut rows, true)?;
+    let controller_clean = controller_status.is_some_and(|s| {
+        use std::os::unix::process::ExitStatusExt;
+        s.success() || s.signal() == Some(libc::SIGTERM)
+    });
+
+    let end = match end {
+        End::Finished if !controller_clean => End::Failed(format!(
+            "hcc-controller (pid {}) did not stop cleanly ({}); its stderr ends with:\n{}",
+            controller.pid(),
+            controller_status.map_or("still running".into(), describe_status),
+            controller.stderr_tail()
+        )),
+        other => other,
+    };
+
+    // Figures of the IPC path.
+    let mut lat = rec.latencies_ns.clone();
+    lat.sort_unstable();
+    let us = |p: f64| percentile(&lat, p).map(|v| v as f64 * 1e-3);
+    let last_state = rec.last_state;
+    let last_tel = rec.last_telemetry;
+    let cycles = (duration * scenario.simulation.control_rate_hz).round() as u64;
+    let ipc_json = serde_json::json!({
+        "runner": "hcc run (hcc-sim and hcc-controller over iceoryx2)",
+        "mode": mode,
+        "namespace": namespace.as_str(),
+        "expected_rows": cycles + 1,
+        "rows": rows.traj.n_rows(),
+        "states_received": rec.states.received,
+        "commands_received": rec.commands.received,
+        "telemetry_received": rec.telemetry.received,
+        "recorder_gaps": {
+            "joint_state": rec.states.checker.missed(),
+            "torque_command": rec.commands.checker.missed(),
+            "telemetry": rec.telemetry.checker.missed(),
+        },
+        "telemetry_without_state": rec.unmatched_telemetry,
+        "stale_telemetry": rec.stale_telemetry,
+        "states_not_answered_by_the_controller": rec.unanswered_states,
+        "driver_missed_commands": last_state.map(|s| s.missed_commands),
+        "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
+        "controller_missed_states": last_tel.map(|t| t.counters.missed_states),
+        "controller_stale_events": last_tel.map(|t| t.counters.stale_events),
+        "controller_invalid_states": last_tel.map(|t| t.counters.invalid_states),
+        "controller_saturations": last_tel.map(|t| t.counters.saturations),
+        "controller_max_compute_us": last_tel.map(|t| t.timings.max_compute_ns as f64 * 1e-3),
+        "commands_by_mode": {
+            "normal": rec.modes[0], "safe_hold": rec.modes[1], "singular": rec.modes[2],
+            "stop": rec.modes[3], "unknown": rec.modes[4],
+        },
+        "state_to_command_latency_us": {
+            "p50": us(50.0), "p99": us(99.0), "max": us(100.0), "samples": lat.len(),
+        },
+        "shadow_controller_max_tau_difference": rows.shadow_tau_diff,
+        "shadow_controller_failures": rows.shadow_failures,
+    });
+    let mut description = describe(&scenario);
+    description.settings.insert("ipc".into(), ipc_json.clone());
+
+    let written = if rows.traj.n_rows() == 0 {
+        None
+    } else if args.no_plots {
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("cannot create {}", out.display()))?;
+        rows.traj
+            .write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
+        let m = hcc_report::Metrics::compute(&rows.traj, &description)?;
+        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
+        Some(m)
+    } else {
+        Some(hcc_report::write_run(&out, &rows.traj, &description)?.metrics)
+    };
+
+    if let Some(m) = &written {
+        print!("{}", m.summary());
+    }
+    let fmt_us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1} µs"));
+    let gaps = rec.states.checker.missed()
+        + rec.commands.checker.missed()
+        + rec.telemetry.checker.missed();
+    println!(
+        "  ipc ({mode}): {} rows of {} expected; driver missed commands {}, fallback cycles {}; controller missed states {}",
+        rows.traj.n_rows(),
+        cycles + 1,
+        last_state.map_or(0, |s| s.missed_commands),
+        last_state.map_or(0, |s| s.fallback_cycles),
+        last_tel.map_or(0, |t| t.counters.missed_states),
+    );
+    println!(
+        "  state -> command latency: p50 {}, p99 {}, max {} ({} commands)",
+        fmt_us(us(50.0)),
+        fmt_us(us(99.0)),
+        fmt_us(us(100.0)),
+        lat.len()
+    );
+    println!(
+        "  recorder: gaps {gaps} (states {}, commands {}, telemetry {}), telemetry without state {}, states not answered {}",
+        rec.states.checker.missed(),
+        rec.commands.checker.missed(),
+        rec.telemetry.checker.missed(),
+        rec.unmatched_telemetry,
+        rec.unanswered_states
+    );
+    if rows.shadow_failures > 0 {
+        println!(
+            "  warning: the shadow controller failed on {} states (accv and S_kin/S_pot are NaN there)",
+            rows.shadow_failures
+        );
+    }
+    for line in sim
+        .stdout_lines()
+        .iter()
+        .chain(controller.stdout_lines().iter())
+    {
+        if !line.trim().is_empty() && !args.quiet {
+            eprintln!("  | {line}");
+        }
+    }
+    if written.is_some() {
+        println!("results in {}", out.display());
+    }
+
+    match end {
+        End::Finished => {
+            if !rec.sim_stopped {
+                eprintln!("hcc run: warning: hcc-sim exited without publishing a Stopped state");
+            }
+            if written.is_none() {
+                bail!("the run recorded no controller cycle");
+            }
+            let _ = sim_status;
+            Ok(())
+        }
+        End::Interrupted => bail!(
+            "interrupted after {:.1} s; both daemons stopped{}",
+            started.elapsed().as_secs_f64(),
+            if written.is_some() {
+                format!(", partial results in {}", out.display())
+            } else {
+                String::new()
+            }
+        ),
+        End::Failed(msg) => Err(anyhow!(msg)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<u64> = (1..=100).collect();
+        assert_eq!(percentile(&v, 50.0), Some(50));
+        assert_eq!(percentile(&v, 99.0), Some(99));
+        assert_eq!(percentile(&v, 100.0), Some(100));
+        assert_eq!(percentile(&[7], 50.0), Some(7));
+        assert_eq!(percentile(&[], 50.0), None);
+    }
+}
