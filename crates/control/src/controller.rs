@@ -3,7 +3,7 @@
 use crate::ControlError;
 use crate::dense::{
     AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemv, gemv_t,
-    null_space_basis, procrustes_align,
+    null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, TaskSpec};
 use hcc_model::{Data, Model};
@@ -11,6 +11,11 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 /// Smallest eigenvalue that counts as "not vanished" for a Gram matrix.
 const GRAM_FLOOR: f64 = 1e-12;
+
+/// Smallest singular value of the previous basis projected onto the new null space
+/// (the cosine of the largest principal angle between them) for which the basis is
+/// continued; below it the state jumped and a fresh basis is taken.
+const MIN_OVERLAP: f64 = 0.5;
 
 /// What one control cycle produced (all preallocated; valid after [`Controller::step`]).
 #[derive(Clone, Debug)]
@@ -140,53 +145,6 @@ pub struct Controller {
     out: Output,
 }
 
-fn level_dims(spec: &ControllerSpec, n: usize) -> Vec<usize> {
-    spec.levels
-        .iter()
-        .map(|l| match &l.task {
-            TaskSpec::Position { axes, .. } => axes.len(),
-            TaskSpec::Orientation { .. } => 3,
-            TaskSpec::PlanarOrientation { .. } => 1,
-            TaskSpec::Joints { indices } => indices.len(),
-            TaskSpec::JointCombination { weights } => weights.nrows(),
-            TaskSpec::Posture => n,
-        })
-        .collect()
-}
-
-fn check_spd(name: &str, what: &str, a: &DMatrix<f64>, m: usize) -> Result<(), ControlError> {
-    let bad = |why: String| ControlError::Level {
-        level: name.to_string(),
-        why: format!("{what}: {why}"),
-    };
-    if a.shape() != (m, m) {
-        return Err(bad(format!(
-            "must be {m}×{m}, is {}×{}",
-            a.nrows(),
-            a.ncols()
-        )));
-    }
-    if a.iter().any(|x| !x.is_finite()) {
-        return Err(bad("has a non-finite entry".into()));
-    }
-    let scale = a.amax().max(1e-300);
-    for i in 0..m {
-        for j in 0..i {
-            if (a[(i, j)] - a[(j, i)]).abs() > 1e-9 * scale {
-                return Err(bad(format!(
-                    "is not symmetric (entry ({}, {}))",
-                    i + 1,
-                    j + 1
-                )));
-            }
-        }
-    }
-    let mut c = a.clone();
-    hcc_model::linalg::cholesky_in_place(&mut c)
-        .map_err(|_| bad("is not positive definite".into()))?;
-    Ok(())
-}
-
 impl Controller {
     /// Checks the hierarchy against the model and the initial configuration `q0`, and
     /// allocates every buffer. Errors name the level and the reason.
@@ -195,86 +153,16 @@ impl Controller {
         spec: ControllerSpec,
         q0: &DVector<f64>,
     ) -> Result<Controller, ControlError> {
+        spec.validate(model)?;
         let n = model.nq();
         let r = spec.levels.len();
-        if r == 0 {
-            return Err(ControlError::Spec("the hierarchy has no level".into()));
-        }
         if q0.len() != n || q0.iter().any(|x| !x.is_finite()) {
             return Err(ControlError::Spec(format!(
                 "initial configuration must be {n} finite values, got {}",
                 q0.len()
             )));
         }
-        if !(spec.singular_ratio > 0.0 && spec.singular_ratio < 1.0) {
-            return Err(ControlError::Spec(
-                "singular_ratio must be in (0, 1)".into(),
-            ));
-        }
-        let dims = level_dims(&spec, n);
-        for (i, l) in spec.levels.iter().enumerate() {
-            let m = dims[i];
-            let bad = |why: String| ControlError::Level {
-                level: format!("{} ({})", i + 1, l.name),
-                why,
-            };
-            if m == 0 {
-                return Err(bad("the task has dimension 0".into()));
-            }
-            match &l.task {
-                TaskSpec::Position { frame, axes } => {
-                    if *frame >= model.frames.len() {
-                        return Err(bad(format!("unknown frame index {frame}")));
-                    }
-                    for (a, ax) in axes.iter().enumerate() {
-                        if *ax > 2 || axes[..a].contains(ax) {
-                            return Err(bad("position axes must be distinct values 0..=2".into()));
-                        }
-                    }
-                }
-                TaskSpec::Orientation { frame } | TaskSpec::PlanarOrientation { frame, .. } => {
-                    if *frame >= model.frames.len() {
-                        return Err(bad(format!("unknown frame index {frame}")));
-                    }
-                    if let TaskSpec::PlanarOrientation { axis, .. } = &l.task
-                        && *axis > 2
-                    {
-                        return Err(bad("planar orientation axis must be 0..=2".into()));
-                    }
-                }
-                TaskSpec::Joints { indices } => {
-                    for (a, ix) in indices.iter().enumerate() {
-                        if *ix >= n || indices[..a].contains(ix) {
-                            return Err(bad(format!(
-                                "joint indices must be distinct values below {n}"
-                            )));
-                        }
-                    }
-                }
-                TaskSpec::JointCombination { weights } => {
-                    if weights.ncols() != n || weights.iter().any(|x| !x.is_finite()) {
-                        return Err(bad(format!("weights must be finite, with {n} columns")));
-                    }
-                }
-                TaskSpec::Posture => {}
-            }
-            let goal_len = m;
-            if l.goal.len() != goal_len || l.goal.iter().any(|x| !x.is_finite()) {
-                return Err(bad(format!(
-                    "goal must be {goal_len} finite values, got {}",
-                    l.goal.len()
-                )));
-            }
-            let name = format!("{} ({})", i + 1, l.name);
-            check_spd(&name, "stiffness", &l.stiffness, m)?;
-            check_spd(&name, "damping", &l.damping, m)?;
-        }
-        let above: usize = dims[..r - 1].iter().sum();
-        if r > 1 && above >= n {
-            return Err(ControlError::Spec(format!(
-                "the levels above the lowest have {above} task dimensions in all; they must be fewer than the {n} joints (Σ_{{j<r}} m_j < n)"
-            )));
-        }
+        let dims = spec.task_dims(n);
 
         let mut levels = Vec::with_capacity(r);
         let mut null = Vec::with_capacity(r);
@@ -717,8 +605,8 @@ impl Controller {
     }
 
     /// Null space of the augmented Jacobian above level `i`: V, V̇ = −J⁺ J̇ V (parallel
-    /// transport), P = V (VᵀMV)⁻¹ Vᵀ and Ṗ. For the lowest level the basis is kept
-    /// continuous in time by a Procrustes alignment to the previous cycle's basis.
+    /// transport), P = V (VᵀMV)⁻¹ Vᵀ and Ṗ. The basis is kept continuous in time (it
+    /// matters for Z_r = V_{r−1}ᵀ; for the other levels P does not depend on it).
     fn null_space(&mut self, i: usize, lowest: bool) -> Result<(), ControlError> {
         let n = self.n;
         let eps = self.spec.singular_ratio;
@@ -734,18 +622,34 @@ impl Controller {
             }
             row += l.m;
         }
-        null_space_basis(&ns.jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
-        if lowest {
-            if ns.has_prev {
-                procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
-            }
-            ns.v_prev.copy_from(&ns.v);
-            ns.has_prev = true;
-        }
-        // V̇ = −J⁺ J̇ V with J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
+        // J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
         gemm_nt(&mut ns.gram, 1.0, &ns.jaug, &ns.jaug, 0.0);
         ns.gram_cond =
             damped_spd_inverse(&ns.gram, &mut ns.gram_inv, &mut ns.spd_k, eps, GRAM_FLOOR);
+        // The basis V: the previous cycle's basis projected onto the null space,
+        // W = (I − J⁺ J) V_prev, and orthonormalised by its polar factor — the
+        // orthonormal basis of null(J) closest to V_prev (the Procrustes-aligned one).
+        // Unlike a fresh factorisation this stays continuous when J_aug loses rank
+        // (the null space grows, W keeps following V_prev). Without a usable previous
+        // basis (first cycle, after `reset`, or a jump of the state): Householder QR,
+        // aligned to the previous basis when there is one.
+        let mut continued = false;
+        if ns.has_prev {
+            gemm(&mut ns.t1, 1.0, &ns.jaug, &ns.v_prev, 0.0);
+            gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
+            ns.v.copy_from(&ns.v_prev);
+            gemm_tn(&mut ns.v, -1.0, &ns.jaug, &ns.t2, 1.0);
+            continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
+        }
+        if !continued {
+            null_space_basis(&ns.jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
+            if ns.has_prev {
+                procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
+            }
+        }
+        ns.v_prev.copy_from(&ns.v);
+        ns.has_prev = true;
+        // V̇ = −J⁺ J̇ V (parallel transport).
         gemm(&mut ns.t1, 1.0, &ns.jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
         gemm_tn(&mut ns.vdot, -1.0, &ns.jaug, &ns.t2, 0.0);

@@ -332,26 +332,20 @@ impl AlignWork {
     }
 }
 
-/// Orthogonal Procrustes alignment: replaces the orthonormal basis `v` (n×d) by
-/// `v R` with the orthogonal `R` that brings it closest to `prev` in the Frobenius
-/// norm, `R = X (XᵀX)^{-1/2}` with `X = vᵀ prev` (the polar factor; Higham,
-/// "Functions of Matrices", ch. 8). Between nearby configurations this is a
-/// first-order approximation of parallel transport of the basis. Returns the
-/// smallest singular value of `X`: near 0 the subspaces jumped and no alignment is
-/// possible (the basis is left as it is).
-pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut AlignWork) -> f64 {
-    let d = v.ncols();
-    gemm_tn(&mut work.x, 1.0, v, prev, 0.0);
-    gemm_tn(&mut work.xtx, 1.0, &work.x, &work.x, 0.0);
+/// `work.r = (work.xtx)^{-1/2}` for the symmetric positive semi-definite `work.xtx`
+/// (destroyed) by its eigen-decomposition. Returns the square root of the smallest
+/// eigenvalue; at or below `min_sigma` (or NaN) `work.r` is left undefined.
+fn inverse_sqrt(work: &mut AlignWork, min_sigma: f64) -> f64 {
+    let d = work.xtx.nrows();
     symmetric_eigen(&mut work.xtx, &mut work.evals, &mut work.evecs, 30);
     let mut smin = f64::INFINITY;
     for i in 0..d {
         smin = smin.min(work.evals[i].max(0.0).sqrt());
     }
-    if smin.is_nan() || smin <= 1e-6 {
+    if smin.is_nan() || smin <= min_sigma {
         return smin;
     }
-    // (XᵀX)^{-1/2} = U diag(1/sqrt(λ)) Uᵀ, then R = X (XᵀX)^{-1/2}.
+    // U diag(1/sqrt(λ)) Uᵀ.
     work.r.fill(0.0);
     for k in 0..d {
         let w = 1.0 / work.evals[k].sqrt();
@@ -362,9 +356,42 @@ pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut Al
             }
         }
     }
+    smin
+}
+
+/// Orthogonal Procrustes alignment: replaces the orthonormal basis `v` (n×d) by
+/// `v R` with the orthogonal `R` that brings it closest to `prev` in the Frobenius
+/// norm, `R = X (XᵀX)^{-1/2}` with `X = vᵀ prev` (the polar factor; Higham,
+/// "Functions of Matrices", ch. 8). Between nearby configurations this is a
+/// first-order approximation of parallel transport of the basis. Returns the
+/// smallest singular value of `X`: near 0 the subspaces jumped and no alignment is
+/// possible (the basis is left as it is).
+pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut AlignWork) -> f64 {
+    gemm_tn(&mut work.x, 1.0, v, prev, 0.0);
+    gemm_tn(&mut work.xtx, 1.0, &work.x, &work.x, 0.0);
+    let smin = inverse_sqrt(work, 1e-6);
+    if smin.is_nan() || smin <= 1e-6 {
+        return smin;
+    }
+    // R = X (XᵀX)^{-1/2}, then v ← v R.
     work.xtx.copy_from(&work.r);
     gemm(&mut work.r, 1.0, &work.x, &work.xtx, 0.0);
     work.tmp.copy_from(v);
     gemm(v, 1.0, &work.tmp, &work.r, 0.0);
+    smin
+}
+
+/// Replaces `w` (n×d, full column rank) by its orthonormal polar factor
+/// `w (wᵀw)^{-1/2}`: the orthonormal basis of span(w) closest to `w` in the Frobenius
+/// norm (Higham, "Functions of Matrices", ch. 8). Returns the smallest singular value
+/// of `w`; at or below `min_sigma` `w` is left unchanged.
+pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigma: f64) -> f64 {
+    gemm_tn(&mut work.xtx, 1.0, w, w, 0.0);
+    let smin = inverse_sqrt(work, min_sigma);
+    if smin.is_nan() || smin <= min_sigma {
+        return smin;
+    }
+    work.tmp.copy_from(w);
+    gemm(w, 1.0, &work.tmp, &work.r, 0.0);
     smin
 }

@@ -19,11 +19,14 @@
 //!
 //! **Basis continuity.** Z_i for i < r does not depend on the choice of V_{i−1}
 //! (only on the subspace), but Z_r = V_{r−1}ᵀ does, and a QR basis is not a
-//! continuous function of q. The lowest level's basis is therefore aligned every
-//! cycle to the previous one by an orthogonal Procrustes step (the polar factor of
-//! V_newᵀ V_prev), a first-order approximation of parallel transport, whose
-//! derivative V̇ = −J⁺ J̇ V is the one used in J̄̇ — so no derivative ever straddles a
-//! sign flip. [`Controller::reset`] forgets the basis after a jump of the state.
+//! continuous function of q. Each cycle the previous basis is therefore projected onto
+//! the new null space, W = (I − J⁺J) V_prev, and orthonormalised by its polar factor —
+//! the orthonormal basis of the new null space closest to V_prev (the orthogonal
+//! Procrustes solution), a first-order approximation of parallel transport whose
+//! derivative V̇ = −J⁺ J̇ V is the one used in J̄̇, so no derivative ever straddles a
+//! sign flip. It also stays continuous where the augmented Jacobian loses rank. The
+//! first cycle (and the one after [`Controller::reset`], for a jump of the state)
+//! takes a Householder QR basis, which is deterministic for a given q.
 //!
 //! **Singularities.** Every Gram matrix that is inverted (J_1 M⁻¹ J_1ᵀ, J_aug J_augᵀ,
 //! Z_i M Z_iᵀ) goes through a damped inverse `(A + δI)⁻¹` whose damping δ rises

@@ -1,7 +1,8 @@
 //! Plain description of a task hierarchy: what the configuration produces and
 //! [`crate::Controller::new`] consumes.
 
-use hcc_model::FrameId;
+use crate::ControlError;
+use hcc_model::{FrameId, Model};
 use nalgebra::{DMatrix, DVector};
 
 /// The task of one priority level, x_i = f_i(q) with Jacobian J_i (eq. 2).
@@ -12,7 +13,7 @@ pub enum TaskSpec {
     Position { frame: FrameId, axes: Vec<usize> },
     /// Full orientation of a frame. Quaternion potential V = 2 εᵀ K ε, where (η, ε) is
     /// the unit quaternion of R_dᵀ R with η ≥ 0 (K in the goal frame's axes); its
-    /// conjugate to the world angular velocity is R_d · 2(ηI + [ε]×) K ε. Goal:
+    /// conjugate to the world angular velocity is R_d · 2(ηI + \[ε\]×) K ε. Goal:
     /// roll, pitch, yaw (rad, R_d = Rz(yaw) Ry(pitch) Rx(roll)).
     Orientation { frame: FrameId },
     /// Rotation angle of a frame about one world axis (planar robots: the sum of the
@@ -76,4 +77,136 @@ impl ControllerSpec {
             singular_ratio: 1e-6,
         }
     }
+
+    /// Task dimension m_i of every level for a robot with `n` joints (eq. 2).
+    pub fn task_dims(&self, n: usize) -> Vec<usize> {
+        self.levels
+            .iter()
+            .map(|l| match &l.task {
+                TaskSpec::Position { axes, .. } => axes.len(),
+                TaskSpec::Orientation { .. } => 3,
+                TaskSpec::PlanarOrientation { .. } => 1,
+                TaskSpec::Joints { indices } => indices.len(),
+                TaskSpec::JointCombination { weights } => weights.nrows(),
+                TaskSpec::Posture => n,
+            })
+            .collect()
+    }
+
+    /// Checks of the hierarchy that need no configuration: frames and joint indices
+    /// exist, goals, K_i and D_i have the task's dimension, K_i and D_i are symmetric
+    /// positive definite, Σ_{j<r} m_j < n, `singular_ratio` in (0, 1). The rank checks
+    /// at a configuration are [`crate::Controller::new`]'s. Errors name the level
+    /// (1-based, with its name) and the reason.
+    pub fn validate(&self, model: &Model) -> Result<(), ControlError> {
+        let n = model.nq();
+        let r = self.levels.len();
+        if r == 0 {
+            return Err(ControlError::Spec("the hierarchy has no level".into()));
+        }
+        if !(self.singular_ratio > 0.0 && self.singular_ratio < 1.0) {
+            return Err(ControlError::Spec(
+                "singular_ratio must be in (0, 1)".into(),
+            ));
+        }
+        let dims = self.task_dims(n);
+        for (i, l) in self.levels.iter().enumerate() {
+            let m = dims[i];
+            let bad = |why: String| ControlError::Level {
+                level: format!("{} ({})", i + 1, l.name),
+                why,
+            };
+            if m == 0 {
+                return Err(bad("the task has dimension 0".into()));
+            }
+            match &l.task {
+                TaskSpec::Position { frame, axes } => {
+                    if *frame >= model.frames.len() {
+                        return Err(bad(format!("unknown frame index {frame}")));
+                    }
+                    for (a, ax) in axes.iter().enumerate() {
+                        if *ax > 2 || axes[..a].contains(ax) {
+                            return Err(bad("position axes must be distinct values 0..=2".into()));
+                        }
+                    }
+                }
+                TaskSpec::Orientation { frame } | TaskSpec::PlanarOrientation { frame, .. } => {
+                    if *frame >= model.frames.len() {
+                        return Err(bad(format!("unknown frame index {frame}")));
+                    }
+                    if let TaskSpec::PlanarOrientation { axis, .. } = &l.task
+                        && *axis > 2
+                    {
+                        return Err(bad("planar orientation axis must be 0..=2".into()));
+                    }
+                }
+                TaskSpec::Joints { indices } => {
+                    for (a, ix) in indices.iter().enumerate() {
+                        if *ix >= n || indices[..a].contains(ix) {
+                            return Err(bad(format!(
+                                "joint indices must be distinct values below {n}"
+                            )));
+                        }
+                    }
+                }
+                TaskSpec::JointCombination { weights } => {
+                    if weights.ncols() != n || weights.iter().any(|x| !x.is_finite()) {
+                        return Err(bad(format!("weights must be finite, with {n} columns")));
+                    }
+                }
+                TaskSpec::Posture => {}
+            }
+            let goal_len = m;
+            if l.goal.len() != goal_len || l.goal.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!(
+                    "goal must be {goal_len} finite values, got {}",
+                    l.goal.len()
+                )));
+            }
+            let name = format!("{} ({})", i + 1, l.name);
+            check_spd(&name, "stiffness", &l.stiffness, m)?;
+            check_spd(&name, "damping", &l.damping, m)?;
+        }
+        let above: usize = dims[..r - 1].iter().sum();
+        if r > 1 && above >= n {
+            return Err(ControlError::Spec(format!(
+                "the levels above the lowest have {above} task dimensions in all; they must be fewer than the {n} joints (Σ_{{j<r}} m_j < n)"
+            )));
+        }
+
+        Ok(())
+    }
+}
+
+fn check_spd(name: &str, what: &str, a: &DMatrix<f64>, m: usize) -> Result<(), ControlError> {
+    let bad = |why: String| ControlError::Level {
+        level: name.to_string(),
+        why: format!("{what}: {why}"),
+    };
+    if a.shape() != (m, m) {
+        return Err(bad(format!(
+            "must be {m}×{m}, is {}×{}",
+            a.nrows(),
+            a.ncols()
+        )));
+    }
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err(bad("has a non-finite entry".into()));
+    }
+    let scale = a.amax().max(1e-300);
+    for i in 0..m {
+        for j in 0..i {
+            if (a[(i, j)] - a[(j, i)]).abs() > 1e-9 * scale {
+                return Err(bad(format!(
+                    "is not symmetric (entry ({}, {}))",
+                    i + 1,
+                    j + 1
+                )));
+            }
+        }
+    }
+    let mut c = a.clone();
+    hcc_model::linalg::cholesky_in_place(&mut c)
+        .map_err(|_| bad("is not positive definite".into()))?;
+    Ok(())
 }

@@ -179,3 +179,45 @@ fn panda_properties() {
     let w = check_robot(&model, panda_spec(&model), 2);
     report("panda", &w);
 }
+
+/// The task force is the gradient of the task potential (the premise of eqs. 26–29):
+/// with q̇ = 0, τ_1 = −J_1ᵀ ∂V_1/∂x_1ᵀ, so V_1(q + h u) − V_1(q − h u) ≈ −2h τ_1ᵀ u for
+/// any direction u. Checked for the quaternion orientation potential and the position
+/// potential of the Panda at random states, far from and near the goal.
+#[test]
+fn task_forces_are_gradients_of_the_potentials() {
+    let model = panda();
+    let full = panda_spec(&model);
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut worst: f64 = 0.0;
+    for level in [0, 1] {
+        let mut spec = ControllerSpec::new(vec![full.levels[level].clone()]);
+        spec.gravity_compensation = false;
+        spec.coriolis_cancellation = false;
+        let mut tested = 0;
+        while tested < 50 {
+            let (q, u) = random_state(&model, &mut rng);
+            let Ok(mut c) = Controller::new(&model, spec.clone(), &DVector::from_vec(q.clone()))
+            else {
+                continue;
+            };
+            tested += 1;
+            let zero = vec![0.0; q.len()];
+            let tau = c.step(&q, &zero).expect("step").tau_level[0].clone();
+            let h = 1e-6;
+            let at = |c: &mut Controller, s: f64| {
+                let qs: Vec<f64> = q.iter().zip(&u).map(|(a, b)| a + s * b).collect();
+                c.step(&qs, &zero).expect("step").potential[0]
+            };
+            let dv = (at(&mut c, h) - at(&mut c, -h)) / (2.0 * h);
+            let predicted = -tau.dot(&DVector::from_vec(u.clone()));
+            let e = (dv - predicted).abs() / predicted.abs().max(1.0);
+            worst = worst.max(e);
+            assert!(
+                e <= 1e-6,
+                "level {level}: dV/dt {dv} vs −τᵀu {predicted} at q {q:?}"
+            );
+        }
+    }
+    println!("potential gradients: worst relative deviation {worst:.1e}");
+}

@@ -1,5 +1,5 @@
-//! τ, τ per level, τ_μ and g against an independent implementation of the paper's
-//! planar arm (tests/data/paper_planar4.json), to 1e-9.
+//! τ, τ per level, τ_μ, g and the block-diagonal Λ (eq. 16) against an independent
+//! implementation of the paper's planar arm (tests/data/paper_planar4.json), to 1e-9.
 
 mod common;
 use common::*;
@@ -19,7 +19,23 @@ fn planar_torques_match_reference() {
             let spec = planar_spec(&model, sim);
             let mut c =
                 Controller::new(&model, spec, &DVector::from_vec(q.clone())).expect("controller");
-            let out = c.step(&q, &qd).expect("step");
+            let out = c.step(&q, &qd).expect("step").clone();
+            // Λ = diag(Λ_1, Λ_2, Λ_3) (eqs. 16, 18).
+            let lambda = c.diagnostics().lambda;
+            let want: Vec<f64> = s["Lambda"]
+                .as_array()
+                .expect("Lambda rows")
+                .iter()
+                .flat_map(vec_of)
+                .collect();
+            let got: Vec<f64> = (0..4)
+                .flat_map(|i| (0..4).map(move |j| (i, j)))
+                .map(|(i, j)| lambda[(i, j)])
+                .collect();
+            assert!(
+                close(&got, &want, 1e-9),
+                "{sim} {name} Λ: got {got:?}, want {want:?}"
+            );
             let expect = &s[sim];
             let pairs: Vec<(&str, &[f64])> = vec![
                 ("tau", out.tau.as_slice()),
