@@ -35,6 +35,15 @@ impl PageFaults {
             major: self.major.saturating_sub(earlier.major),
         }
     }
+
+    /// The faults a prepared real-time section must not take: every minor fault
+    /// (the memory it touches was pre-faulted), and the major ones when memory is
+    /// locked. Without [`lock_memory`] the kernel may drop a clean file-backed page
+    /// (the binary's code) and read it back on the next touch, a major fault that
+    /// only locking rules out.
+    pub fn unexpected(self, memory_locked: bool) -> u64 {
+        self.minor + if memory_locked { self.major } else { 0 }
+    }
 }
 
 /// Page-fault counters from `getrusage`: of the calling thread on Linux
