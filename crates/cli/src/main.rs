@@ -3,6 +3,8 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod daemons;
+mod jitter_cmd;
 mod model_cmd;
 mod plot_cmd;
 mod run_cmd;
@@ -26,6 +28,9 @@ enum Command {
     Run(run_cmd::RunArgs),
     /// Run a scenario in-process (controller at 1 kHz, plant RK4 at 0.1 ms) and write its results.
     Simulate(simulate_cmd::SimulateArgs),
+    /// Measure the timing of the daemons on two cores (simulator on one, controller on the
+    /// other) against the machine's own floor; table, jitter.json and jitter.png.
+    Jitter(jitter_cmd::JitterArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
     Model(model_cmd::ModelArgs),
     /// Redraw the plots of a results directory from its trajectory.csv and metrics.json.
@@ -37,6 +42,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run_cmd::run(args),
         Command::Simulate(args) => simulate_cmd::run(args),
+        Command::Jitter(args) => jitter_cmd::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),
     };

@@ -28,17 +28,20 @@
 //! marks the peer lost (once per loss), publishes a telemetry sample carrying
 //! the counters, and keeps waiting. The first state after a loss, or three
 //! consecutive states going backwards (a restarted driver counts from 0),
-//! reset the [`SequenceChecker`] and the controller's null-space basis
-//! memory (`Controller::reset`), and control resumes.
+//! reset the [`SequenceChecker`], and control resumes. The controller's
+//! null-space basis memory is kept: the control law continues the previous
+//! basis only while it still overlaps the new null space and takes a fresh one
+//! after a jump of the state (hcc-control, "Basis continuity"), and the torque
+//! does not depend on the basis — so a state that merely comes late (a loaded
+//! machine, a lockstep peer) changes nothing, not even the last bits.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::Duration;
 
 use hcc_config::WaitStrategy;
 use hcc_control::Controller;
 use hcc_msgs::ipc::{
-    CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, Services,
+    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, Services,
     StateSubscriber, TelemetryPublisher,
 };
 use hcc_msgs::{
@@ -47,6 +50,7 @@ use hcc_msgs::{
 };
 
 use crate::rt;
+use hcc_timing::LatencyHistogram;
 
 /// Longest single blocking wait, so that a stop request is seen promptly.
 const MAX_WAIT_NS: u64 = 20_000_000;
@@ -110,7 +114,7 @@ impl CycleSettings {
             stale_timeout_ns: (d.stale_timeout_ms * 1e6).round() as u64,
             torque_limits: d.torque_limits.iter().copied().collect(),
             gravity_compensation: scenario.gravity_compensation,
-            hybrid_lead_ns: 150_000,
+            hybrid_lead_ns: rt::HYBRID_LEAD_NS,
             hybrid_spin_ns: 200_000,
         }
     }
@@ -196,6 +200,18 @@ pub enum Outcome {
     Stop,
 }
 
+/// Latency distributions of the loop (recorded every answered state,
+/// allocation-free; read by the daemon when it stops).
+#[derive(Debug, Default)]
+pub struct CycleTimings {
+    /// Wake-up latency: from the state's stamp (its publication by the driver)
+    /// to the start of the computation, ns.
+    pub wakeup: LatencyHistogram,
+    /// Compute time: from the start of the computation to the command sent
+    /// (`command_ready` notified), ns.
+    pub compute: LatencyHistogram,
+}
+
 /// The controller's loop state: the control law, all message buffers and counters.
 pub struct Cycle {
     controller: Controller,
@@ -221,6 +237,7 @@ pub struct Cycle {
     last_wake_ns: u64,
     peer_lost: bool,
     max_compute_ns: u64,
+    timings: CycleTimings,
     status: Arc<Status>,
 }
 
@@ -291,6 +308,7 @@ impl Cycle {
             last_wake_ns: 0,
             peer_lost: false,
             max_compute_ns: 0,
+            timings: CycleTimings::default(),
             status: Arc::new(Status::default()),
             settings,
         })
@@ -309,6 +327,11 @@ impl Cycle {
     /// The last command sent.
     pub fn last_command(&self) -> &TorqueCommand {
         &self.command
+    }
+
+    /// Latency distributions of the answered states so far.
+    pub fn timings(&self) -> &CycleTimings {
+        &self.timings
     }
 
     /// The control law.
@@ -348,14 +371,18 @@ impl Cycle {
         got
     }
 
+    /// Blocks on `state_ready` until a notification or the stale deadline
+    /// (at most [`MAX_WAIT_NS`]), precisely (`ipc::wait_for_event_until`;
+    /// iceoryx2's own timed wait rounds its timeout up to a scheduler tick).
     fn event_wait(&self, ports: &Ports, now: u64) {
-        let timeout = self
+        let deadline = self
             .stale_deadline_ns
-            .saturating_sub(now)
-            .clamp(1_000, MAX_WAIT_NS);
-        let _ = ports
-            .state_ready
-            .timed_wait(|_| {}, Duration::from_nanos(timeout));
+            .min(now.saturating_add(MAX_WAIT_NS))
+            .max(now + 1_000);
+        if ipc::wait_for_event_until(&ports.state_ready, deadline) {
+            // Consume the notification; the sample is taken by the next take_newest.
+            let _ = ports.state_ready.try_wait(|_| {});
+        }
     }
 
     fn wait_step(&self, ports: &Ports, now: u64) {
@@ -396,10 +423,9 @@ impl Cycle {
             .publish(&self.counters, self.numerical_failures, self.restarts);
     }
 
-    /// Forgets the peer's sequence and the controller's basis memory.
+    /// Forgets the peer's sequence.
     fn restart_peer(&mut self) {
         self.checker.reset();
-        self.controller.reset();
         self.backwards_run = 0;
         self.restarts += 1;
     }
@@ -525,6 +551,8 @@ impl Cycle {
         let compute_ns = sent.saturating_sub(wake);
         self.max_compute_ns = self.max_compute_ns.max(compute_ns);
         let latency = wake as i64 - self.state.header.stamp_ns as i64;
+        self.timings.compute.record(compute_ns);
+        self.timings.wakeup.record_signed(latency);
 
         // Telemetry (never blocks: safe overflow, discard on a full queue).
         self.fill_telemetry(mode, &tau, valid);

@@ -61,6 +61,20 @@ pub struct Args {
     /// Wait strategy (overrides [controller_daemon].wait_strategy).
     #[arg(long, value_enum)]
     pub wait: Option<WaitArg>,
+    /// CPU core of the control thread (overrides [controller_daemon].cpu_core).
+    #[arg(long)]
+    pub cpu_core: Option<usize>,
+    /// SCHED_FIFO priority 1..=99 of the control thread (overrides
+    /// [controller_daemon].sched_priority).
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub sched_priority: Option<i32>,
+    /// Lock memory (mlockall), as [controller_daemon].mlock = true.
+    #[arg(long)]
+    pub mlock: bool,
+    /// When stopping, write the loop's timing report (wake-up latency and
+    /// compute time histograms, counters, real-time set-up obtained) as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
 }
 
 /// Parses `args` (program name first), runs the daemon, maps the result to
@@ -140,12 +154,13 @@ pub fn run(args: Args) -> Result<()> {
     let ports = Ports::open(&services)?;
 
     let d = &scenario.controller_daemon;
-    let report = rt::prepare_rt_thread(&RtSettings {
-        cpu_core: d.cpu_core,
-        sched_priority: d.sched_priority,
-        lock_memory: d.mlock,
+    let rt_settings = RtSettings {
+        cpu_core: args.cpu_core.or(d.cpu_core),
+        sched_priority: args.sched_priority.or(d.sched_priority),
+        lock_memory: args.mlock || d.mlock,
         prefault_stack_bytes: PREFAULT_STACK_BYTES,
-    });
+    };
+    let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
         eprintln!("hcc-controller: warning: {w}");
     }
@@ -179,6 +194,7 @@ pub fn run(args: Args) -> Result<()> {
     };
 
     let mut cycles = 0u64;
+    let started = std::time::Instant::now();
     {
         let _rt = hcc_rtalloc::RtSection::enter();
         loop {
@@ -218,10 +234,50 @@ pub fn run(args: Args) -> Result<()> {
         },
         s.pool_high_water,
     );
+    if let Some(path) = &args.stats {
+        let t = cycle.timings();
+        let mut stats = hcc_timing::DaemonTimings {
+            daemon: "hcc-controller".into(),
+            wait: wait_name(setup.settings.wait).into(),
+            rt: report.obtained(&rt_settings),
+            run_s: started.elapsed().as_secs_f64(),
+            ..Default::default()
+        };
+        stats
+            .figures
+            .insert("wakeup_latency".into(), (&t.wakeup).into());
+        stats
+            .figures
+            .insert("compute_time".into(), (&t.compute).into());
+        for (name, value) in [
+            ("cycles", c.cycles),
+            ("invalid_states", c.invalid_states),
+            ("saturations", c.saturations),
+            ("singular_cycles", c.singular_cycles),
+            ("stale_events", c.stale_events),
+            ("peer_lost_events", c.peer_lost_events),
+            ("missed_states", c.missed_states),
+            ("sequence_errors", c.sequence_errors),
+            ("send_failures", c.send_failures),
+        ] {
+            stats.counters.insert(name.into(), value);
+        }
+        stats
+            .write_json(path)
+            .context("--stats: writing the timing report")?;
+    }
     drop(ports);
     drop(services);
     drop(node);
     Ok(())
+}
+
+/// The wait strategy's name on the command line.
+pub fn wait_name(w: WaitStrategy) -> &'static str {
+    match w {
+        WaitStrategy::Event => "event",
+        WaitStrategy::Hybrid => "hybrid",
+    }
 }
 
 /// The logging thread: every 100 ms, report what changed.

@@ -33,7 +33,6 @@ use nalgebra::DVector;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
 
 #[global_allocator]
 static ALLOCATOR: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
@@ -264,8 +263,11 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
                     if current || now >= deadline {
                         break;
                     }
-                    let wait = Duration::from_nanos((deadline - now).min(200_000));
-                    let _ = command_ready.timed_wait(|_| {}, wait);
+                    // Precise to the deadline (iceoryx2's Listener::timed_wait
+                    // rounds up to a scheduler tick, several ms).
+                    if hcc_msgs::ipc::wait_for_event_until(&command_ready, deadline) {
+                        let _ = command_ready.try_wait(|_| {});
+                    }
                 }
                 // (3) Apply, hold, fall back or stop.
                 let action =

@@ -16,10 +16,12 @@
 
 pub mod columns;
 pub mod metrics;
+pub mod percentiles;
 pub mod plots;
 pub mod trajectory;
 
 pub use metrics::{ErrorUnit, LevelDescription, LevelMetrics, Metrics, RunDescription};
+pub use percentiles::{PercentileCurve, plot_percentiles};
 pub use plots::plot_all;
 pub use trajectory::Trajectory;
 

@@ -39,9 +39,19 @@ use hcc_msgs::{JointState, ServiceNames, TorqueCommand, monotonic_now_ns};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
 use crate::driver::{Applied, SimDriver};
+use hcc_timing::LatencyHistogram;
 
 /// Republish period of the current state while waiting for the first command (lockstep).
 const REPUBLISH_NS: u64 = 20_000_000;
+
+/// Real time: part of the period, from the publication of state k, during
+/// which the loop waits for the command answering it (then it prepares for
+/// the next tick; a command arriving later but before the tick is still
+/// applied, and counted as late).
+const COMMAND_WINDOW_FRACTION: f64 = 0.8;
+
+/// Hybrid wait: how long the loop polls for the answer before it blocks, ns.
+const HYBRID_POLL_NS: u64 = 100_000;
 
 /// Command line of `hcc-sim`.
 #[derive(Debug, Parser)]
@@ -78,6 +88,38 @@ pub struct Args {
     /// Lock memory (mlockall).
     #[arg(long)]
     pub mlock: bool,
+    /// CPU core of the simulator thread (overrides [sim_daemon].cpu_core).
+    #[arg(long)]
+    pub cpu_core: Option<usize>,
+    /// Real time: how the loop waits — `event`: sleep until each tick
+    /// (clock_nanosleep) and block on `command_ready` for the answer;
+    /// `hybrid`: sleep until shortly before the tick and spin to it, poll for
+    /// the answer for a while before blocking.
+    #[arg(long, value_enum, default_value_t = SimWait::Event)]
+    pub wait: SimWait,
+    /// When stopping, write the loop's timing report (tick lateness and
+    /// state → command latency histograms, counters, real-time set-up
+    /// obtained) as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+}
+
+/// How the real-time loop waits (`--wait`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SimWait {
+    /// Sleep to each tick; block on the command event.
+    Event,
+    /// Sleep, then spin to each tick; poll for the command, then block.
+    Hybrid,
+}
+
+impl SimWait {
+    fn name(self) -> &'static str {
+        match self {
+            SimWait::Event => "event",
+            SimWait::Hybrid => "hybrid",
+        }
+    }
 }
 
 /// Parses `args` (program name first) and runs the daemon; 0 after a clean
@@ -107,62 +149,9 @@ where
     }
 }
 
-/// Counts of durations in 10 µs buckets up to 5 ms (allocation-free after construction).
-struct Histogram {
-    buckets: Vec<u64>,
-    count: u64,
-    max_ns: u64,
-}
-
-impl Histogram {
-    const BUCKET_NS: u64 = 10_000;
-
-    fn new() -> Histogram {
-        Histogram {
-            buckets: vec![0; 501],
-            count: 0,
-            max_ns: 0,
-        }
-    }
-
-    fn record(&mut self, ns: u64) {
-        let i = ((ns / Self::BUCKET_NS) as usize).min(self.buckets.len() - 1);
-        self.buckets[i] += 1;
-        self.count += 1;
-        self.max_ns = self.max_ns.max(ns);
-    }
-
-    /// Upper bucket edge below which a fraction `p` of the samples lie, µs.
-    fn percentile_us(&self, p: f64) -> f64 {
-        let target = (p * self.count as f64).ceil() as u64;
-        let mut seen = 0;
-        for (i, c) in self.buckets.iter().enumerate() {
-            seen += c;
-            if seen >= target.max(1) {
-                return ((i as u64 + 1) * Self::BUCKET_NS) as f64 / 1e3;
-            }
-        }
-        self.max_ns as f64 / 1e3
-    }
-
-    fn summary(&self) -> String {
-        if self.count == 0 {
-            return "no samples".into();
-        }
-        format!(
-            "p50 < {:.0} µs, p99 < {:.0} µs, p99.9 < {:.0} µs, max {:.1} µs ({} samples)",
-            self.percentile_us(0.5),
-            self.percentile_us(0.99),
-            self.percentile_us(0.999),
-            self.max_ns as f64 / 1e3,
-            self.count
-        )
-    }
-}
-
 /// Counters shared with the logging thread.
 #[derive(Default)]
-struct Shared {
+pub struct Shared {
     missed: AtomicU64,
     fallback_cycles: AtomicU64,
     in_fallback: AtomicBool,
@@ -171,30 +160,130 @@ struct Shared {
     rejected: AtomicU64,
 }
 
-/// The simulator's ports.
-struct Ports {
+/// The simulator's ports (the driver side of the contract).
+pub struct Ports {
     states: StatePublisher,
     state_ready: EventNotifier,
     commands: CommandSubscriber,
     command_ready: EventListener,
 }
 
-struct Loop<'a> {
+impl Ports {
+    /// Creates the driver's ports on the opened services.
+    pub fn open(services: &Services) -> Result<Ports> {
+        Ok(Ports {
+            states: services.joint_state_publisher()?,
+            state_ready: services.state_ready_notifier()?,
+            commands: services.torque_command_subscriber(LATEST_BUFFER)?,
+            command_ready: services.command_ready_listener()?,
+        })
+    }
+}
+
+/// Counts of the periods by how their torque was chosen.
+#[derive(Debug, Default, Clone, Copy)]
+struct PeriodCounts {
+    periods: u64,
+    waiting: u64,
+    stopped: u64,
+    /// Answers that arrived after the command window but before the tick.
+    late: u64,
+}
+
+/// The simulator's loop state: the driver, its ports, the newest command,
+/// the timing histograms and counters. Every method called per period is
+/// allocation-free.
+pub struct SimLoop<'a> {
     driver: SimDriver,
     ports: &'a Ports,
     newest: Option<TorqueCommand>,
     state: JointState,
     shared: &'a Shared,
-    lateness: Histogram,
-    round_trip: Histogram,
+    wait: SimWait,
+    /// Real time: lateness of each tick, ns.
+    lateness: LatencyHistogram,
+    /// Publication of state k → its answer received here, ns.
+    state_to_command: LatencyHistogram,
+    /// Answer's stamp − state's stamp (the controller's view), ns.
+    answer_stamp: LatencyHistogram,
+    /// Publication time of the current state, ns.
+    published_ns: u64,
+    /// The answer to the current state was received (and its latency recorded).
+    answered: bool,
+    counts: PeriodCounts,
     overruns: u64,
 }
 
-impl Loop<'_> {
-    fn publish(&mut self) {
-        self.driver.write_state(&mut self.state, monotonic_now_ns());
+impl<'a> SimLoop<'a> {
+    /// The loop around `driver` on `ports`, reporting to `shared`.
+    pub fn new(driver: SimDriver, ports: &'a Ports, shared: &'a Shared, wait: SimWait) -> Self {
+        SimLoop {
+            driver,
+            ports,
+            newest: None,
+            state: JointState::zeroed(),
+            shared,
+            wait,
+            lateness: LatencyHistogram::new(),
+            state_to_command: LatencyHistogram::new(),
+            answer_stamp: LatencyHistogram::new(),
+            published_ns: 0,
+            answered: false,
+            counts: PeriodCounts::default(),
+            overruns: 0,
+        }
+    }
+
+    /// The driver.
+    pub fn driver(&self) -> &SimDriver {
+        &self.driver
+    }
+
+    /// Publishes state k (stamped now) and notifies `state_ready`.
+    pub fn publish(&mut self) {
+        self.published_ns = monotonic_now_ns();
+        self.answered = false;
+        self.driver.write_state(&mut self.state, self.published_ns);
         let _ = self.ports.states.send_copy(self.state);
         let _ = self.ports.state_ready.notify();
+    }
+
+    /// Drains the queue and records the latency of the answer to state k when
+    /// it is there for the first time.
+    fn take_answer(&mut self) -> bool {
+        let got = self.drain();
+        if got && !self.answered {
+            self.answered = true;
+            let now = monotonic_now_ns();
+            self.state_to_command
+                .record(now.saturating_sub(self.published_ns));
+        }
+        got
+    }
+
+    /// Real time: waits for the answer to state k until `deadline_ns`.
+    pub fn wait_for_answer(&mut self, deadline_ns: u64) {
+        if self.wait == SimWait::Hybrid {
+            let poll_until = deadline_ns.min(self.published_ns + HYBRID_POLL_NS);
+            while monotonic_now_ns() < poll_until {
+                if self.take_answer() || rt::stop_requested() {
+                    return;
+                }
+                std::hint::spin_loop();
+            }
+        }
+        loop {
+            if self.take_answer() || rt::stop_requested() {
+                return;
+            }
+            let now = monotonic_now_ns();
+            if now >= deadline_ns {
+                return;
+            }
+            // Precise to the deadline (Listener::timed_wait is not: see
+            // ipc::wait_for_event_until); the event is drained by drain().
+            ipc::wait_for_event_until(&self.ports.command_ready, deadline_ns.min(now + 20_000_000));
+        }
     }
 
     /// Drains the command queue into `newest`; true if the newest answers state k.
@@ -213,10 +302,16 @@ impl Loop<'_> {
             .filter(|c| c.state_seq == self.driver.k())
             .map(|c| c.header.stamp_ns.saturating_sub(c.state_stamp_ns));
         let applied = self.driver.advance(self.newest.as_ref())?;
+        self.counts.periods += 1;
+        match applied {
+            Applied::WaitingForController => self.counts.waiting += 1,
+            Applied::Stopped => self.counts.stopped += 1,
+            _ => {}
+        }
         if applied == Applied::Command
             && let Some(rtt) = answered
         {
-            self.round_trip.record(rtt);
+            self.answer_stamp.record(rtt);
         }
         let c = self.driver.counters();
         self.shared
@@ -237,23 +332,42 @@ impl Loop<'_> {
         Ok(())
     }
 
+    /// Real time, at the tick: takes the newest command (an answer that came
+    /// after the window counts as late), integrates the period with it (or
+    /// holds / falls back) and publishes the next state. False once the
+    /// final state has been reached (nothing published then).
+    pub fn tick(&mut self) -> Result<bool> {
+        let was_answered = self.answered;
+        if self.take_answer() && !was_answered {
+            self.counts.late += 1;
+        }
+        self.advance()?;
+        if self.driver.finished() {
+            return Ok(false);
+        }
+        self.publish();
+        Ok(true)
+    }
+
     fn run_realtime(&mut self) -> Result<()> {
         let period_ns = (self.driver.period_s() * 1e9).round() as u64;
+        let window_ns = (period_ns as f64 * COMMAND_WINDOW_FRACTION) as u64;
         self.publish();
         let mut next = monotonic_now_ns() + period_ns;
         loop {
-            rt::sleep_until_ns(next);
+            self.wait_for_answer((self.published_ns + window_ns).min(next));
+            match self.wait {
+                SimWait::Event => rt::sleep_until_ns(next),
+                SimWait::Hybrid => rt::sleep_until_hybrid_ns(next, rt::HYBRID_LEAD_NS),
+            }
             let now = monotonic_now_ns();
             self.lateness.record(now.saturating_sub(next));
             if rt::stop_requested() {
                 break;
             }
-            self.drain();
-            self.advance()?;
-            if self.driver.finished() {
+            if !self.tick()? {
                 break;
             }
-            self.publish();
             next += period_ns;
             if now > next + 10 * period_ns {
                 next = now + period_ns;
@@ -385,27 +499,24 @@ pub fn run(args: Args) -> Result<()> {
         file_prefix.as_deref(),
     )?;
     let services = Services::open(&node, &names)?;
-    let ports = Ports {
-        states: services.joint_state_publisher()?,
-        state_ready: services.state_ready_notifier()?,
-        commands: services.torque_command_subscriber(LATEST_BUFFER)?,
-        command_ready: services.command_ready_listener()?,
-    };
+    let ports = Ports::open(&services)?;
 
-    let report = rt::prepare_rt_thread(&RtSettings {
-        cpu_core: scenario.sim_daemon.cpu_core,
+    let rt_settings = RtSettings {
+        cpu_core: args.cpu_core.or(scenario.sim_daemon.cpu_core),
         sched_priority: args.sched_priority,
         lock_memory: args.mlock,
         prefault_stack_bytes: 512 * 1024,
-    });
+    };
+    let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
         eprintln!("hcc-sim: warning: {w}");
     }
     eprintln!(
-        "hcc-sim: {} ({} joints), {:?} mode, namespace {:?}, {}; publishing on {:?}",
+        "hcc-sim: {} ({} joints), {:?} mode, wait {}, namespace {:?}, {}; publishing on {:?}",
         scenario.name,
         driver.model().nq(),
         mode,
+        args.wait.name(),
         names.namespace().as_str(),
         match args.duration {
             Some(d) => format!("{d} s of simulated time"),
@@ -424,16 +535,8 @@ pub fn run(args: Args) -> Result<()> {
             .context("starting the logging thread")?
     };
 
-    let mut lp = Loop {
-        driver,
-        ports: &ports,
-        newest: None,
-        state: JointState::zeroed(),
-        shared: &shared,
-        lateness: Histogram::new(),
-        round_trip: Histogram::new(),
-        overruns: 0,
-    };
+    let mut lp = SimLoop::new(driver, &ports, &shared, args.wait);
+    let started = std::time::Instant::now();
     let result = {
         let _rt = hcc_rtalloc::RtSection::enter();
         let timeout_ns = (args.lockstep_timeout_ms * 1e6) as u64;
@@ -459,12 +562,58 @@ pub fn run(args: Args) -> Result<()> {
         lp.overruns
     );
     if mode == SimMode::Realtime {
-        eprintln!("hcc-sim: tick lateness: {}", lp.lateness.summary());
+        eprintln!(
+            "hcc-sim: tick lateness: {}",
+            lp.lateness.summary().line_us()
+        );
+        eprintln!(
+            "hcc-sim: state published → command received: {} ({} late)",
+            lp.state_to_command.summary().line_us(),
+            lp.counts.late
+        );
     }
     eprintln!(
         "hcc-sim: state → command (controller stamp − state stamp): {}",
-        lp.round_trip.summary()
+        lp.answer_stamp.summary().line_us()
     );
+    if let Some(path) = &args.stats {
+        let period_ns = lp.driver.period_s() * 1e9;
+        let mut stats = hcc_timing::DaemonTimings {
+            daemon: "hcc-sim".into(),
+            wait: args.wait.name().into(),
+            rt: report.obtained(&rt_settings),
+            run_s: started.elapsed().as_secs_f64(),
+            ..Default::default()
+        };
+        for (name, h) in [
+            ("tick_lateness", &lp.lateness),
+            ("state_to_command", &lp.state_to_command),
+            ("answer_stamp_latency", &lp.answer_stamp),
+        ] {
+            stats.figures.insert(name.into(), h.into());
+        }
+        for (name, value) in [
+            ("periods", lp.counts.periods),
+            ("waiting_for_controller", lp.counts.waiting),
+            ("stopped_periods", lp.counts.stopped),
+            ("applied_commands", c.applied_commands),
+            ("missed_commands", c.missed_commands),
+            ("fallback_cycles", c.fallback_cycles),
+            ("rejected_commands", c.rejected_commands),
+            ("late_commands", lp.counts.late),
+            (
+                "ticks_late",
+                lp.lateness
+                    .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
+            ),
+            ("overruns", lp.overruns),
+        ] {
+            stats.counters.insert(name.into(), value);
+        }
+        stats
+            .write_json(path)
+            .context("--stats: writing the timing report")?;
+    }
     drop(lp);
     drop(ports);
     drop(services);

@@ -1,0 +1,869 @@
+//! `hcc jitter [CONFIG] [--duration S] [--out DIR] [--wait event|hybrid] [--load]`:
+//! how late is each cycle, and how much of that is the machine and how much
+//! the software?
+//!
+//! 1. **Floor.** A bare periodic thread at the control rate on each of the
+//!    two cores (pinned, `SCHED_FIFO` when permitted, timer slack 1 ns, the
+//!    same wait strategy as the daemons: `event` sleeps to each deadline with
+//!    `clock_nanosleep(TIMER_ABSTIME)`, `hybrid` sleeps until
+//!    [`rt::HYBRID_LEAD_NS`] before it and spins) — no IPC, no work. Its
+//!    lateness is what the machine alone costs.
+//! 2. **Pair.** `hcc-sim` (real time) pinned to one core and `hcc-controller`
+//!    to the other, both `SCHED_FIFO` and `mlockall` when permitted, for the
+//!    duration. Each records HDR histograms in its loop (fixed bounds, no
+//!    allocation) and writes them when it stops (`--stats`): the simulator's
+//!    tick lateness and the state → command latency (state published → its
+//!    answer received at the simulator), the controller's wake-up latency
+//!    (state published → start of the computation) and compute time, and the
+//!    counters (missed commands, fallbacks, …).
+//!
+//! It prints a table (min, p50, p90, p99, p99.9, p99.99, max of each figure,
+//! the floor beside it and the ratio) and writes `DIR/jitter.json` (the same
+//! numbers, the quantile curves and the run's settings: kernel, CPU, the
+//! scheduling actually obtained, wait strategy, durations, steal time) and
+//! `DIR/jitter.png` (latency vs percentile, floor dashed). While it measures,
+//! `/dev/cpu_dma_latency` is held at 0 µs when the process may open it (as
+//! cyclictest does). `--load` runs a busy thread at normal priority on each
+//! core during both measurements.
+//!
+//! On a small virtual machine the maximum belongs to the host (stalls of
+//! several ms, visible as steal time); judge by p99 and p99.9, and by misses
+//! beyond those the floor shows.
+
+use anyhow::{Context, bail};
+use hcc_config::Scenario;
+use hcc_controller::rt::{self, RtSettings};
+use hcc_msgs::ipc;
+use hcc_msgs::{Namespace, ServiceNames, monotonic_now_ns};
+use hcc_report::{PercentileCurve, plot_percentiles};
+use hcc_timing::machine::{CpuDmaLatency, CpuTimes, MachineInfo};
+use hcc_timing::{DaemonTimings, Figure, LatencyHistogram, LatencySummary, RtObtained};
+use iceoryx2::prelude::SignalHandlingMode;
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::daemons::{
+    Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
+    wait_until_controller_listens,
+};
+use crate::run_cmd::DEFAULT_CONFIG;
+
+/// The floor thread and the simulator count a cycle as late when it wakes
+/// later than this part of the period (the simulator's command window).
+const LATE_FRACTION: f64 = 0.8;
+
+/// Default floor measurement, s (at most the pair's duration).
+const DEFAULT_FLOOR_S: f64 = 10.0;
+
+/// Wait strategy of both daemons and of the floor threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Wait {
+    /// Sleep to the deadline / block on the IPC event.
+    Event,
+    /// Sleep until shortly before the deadline, then poll.
+    Hybrid,
+}
+
+impl Wait {
+    fn name(self) -> &'static str {
+        match self {
+            Wait::Event => "event",
+            Wait::Hybrid => "hybrid",
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct JitterArgs {
+    /// Scenario TOML (default: the paper's simulation #1; after convergence
+    /// the controller holds the goal).
+    #[arg(default_value = DEFAULT_CONFIG)]
+    pub config: PathBuf,
+    /// Duration of the measurement of the pair, s.
+    #[arg(long, default_value_t = 60.0)]
+    pub duration: f64,
+    /// Duration of the floor measurement, s (default: 10 s, at most --duration).
+    #[arg(long)]
+    pub floor_duration: Option<f64>,
+    /// Output directory.
+    #[arg(long, default_value = "out/jitter")]
+    pub out: PathBuf,
+    /// Wait strategy of the daemons and of the floor threads.
+    #[arg(long, value_enum, default_value_t = Wait::Hybrid)]
+    pub wait: Wait,
+    /// Run a CPU load at normal priority on both cores during the measurements.
+    #[arg(long)]
+    pub load: bool,
+    /// Core of the simulator (and of the first floor thread).
+    #[arg(long, default_value_t = 0)]
+    pub sim_core: usize,
+    /// Core of the controller (and of the second floor thread).
+    #[arg(long, default_value_t = 1)]
+    pub controller_core: usize,
+    /// SCHED_FIFO priority of the daemons and floor threads (when permitted).
+    #[arg(long, default_value_t = 80, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub priority: i32,
+    /// Normal scheduling instead of SCHED_FIFO.
+    #[arg(long)]
+    pub no_fifo: bool,
+    /// IPC namespace (default: a unique one).
+    #[arg(long)]
+    pub namespace: Option<String>,
+    /// iceoryx2 file prefix shared with the daemons (default: HCC_IPC_FILE_PREFIX, else iceoryx2's).
+    #[arg(long)]
+    pub file_prefix: Option<String>,
+    /// Skip the PNG plot.
+    #[arg(long)]
+    pub no_plot: bool,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// What one floor thread measured.
+struct FloorCore {
+    core: usize,
+    rt: RtObtained,
+    lateness: LatencyHistogram,
+    late_cycles: u64,
+}
+
+/// Bare periodic threads, one per core, all with the same deadlines.
+fn measure_floor(
+    cores: &[usize],
+    fifo: Option<i32>,
+    wait: Wait,
+    period_ns: u64,
+    duration_s: f64,
+) -> anyhow::Result<Vec<FloorCore>> {
+    let cycles = (duration_s * 1e9 / period_ns as f64).round().max(1.0) as u64;
+    let late_ns = (period_ns as f64 * LATE_FRACTION) as u64;
+    let start_ns = monotonic_now_ns() + 50_000_000;
+    let handles: Vec<_> = cores
+        .iter()
+        .map(|&core| {
+            std::thread::Builder::new()
+                .name(format!("hcc-floor-{core}"))
+                .spawn(move || {
+                    let settings = RtSettings {
+                        cpu_core: Some(core),
+                        sched_priority: fifo,
+                        lock_memory: false,
+                        prefault_stack_bytes: 256 * 1024,
+                    };
+                    let report = rt::prepare_rt_thread(&settings);
+                    let mut lateness = LatencyHistogram::new();
+                    let mut late_cycles = 0;
+                    rt::sleep_until_ns(start_ns);
+                    for k in 1..=cycles {
+                        let deadline = start_ns + k * period_ns;
+                        match wait {
+                            Wait::Event => rt::sleep_until_ns(deadline),
+                            Wait::Hybrid => rt::sleep_until_hybrid_ns(deadline, rt::HYBRID_LEAD_NS),
+                        }
+                        let late = monotonic_now_ns().saturating_sub(deadline);
+                        lateness.record(late);
+                        late_cycles += u64::from(late > late_ns);
+                        if interrupted() {
+                            break;
+                        }
+                    }
+                    FloorCore {
+                        core,
+                        rt: report.obtained(&settings),
+                        lateness,
+                        late_cycles,
+                    }
+                })
+        })
+        .collect::<Result<_, _>>()
+        .context("starting the floor threads")?;
+    handles
+        .into_iter()
+        .map(|h| {
+            h.join()
+                .map_err(|_| anyhow::anyhow!("a floor thread panicked"))
+        })
+        .collect()
+}
+
+/// Busy threads at normal priority, one per core, until dropped.
+struct Load {
+    stop: Arc<AtomicBool>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Load {
+    fn start(cores: &[usize]) -> anyhow::Result<Load> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut threads = Vec::new();
+        for &core in cores {
+            let stop = stop.clone();
+            threads.push(
+                std::thread::Builder::new()
+                    .name(format!("hcc-load-{core}"))
+                    .spawn(move || {
+                        core_affinity::set_for_current(core_affinity::CoreId { id: core });
+                        // Arithmetic and a 4 MiB working set (evicts the caches
+                        // the real-time threads share with it).
+                        let mut buffer = vec![1u64; 512 * 1024];
+                        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+                        let mut i = 0usize;
+                        while !stop.load(Ordering::Relaxed) {
+                            for _ in 0..4096 {
+                                x ^= x << 13;
+                                x ^= x >> 7;
+                                x ^= x << 17;
+                                let j = (x as usize) % buffer.len();
+                                buffer[j] = buffer[j].wrapping_add(x);
+                                i = i.wrapping_add(1);
+                            }
+                        }
+                        std::hint::black_box((&buffer, i));
+                    })
+                    .context("starting a load thread")?,
+            );
+        }
+        Ok(Load { stop, threads })
+    }
+}
+
+impl Drop for Load {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// CPU time counters of the measured cores, to report the steal time.
+fn cpu_times(cores: &[usize]) -> Vec<Option<CpuTimes>> {
+    cores.iter().map(|&c| CpuTimes::read(Some(c))).collect()
+}
+
+fn steal_since(cores: &[usize], before: &[Option<CpuTimes>]) -> Value {
+    let after = cpu_times(cores);
+    let mut v = serde_json::Map::new();
+    for ((core, b), a) in cores.iter().zip(before).zip(&after) {
+        let f = match (b, a) {
+            (Some(b), Some(a)) => json!(a.steal_fraction_since(b)),
+            _ => Value::Null,
+        };
+        v.insert(format!("core{core}"), f);
+    }
+    Value::Object(v)
+}
+
+/// The pair's figures, read from the daemons' timing reports.
+struct Pair {
+    sim: DaemonTimings,
+    controller: DaemonTimings,
+    run_s: f64,
+}
+
+fn run_pair(
+    args: &JitterArgs,
+    fifo: Option<i32>,
+    sim_stats: &Path,
+    controller_stats: &Path,
+) -> anyhow::Result<Pair> {
+    let namespace = match &args.namespace {
+        Some(ns) => Namespace::new(ns).context("--namespace")?,
+        None => Namespace::unique("hcc_jitter")?,
+    };
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let names = ServiceNames::for_namespace(namespace.clone());
+    let config = args.config.display().to_string();
+    let mut common = vec![
+        "--namespace".to_string(),
+        namespace.to_string(),
+        "--wait".into(),
+        args.wait.name().into(),
+        "--mlock".into(),
+    ];
+    if let Some(p) = fifo {
+        common.extend(["--sched-priority".into(), p.to_string()]);
+    }
+    let mut controller_args = vec![config.clone()];
+    controller_args.extend(common.iter().cloned());
+    controller_args.extend([
+        "--cpu-core".into(),
+        args.controller_core.to_string(),
+        "--stats".into(),
+        controller_stats.display().to_string(),
+    ]);
+    let mut sim_args = vec![config];
+    sim_args.extend(common);
+    sim_args.extend([
+        "--realtime".into(),
+        "--duration".into(),
+        format!("{:?}", args.duration),
+        "--cpu-core".into(),
+        args.sim_core.to_string(),
+        "--stats".into(),
+        sim_stats.display().to_string(),
+    ]);
+    let _ = std::fs::remove_file(sim_stats);
+    let _ = std::fs::remove_file(controller_stats);
+
+    let node = ipc::create_node(
+        "hcc-jitter-probe",
+        SignalHandlingMode::Disabled,
+        file_prefix.as_deref(),
+    )?;
+    let mut controller = Daemon::spawn(
+        "hcc-controller",
+        &daemon_path("hcc-controller")?,
+        &controller_args,
+        file_prefix.as_deref(),
+    )?;
+    wait_until_controller_listens(&mut controller, &node, &names, 0)?;
+    drop(node);
+    let mut sim = Daemon::spawn(
+        "hcc-sim",
+        &daemon_path("hcc-sim")?,
+        &sim_args,
+        file_prefix.as_deref(),
+    )?;
+    let started = Instant::now();
+    let mut next_progress = started + Duration::from_secs(5);
+    // The simulated time runs with the wall clock; allow for start-up and overruns.
+    let limit = Duration::from_secs_f64(args.duration * 1.5 + 30.0);
+    loop {
+        if let Some(s) = sim.poll() {
+            if s.success() {
+                break;
+            }
+            bail!(
+                "hcc-sim (pid {}) failed with {}; its stderr ends with:\n{}",
+                sim.pid(),
+                describe_status(s),
+                sim.stderr_tail()
+            );
+        }
+        if let Some(s) = controller.poll() {
+            bail!(
+                "hcc-controller (pid {}) exited with {} during the measurement; its stderr ends with:\n{}",
+                controller.pid(),
+                describe_status(s),
+                controller.stderr_tail()
+            );
+        }
+        if interrupted() {
+            sim.terminate(TERMINATE_GRACE);
+            controller.terminate(TERMINATE_GRACE);
+            bail!("interrupted; both daemons stopped");
+        }
+        if started.elapsed() > limit {
+            bail!(
+                "hcc-sim did not finish its {} s within {} s; its stderr ends with:\n{}",
+                args.duration,
+                limit.as_secs(),
+                sim.stderr_tail()
+            );
+        }
+        let now = Instant::now();
+        if now >= next_progress {
+            if !args.quiet {
+                eprintln!(
+                    "hcc jitter: pair {:.0} / {} s",
+                    started.elapsed().as_secs_f64(),
+                    args.duration
+                );
+            }
+            next_progress += Duration::from_secs(5);
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let run_s = started.elapsed().as_secs_f64();
+    // The controller answers the simulator's last state, then stops on SIGTERM
+    // and writes its report.
+    std::thread::sleep(Duration::from_millis(100));
+    let status = controller.terminate(TERMINATE_GRACE);
+    let clean = status.is_some_and(|s| s.success());
+    if !clean {
+        bail!(
+            "hcc-controller did not stop cleanly ({}); its stderr ends with:\n{}",
+            status.map_or("still running".into(), describe_status),
+            controller.stderr_tail()
+        );
+    }
+    let sim = DaemonTimings::read_json(sim_stats).context("the simulator's timing report")?;
+    let controller =
+        DaemonTimings::read_json(controller_stats).context("the controller's timing report")?;
+    Ok(Pair {
+        sim,
+        controller,
+        run_s,
+    })
+}
+
+/// One row group of the table: a figure of the pair and the floor it is compared with.
+struct Row<'a> {
+    key: &'static str,
+    label: &'static str,
+    pair: Figure,
+    floor: Option<&'a FloorCore>,
+}
+
+fn us(ns: u64) -> String {
+    let v = ns as f64 * 1e-3;
+    if v >= 100.0 {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.1}")
+    }
+}
+
+fn ratio(a: u64, b: u64) -> Option<f64> {
+    (b > 0).then(|| a as f64 / b as f64)
+}
+
+fn table(rows: &[Row]) -> String {
+    let mut out = format!("  {:<34}", "[µs]");
+    for l in LatencySummary::LABELS {
+        out.push_str(&format!("{l:>9}"));
+    }
+    out.push('\n');
+    for row in rows {
+        let s = row.pair.summary;
+        out.push_str(&format!("  {:<34}", row.label));
+        for v in s.values_ns() {
+            out.push_str(&format!("{:>9}", us(v)));
+        }
+        out.push('\n');
+        if let Some(f) = row.floor {
+            let fs = f.lateness.summary();
+            out.push_str(&format!("  {:<34}", format!("  floor, core {}", f.core)));
+            for v in fs.values_ns() {
+                out.push_str(&format!("{:>9}", us(v)));
+            }
+            out.push('\n');
+            out.push_str(&format!("  {:<34}", "  ratio"));
+            for (a, b) in s.values_ns().iter().zip(fs.values_ns()) {
+                out.push_str(&match ratio(*a, b) {
+                    Some(r) => format!("{r:>9.2}"),
+                    None => format!("{:>9}", "-"),
+                });
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+fn summary_json(s: &LatencySummary) -> Value {
+    serde_json::to_value(s).unwrap_or(Value::Null)
+}
+
+fn ratios_json(a: &LatencySummary, b: &LatencySummary) -> Value {
+    let mut m = serde_json::Map::new();
+    for ((l, x), y) in LatencySummary::LABELS
+        .iter()
+        .zip(a.values_ns())
+        .zip(b.values_ns())
+    {
+        m.insert((*l).to_string(), json!(ratio(x, y)));
+    }
+    Value::Object(m)
+}
+
+fn curve_us(f: &Figure) -> Vec<(f64, f64)> {
+    f.curve
+        .iter()
+        .map(|p| (p.percentile, p.value_ns as f64 * 1e-3))
+        .collect()
+}
+
+pub fn run(args: JitterArgs) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&args.config)?;
+    if !(args.duration.is_finite() && args.duration >= 0.5) {
+        bail!("--duration {} must be at least 0.5 s", args.duration);
+    }
+    let floor_s = args
+        .floor_duration
+        .unwrap_or(DEFAULT_FLOOR_S.min(args.duration));
+    if !(floor_s.is_finite() && floor_s > 0.0) {
+        bail!("--floor-duration {floor_s} must be positive");
+    }
+    let period_ns = (1e9 / scenario.simulation.control_rate_hz).round() as u64;
+    let available: Vec<usize> = core_affinity::get_core_ids()
+        .unwrap_or_default()
+        .iter()
+        .map(|c| c.id)
+        .collect();
+    for (what, core) in [
+        ("--sim-core", args.sim_core),
+        ("--controller-core", args.controller_core),
+    ] {
+        if !available.contains(&core) {
+            bail!("{what} {core}: this process may run on cores {available:?} only");
+        }
+    }
+    if args.sim_core == args.controller_core {
+        eprintln!(
+            "hcc jitter: warning: the simulator and the controller share core {}",
+            args.sim_core
+        );
+    }
+    let cores = if args.sim_core == args.controller_core {
+        vec![args.sim_core]
+    } else {
+        vec![args.sim_core, args.controller_core]
+    };
+    let fifo = (!args.no_fifo).then_some(args.priority);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    install_signal_handlers()?;
+    let machine = MachineInfo::read();
+    let dma = CpuDmaLatency::request(0);
+    let dma_note = match &dma {
+        Ok(d) => format!("held at {} µs", d.us),
+        Err(e) => format!("not held ({e})"),
+    };
+    // The floor threads run in this process: lock its memory like the daemons'.
+    let memory_locked = hcc_rtalloc::lock_memory().is_ok();
+    if !args.quiet {
+        eprintln!(
+            "hcc jitter: {} — {} wait, floor {floor_s} s then pair {} s, simulator on core {}, controller on core {}, {}, /dev/cpu_dma_latency {dma_note}, load {}",
+            scenario.name,
+            args.wait.name(),
+            args.duration,
+            args.sim_core,
+            args.controller_core,
+            match fifo {
+                Some(p) => format!("SCHED_FIFO {p} requested"),
+                None => "normal scheduling".into(),
+            },
+            if args.load { "on" } else { "off" },
+        );
+    }
+    let load = if args.load {
+        Some(Load::start(&cores)?)
+    } else {
+        None
+    };
+
+    // 1. The floor.
+    let before = cpu_times(&cores);
+    let floor = measure_floor(&cores, fifo, args.wait, period_ns, floor_s)?;
+    let floor_steal = steal_since(&cores, &before);
+    if interrupted() {
+        bail!("interrupted during the floor measurement");
+    }
+    for f in &floor {
+        for w in &f.rt.warnings {
+            eprintln!("hcc jitter: floor core {}: warning: {w}", f.core);
+        }
+    }
+    if !args.quiet {
+        for f in &floor {
+            eprintln!(
+                "hcc jitter: floor core {}: {}",
+                f.core,
+                f.lateness.summary().line_us()
+            );
+        }
+    }
+
+    // 2. The pair.
+    let sim_stats = args.out.join("sim-timings.json");
+    let controller_stats = args.out.join("controller-timings.json");
+    let before = cpu_times(&cores);
+    let pair = run_pair(&args, fifo, &sim_stats, &controller_stats)?;
+    let pair_steal = steal_since(&cores, &before);
+    drop(load);
+    drop(dma);
+
+    let floor_of = |core: usize| floor.iter().find(|f| f.core == core);
+    let rows = [
+        Row {
+            key: "sim_tick_lateness",
+            label: "simulator tick lateness",
+            pair: pair.sim.figure("tick_lateness"),
+            floor: floor_of(args.sim_core),
+        },
+        Row {
+            key: "state_to_command_latency",
+            label: "state -> command latency",
+            pair: pair.sim.figure("state_to_command"),
+            floor: floor_of(args.controller_core),
+        },
+        Row {
+            key: "controller_wakeup_latency",
+            label: "controller wake-up latency",
+            pair: pair.controller.figure("wakeup_latency"),
+            floor: floor_of(args.controller_core),
+        },
+        Row {
+            key: "controller_compute_time",
+            label: "controller compute time",
+            pair: pair.controller.figure("compute_time"),
+            floor: None,
+        },
+    ];
+
+    // Counts: every period after the first command is answered or missed.
+    let sim = &pair.sim;
+    let periods = sim.counter("periods");
+    let waiting = sim.counter("waiting_for_controller");
+    let stopped = sim.counter("stopped_periods");
+    let received = sim.counter("applied_commands");
+    let missed = sim.counter("missed_commands");
+    let cycles = periods.saturating_sub(waiting + stopped);
+    let consistent = cycles == received + missed;
+    let floor_late: u64 = floor_of(args.controller_core).map_or(0, |f| f.late_cycles);
+    let floor_cycles: u64 = floor_of(args.controller_core).map_or(0, |f| f.lateness.count());
+    let per_million = |n: u64, of: u64| {
+        if of == 0 {
+            0.0
+        } else {
+            n as f64 * 1e6 / of as f64
+        }
+    };
+    let miss_rate = per_million(missed, cycles);
+    let floor_late_rate = per_million(floor_late, floor_cycles);
+
+    // Targets (figures, not assertions).
+    let s2c = rows[1].pair.summary;
+    let tick = rows[0].pair.summary;
+    let tick_floor = rows[0].floor.map(|f| f.lateness.summary());
+    let mut targets = Vec::new();
+    if args.wait == Wait::Hybrid {
+        targets.push((
+            "state -> command latency p50 <= 10 us",
+            s2c.p50_ns as f64 * 1e-3,
+            10.0,
+        ));
+        targets.push((
+            "state -> command latency p99.9 <= 50 us",
+            s2c.p999_ns as f64 * 1e-3,
+            50.0,
+        ));
+        if let Some(f) = tick_floor {
+            targets.push((
+                "tick lateness p99.9 <= 1.2 x floor p99.9 (us)",
+                tick.p999_ns as f64 * 1e-3,
+                1.2 * f.p999_ns as f64 * 1e-3,
+            ));
+        }
+    }
+    targets.push((
+        "missed commands per million cycles <= floor late cycles per million",
+        miss_rate,
+        floor_late_rate,
+    ));
+
+    let mut figures = serde_json::Map::new();
+    for row in &rows {
+        let mut v = json!({
+            "pair": summary_json(&row.pair.summary),
+            "curve": row.pair.curve,
+        });
+        if let Some(f) = row.floor {
+            let fs = f.lateness.summary();
+            v["floor_core"] = json!(f.core);
+            v["floor"] = summary_json(&fs);
+            v["ratio"] = ratios_json(&row.pair.summary, &fs);
+        }
+        figures.insert(row.key.to_string(), v);
+    }
+    let report = json!({
+        "settings": {
+            "scenario": scenario.name,
+            "config": args.config.display().to_string(),
+            "wait": args.wait.name(),
+            "duration_s": args.duration,
+            "floor_duration_s": floor_s,
+            "pair_wall_time_s": pair.run_s,
+            "period_ns": period_ns,
+            "late_threshold_ns": (period_ns as f64 * LATE_FRACTION) as u64,
+            "load": args.load,
+            "cores": {"sim": args.sim_core, "controller": args.controller_core},
+            "sched_fifo_requested": fifo,
+            "memory_locked_launcher": memory_locked,
+            "cpu_dma_latency": dma_note,
+            "machine": machine,
+            "obtained": {
+                "sim": sim.rt,
+                "controller": pair.controller.rt,
+                "floor": floor.iter().map(|f| json!({"core": f.core, "rt": f.rt})).collect::<Vec<_>>(),
+            },
+        },
+        "figures": figures,
+        "counts": {
+            "cycles": cycles,
+            "received_commands": received,
+            "missed_commands": missed,
+            "consistent": consistent,
+            "periods": periods,
+            "waiting_for_controller": waiting,
+            "stopped_periods": stopped,
+            "fallback_cycles": sim.counter("fallback_cycles"),
+            "late_commands": sim.counter("late_commands"),
+            "rejected_commands": sim.counter("rejected_commands"),
+            "overruns": sim.counter("overruns"),
+            "ticks_late": sim.counter("ticks_late"),
+            "controller_cycles": pair.controller.counter("cycles"),
+            "controller_missed_states": pair.controller.counter("missed_states"),
+            "controller_stale_events": pair.controller.counter("stale_events"),
+            "floor": floor.iter().map(|f| json!({
+                "core": f.core, "cycles": f.lateness.count(), "late_cycles": f.late_cycles,
+            })).collect::<Vec<_>>(),
+        },
+        "steal_fraction": {"floor": floor_steal, "pair": pair_steal},
+        "targets": targets.iter().map(|(what, value, limit)| json!({
+            "target": what, "value": value, "limit": limit, "met": value <= limit,
+        })).collect::<Vec<_>>(),
+    });
+    let json_path = args.out.join("jitter.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+
+    let png_path = args.out.join("jitter.png");
+    if !args.no_plot {
+        let mut curves = Vec::new();
+        for (k, row) in rows.iter().enumerate() {
+            curves.push(PercentileCurve {
+                label: row.label.to_string(),
+                points: curve_us(&row.pair),
+                reference: false,
+                color: k,
+            });
+        }
+        for f in &floor {
+            // The colour of the figure measured on the same core.
+            let color = if f.core == args.sim_core { 0 } else { 2 };
+            curves.push(PercentileCurve {
+                label: format!("floor, core {} ({} wait)", f.core, args.wait.name()),
+                points: curve_us(&Figure::from(&f.lateness)),
+                reference: true,
+                color,
+            });
+        }
+        plot_percentiles(
+            &png_path,
+            &format!(
+                "{}: {} wait, {} s, {}{}",
+                scenario.name,
+                args.wait.name(),
+                args.duration,
+                match (sim.rt.fifo_priority, pair.controller.rt.fifo_priority) {
+                    (Some(_), Some(_)) => "SCHED_FIFO",
+                    _ => "normal scheduling",
+                },
+                if args.load { ", with load" } else { "" }
+            ),
+            &curves,
+        )?;
+    }
+
+    // The table.
+    println!(
+        "hcc jitter: {} — {} wait, pair {} s (floor {floor_s} s), simulator core {} / controller core {}, load {}",
+        scenario.name,
+        args.wait.name(),
+        args.duration,
+        args.sim_core,
+        args.controller_core,
+        if args.load { "on" } else { "off" }
+    );
+    println!(
+        "  {} ({} CPUs{}), kernel {}, rt throttling {} of {} µs",
+        machine.cpu_model,
+        machine.cpus,
+        if machine.virtual_machine {
+            ", virtual machine"
+        } else {
+            ""
+        },
+        machine.kernel,
+        machine
+            .rt_throttling
+            .runtime_us
+            .map_or("?".into(), |v| v.to_string()),
+        machine
+            .rt_throttling
+            .period_us
+            .map_or("?".into(), |v| v.to_string()),
+    );
+    let sched = |r: &RtObtained| {
+        format!(
+            "{}{}{}",
+            r.fifo_priority
+                .map_or("normal".into(), |p| format!("SCHED_FIFO {p}")),
+            r.pinned_core
+                .map_or(", unpinned".into(), |c| format!(", core {c}")),
+            if r.memory_locked { ", mlocked" } else { "" }
+        )
+    };
+    println!(
+        "  obtained: simulator {}; controller {}; floor {}; /dev/cpu_dma_latency {dma_note}",
+        sched(&sim.rt),
+        sched(&pair.controller.rt),
+        floor
+            .iter()
+            .map(|f| sched(&f.rt))
+            .collect::<Vec<_>>()
+            .join(" / "),
+    );
+    print!("{}", table(&rows));
+    println!(
+        "  cycles {cycles} = received commands {received} + missed {missed} ({}); fallback cycles {}, late answers {}, rejected {}, clock overruns {}",
+        if consistent {
+            "consistent"
+        } else {
+            "INCONSISTENT"
+        },
+        sim.counter("fallback_cycles"),
+        sim.counter("late_commands"),
+        sim.counter("rejected_commands"),
+        sim.counter("overruns"),
+    );
+    println!(
+        "  late cycles (> {} µs): floor {} of {} on core {}, simulator ticks {} of {}",
+        us((period_ns as f64 * LATE_FRACTION) as u64),
+        floor_late,
+        floor_cycles,
+        args.controller_core,
+        sim.counter("ticks_late"),
+        rows[0].pair.summary.count,
+    );
+    println!(
+        "  steal time: floor {}, pair {}",
+        steal_text(&report["steal_fraction"]["floor"]),
+        steal_text(&report["steal_fraction"]["pair"])
+    );
+    for (what, value, limit) in &targets {
+        println!(
+            "  target {what}: {value:.2} vs {limit:.2} — {}",
+            if value <= limit { "met" } else { "missed" }
+        );
+    }
+    println!("results in {}", args.out.display());
+    if !consistent {
+        bail!(
+            "the simulator's counts do not add up: {cycles} cycles, {received} received, {missed} missed"
+        );
+    }
+    Ok(())
+}
+
+fn steal_text(v: &Value) -> String {
+    match v.as_object() {
+        Some(m) => m
+            .iter()
+            .map(|(k, f)| match f.as_f64() {
+                Some(x) => format!("{k} {:.2} %", 100.0 * x),
+                None => format!("{k} ?"),
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        None => "?".into(),
+    }
+}
