@@ -7,11 +7,12 @@ use hcc_system_tests::*;
 use std::process::Command;
 use std::time::Duration;
 
-const FIGURES: [&str; 4] = [
+const FIGURES: [&str; 5] = [
     "sim_tick_lateness",
     "state_to_command_latency",
     "controller_wakeup_latency",
     "controller_compute_time",
+    "controller_control_law_time",
 ];
 const STATS: [&str; 11] = [
     "count",
@@ -66,7 +67,7 @@ fn jitter_reports_every_figure_and_consistent_counts() {
             f["pair"]["max_ns"].as_u64().unwrap(),
         );
         assert!(p50 <= p99 && p99 <= max, "{name}: percentiles out of order");
-        if name != "controller_compute_time" {
+        if !name.starts_with("controller_c") {
             for s in STATS {
                 assert!(f["floor"][s].is_number(), "{name}.floor.{s} missing: {f}");
             }

@@ -606,6 +606,12 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
             pair: pair.controller.figure("compute_time"),
             floor: None,
         },
+        Row {
+            key: "controller_control_law_time",
+            label: "  of which the control law",
+            pair: pair.controller.figure("control_law_time"),
+            floor: None,
+        },
     ];
 
     // Counts: every period after the first command is answered or missed.
@@ -730,7 +736,7 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
         let mut curves = Vec::new();
         for (k, row) in rows.iter().enumerate() {
             curves.push(PercentileCurve {
-                label: row.label.to_string(),
+                label: row.label.trim().to_string(),
                 points: curve_us(&row.pair),
                 reference: false,
                 color: k,

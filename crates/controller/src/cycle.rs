@@ -210,6 +210,8 @@ pub struct CycleTimings {
     /// Compute time: from the start of the computation to the command sent
     /// (`command_ready` notified), ns.
     pub compute: LatencyHistogram,
+    /// The control law alone (`Controller::step`, eqs. 3–22), ns.
+    pub step: LatencyHistogram,
 }
 
 /// The controller's loop state: the control law, all message buffers and counters.
@@ -344,10 +346,16 @@ impl Cycle {
     /// telemetry. Returns after one state was handled, after a stale timeout,
     /// or when a stop was requested. Allocation-free.
     pub fn run_once(&mut self, ports: &Ports) -> Outcome {
+        let mut notified = false;
         loop {
             if self.take_newest(ports) {
                 let wake = monotonic_now_ns();
                 return self.process(ports, wake);
+            }
+            if notified {
+                // A notification without a new sample: consume it, or the
+                // next wait would return at once.
+                let _ = ports.state_ready.try_wait(|_| {});
             }
             if rt::stop_requested() {
                 return Outcome::Stop;
@@ -357,7 +365,7 @@ impl Cycle {
                 self.on_stale(ports, now);
                 return Outcome::Stale;
             }
-            self.wait_step(ports, now);
+            notified = self.wait_step(ports, now);
         }
     }
 
@@ -374,18 +382,18 @@ impl Cycle {
     /// Blocks on `state_ready` until a notification or the stale deadline
     /// (at most [`MAX_WAIT_NS`]), precisely (`ipc::wait_for_event_until`;
     /// iceoryx2's own timed wait rounds its timeout up to a scheduler tick).
-    fn event_wait(&self, ports: &Ports, now: u64) {
+    /// Returns whether a notification is pending (it is consumed after the
+    /// state has been answered, off the path from wake-up to command).
+    fn event_wait(&self, ports: &Ports, now: u64) -> bool {
         let deadline = self
             .stale_deadline_ns
             .min(now.saturating_add(MAX_WAIT_NS))
             .max(now + 1_000);
-        if ipc::wait_for_event_until(&ports.state_ready, deadline) {
-            // Consume the notification; the sample is taken by the next take_newest.
-            let _ = ports.state_ready.try_wait(|_| {});
-        }
+        ipc::wait_for_event_until(&ports.state_ready, deadline)
     }
 
-    fn wait_step(&self, ports: &Ports, now: u64) {
+    /// One step of the wait strategy; whether a notification is pending.
+    fn wait_step(&self, ports: &Ports, now: u64) -> bool {
         match self.settings.wait {
             WaitStrategy::Event => self.event_wait(ports, now),
             WaitStrategy::Hybrid => {
@@ -396,10 +404,12 @@ impl Cycle {
                 let wake_at = expected.saturating_sub(self.settings.hybrid_lead_ns);
                 if now < wake_at {
                     rt::sleep_until_ns(wake_at.min(self.stale_deadline_ns));
+                    false
                 } else if now < expected.saturating_add(self.settings.hybrid_spin_ns) {
                     std::hint::spin_loop();
+                    false
                 } else {
-                    self.event_wait(ports, now);
+                    self.event_wait(ports, now)
                 }
             }
         }
@@ -444,7 +454,6 @@ impl Cycle {
             self.status.peer_lost.store(false, Ordering::Relaxed);
             self.restart_peer();
         }
-        let _ = ports.state_ready.try_wait(|_| {});
         self.counters.cycles += 1;
 
         let well_formed = self.state.validate(n).is_ok();
@@ -484,7 +493,12 @@ impl Cycle {
         let mut tau = [0.0; MAX_JOINTS];
         let mut mode = CommandMode::SafeHold;
         if valid {
-            match self.controller.step(self.state.q(), self.state.qd()) {
+            let step_start = monotonic_now_ns();
+            let result = self.controller.step(self.state.q(), self.state.qd());
+            self.timings
+                .step
+                .record(monotonic_now_ns().saturating_sub(step_start));
+            match result {
                 Ok(out) => {
                     tau[..n].copy_from_slice(out.tau.as_slice());
                     self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
@@ -548,6 +562,8 @@ impl Cycle {
             self.counters.send_failures += 1;
         }
         let sent = monotonic_now_ns();
+        // The state's notification, consumed now that it is answered.
+        let _ = ports.state_ready.try_wait(|_| {});
         let compute_ns = sent.saturating_sub(wake);
         self.max_compute_ns = self.max_compute_ns.max(compute_ns);
         let latency = wake as i64 - self.state.header.stamp_ns as i64;

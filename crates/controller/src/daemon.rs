@@ -249,6 +249,9 @@ pub fn run(args: Args) -> Result<()> {
         stats
             .figures
             .insert("compute_time".into(), (&t.compute).into());
+        stats
+            .figures
+            .insert("control_law_time".into(), (&t.step).into());
         for (name, value) in [
             ("cycles", c.cycles),
             ("invalid_states", c.invalid_states),

@@ -251,13 +251,15 @@ impl<'a> SimLoop<'a> {
     /// Drains the queue and records the latency of the answer to state k when
     /// it is there for the first time.
     fn take_answer(&mut self) -> bool {
-        let got = self.drain();
+        let got = self.receive_commands();
         if got && !self.answered {
             self.answered = true;
             let now = monotonic_now_ns();
             self.state_to_command
                 .record(now.saturating_sub(self.published_ns));
         }
+        // The notifications are consumed after the receipt time is taken.
+        let _ = self.ports.command_ready.try_wait(|_| {});
         got
     }
 
@@ -286,14 +288,20 @@ impl<'a> SimLoop<'a> {
         }
     }
 
-    /// Drains the command queue into `newest`; true if the newest answers state k.
-    fn drain(&mut self) -> bool {
+    /// Takes every queued command into `newest`; true if the newest answers state k.
+    fn receive_commands(&mut self) -> bool {
         while let Ok(Some(c)) = self.ports.commands.receive() {
             self.newest = Some(*c);
         }
-        let _ = self.ports.command_ready.try_wait(|_| {});
         self.newest
             .is_some_and(|c| c.state_seq == self.driver.k() && c.state_stamp_ns != 0)
+    }
+
+    /// [`Self::receive_commands`], then consumes the `command_ready` notifications.
+    fn drain(&mut self) -> bool {
+        let answered = self.receive_commands();
+        let _ = self.ports.command_ready.try_wait(|_| {});
+        answered
     }
 
     fn advance(&mut self) -> Result<()> {
