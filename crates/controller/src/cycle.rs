@@ -400,7 +400,16 @@ impl Cycle {
                 if self.last_state_ns.is_none() {
                     return self.event_wait(ports, now);
                 }
-                let expected = self.last_wake_ns.saturating_add(self.settings.period_ns);
+                // The next state is due one period after the last one was
+                // published (its stamp, same clock), not after this thread
+                // woke: a late wake-up must not push the next one later.
+                let stamp = self.state.header.stamp_ns;
+                let anchor = if stamp != 0 && stamp <= self.last_wake_ns {
+                    stamp
+                } else {
+                    self.last_wake_ns
+                };
+                let expected = anchor.saturating_add(self.settings.period_ns);
                 let wake_at = expected.saturating_sub(self.settings.hybrid_lead_ns);
                 if now < wake_at {
                     rt::sleep_until_ns(wake_at.min(self.stale_deadline_ns));
