@@ -98,6 +98,35 @@ pub fn prepare_rt_thread(settings: &RtSettings) -> RtReport {
     report
 }
 
+/// The CPU cores this process may run on (its affinity mask); empty if it
+/// cannot be read.
+pub fn available_cores() -> Vec<usize> {
+    core_affinity::get_core_ids()
+        .map(|ids| ids.into_iter().map(|c| c.id).collect())
+        .unwrap_or_default()
+}
+
+/// Removes the iceoryx2 resources that crashed processes left under
+/// `file_prefix` (see [`hcc_msgs::ipc::cleanup_dead_nodes`]) and returns a
+/// line for the log when there were any. Run at start-up, before the node is
+/// created, so that a daemon restarted after a crash (its own or its peer's)
+/// finds the namespace's single-publisher slots free.
+pub fn cleanup_stale_resources(file_prefix: Option<&str>) -> Option<String> {
+    match hcc_msgs::ipc::cleanup_dead_nodes(file_prefix) {
+        Ok(r) if r.dead == 0 => None,
+        Ok(r) => Some(format!(
+            "removed the stale iceoryx2 resources of {} dead process(es){}",
+            r.removed,
+            if r.failed > 0 {
+                format!(" ({} could not be removed)", r.failed)
+            } else {
+                String::new()
+            }
+        )),
+        Err(e) => Some(format!("cannot look for stale iceoryx2 resources: {e}")),
+    }
+}
+
 /// Switches the calling thread to `SCHED_FIFO` at `priority`.
 pub fn set_fifo(priority: i32) -> std::io::Result<()> {
     let param = libc::sched_param {
@@ -131,6 +160,36 @@ pub fn sleep_until_ns(deadline_ns: u64) {
         };
         if rc != libc::EINTR || stop_requested() {
             return;
+        }
+    }
+}
+
+/// Waits until `fd` is readable or `timeout_ns` has passed (`ppoll` with a
+/// nanosecond timeout, precise to the timer slack); true if readable.
+/// Retries after signals unless a stop was requested. Allocation-free.
+pub fn poll_readable(fd: i32, timeout_ns: u64) -> bool {
+    let deadline = hcc_msgs::monotonic_now_ns().saturating_add(timeout_ns);
+    loop {
+        let left = deadline.saturating_sub(hcc_msgs::monotonic_now_ns());
+        let ts = libc::timespec {
+            tv_sec: (left / 1_000_000_000) as libc::time_t,
+            tv_nsec: (left % 1_000_000_000) as libc::c_long,
+        };
+        let mut pfd = libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd, a valid timespec, no signal mask change.
+        let rc = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+        if rc > 0 {
+            return pfd.revents & libc::POLLIN != 0;
+        }
+        if rc == 0
+            || stop_requested()
+            || std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR)
+        {
+            return false;
         }
     }
 }
