@@ -123,7 +123,9 @@ pub fn cleanup_stale_resources(file_prefix: Option<&str>) -> Option<String> {
                 String::new()
             }
         )),
-        Err(e) => Some(format!("cannot look for stale iceoryx2 resources: {e}")),
+        Err(e) => Some(format!(
+            "warning: cannot look for stale iceoryx2 resources: {e}"
+        )),
     }
 }
 
