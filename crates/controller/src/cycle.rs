@@ -75,10 +75,9 @@ const GAP_SLACK: u64 = 16;
 /// [`GAP_SLACK`] (wake-up jitter, a driver running slightly fast). A larger
 /// jump of the sequence number is a corrupt or foreign stream and is rejected.
 pub const fn max_plausible_gap(elapsed_ns: u64, period_ns: u64) -> u64 {
-    let periods = if period_ns == 0 {
-        0
-    } else {
-        elapsed_ns / period_ns
+    let periods = match elapsed_ns.checked_div(period_ns) {
+        Some(p) => p,
+        None => 0,
     };
     periods.saturating_mul(2).saturating_add(GAP_SLACK)
 }

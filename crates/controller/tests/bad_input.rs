@@ -388,7 +388,7 @@ fn random_states_never_panic_or_command_a_torque_spike() {
                 other => panic!("unexpected outcome {other:?}"),
             }
             // Back to the stream of the in-test driver now and then.
-            if rng.next() % 4 == 0 {
+            if rng.next().is_multiple_of(4) {
                 let s = rig.valid();
                 handled += 1;
                 assert!(matches!(rig.handle(s), Outcome::Answered(_)));

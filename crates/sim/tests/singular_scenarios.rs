@@ -36,7 +36,6 @@ struct Sample {
     finite: bool,
     errors: Vec<f64>,
     conditioning: Vec<f64>,
-    q: Vec<f64>,
 }
 
 /// The hierarchical controller, with one level's goal moved at `switch_s`.
@@ -78,7 +77,6 @@ impl ControlLaw for SwitchingLaw {
                 && out.tau_level.iter().flatten().all(|x| x.is_finite()),
             errors: out.task_error.iter().map(|e| e.norm()).collect(),
             conditioning: out.conditioning.clone(),
-            q: q.iter().copied().collect(),
         });
         Ok(())
     }
