@@ -577,7 +577,10 @@ fn cpu_cores_are_checked_against_the_available_ones() {
     let s = load(BASE).unwrap();
     assert_eq!(s.controller_daemon.cpu_core, Some(1));
     assert!(s.check_cpu_core("controller_daemon", &[0, 1]).is_ok());
-    assert!(s.check_cpu_core("sim_daemon", &[0]).is_ok(), "none configured");
+    assert!(
+        s.check_cpu_core("sim_daemon", &[0]).is_ok(),
+        "none configured"
+    );
     let e = s.check_cpu_core("controller_daemon", &[0]).unwrap_err();
     let msg = e.to_string();
     assert!(
