@@ -476,7 +476,12 @@ impl Scenario {
             return Err(cx.err(&field, format!("rejected by the controller: {e}")));
         }
 
-        let controller_daemon = resolve_controller_daemon(&cx, &model, &file.controller_daemon)?;
+        let controller_daemon = resolve_controller_daemon(
+            &cx,
+            &model,
+            &file.controller_daemon,
+            simulation.control_rate_hz,
+        )?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
@@ -522,6 +527,48 @@ impl Scenario {
         }
         self.simulation.duration_s = duration_s;
         Ok(())
+    }
+
+    /// Checks a daemon's `cpu_core` (`section` is `"controller_daemon"` or
+    /// `"sim_daemon"`) against the cores this process may run on (`available`,
+    /// e.g. from `sched_getaffinity`). A configured core that is not available
+    /// is an error naming the field and its line: a real-time thread that
+    /// silently ran unpinned would not be what the scenario asks for. Called
+    /// by the daemons at start-up, not by [`Scenario::load`], so that a
+    /// robot's scenario can still be simulated in process on another machine.
+    pub fn check_cpu_core(&self, section: &str, available: &[usize]) -> Result<(), ConfigError> {
+        let core = match section {
+            "controller_daemon" => self.controller_daemon.cpu_core,
+            "sim_daemon" => self.sim_daemon.cpu_core,
+            _ => None,
+        };
+        let Some(core) = core else {
+            return Ok(());
+        };
+        if available.contains(&core) {
+            return Ok(());
+        }
+        let path = format!("{section}.cpu_core");
+        let text = std::fs::read_to_string(&self.path).unwrap_or_default();
+        let mut sorted = available.to_vec();
+        sorted.sort_unstable();
+        Err(invalid(
+            &self.path,
+            &text,
+            &path,
+            format!(
+                "CPU core {core} is not available to this process (available: {})",
+                if sorted.is_empty() {
+                    "unknown".to_string()
+                } else {
+                    sorted
+                        .iter()
+                        .map(|c| c.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            ),
+        ))
     }
 
     /// Switches the Coriolis cancellation τ_μ (eq. 22) on or off (e.g. for the ablation).
@@ -821,10 +868,18 @@ fn resolve_simulation(
     })
 }
 
+/// Default stale timeout of the controller daemon, in control periods: the
+/// peer is declared lost when the third consecutive state is missing.
+pub const STALE_TIMEOUT_PERIODS: f64 = 3.0;
+
+/// Largest CPU index a `cpu_core` may name (Linux' `CPU_SETSIZE` − 1).
+pub const MAX_CPU_CORE: usize = 1023;
+
 fn resolve_controller_daemon(
     cx: &Ctx,
     model: &Model,
     d: &ControllerDaemonSection,
+    control_rate_hz: f64,
 ) -> Result<ControllerDaemon, ConfigError> {
     if let Some(p) = d.sched_priority
         && !(1..=99).contains(&p)
@@ -847,7 +902,17 @@ fn resolve_controller_daemon(
         }
         None => model.effort_limits(),
     };
-    let stale_timeout_ms = d.stale_timeout_ms.unwrap_or(5.0);
+    if let Some(core) = d.cpu_core
+        && core > MAX_CPU_CORE
+    {
+        return Err(cx.err(
+            "controller_daemon.cpu_core",
+            format!("{core} is not a CPU index (at most {MAX_CPU_CORE})"),
+        ));
+    }
+    let stale_timeout_ms = d
+        .stale_timeout_ms
+        .unwrap_or(STALE_TIMEOUT_PERIODS * 1e3 / control_rate_hz);
     if !(stale_timeout_ms.is_finite() && stale_timeout_ms > 0.0) {
         return Err(cx.err(
             "controller_daemon.stale_timeout_ms",
@@ -865,6 +930,14 @@ fn resolve_controller_daemon(
 }
 
 fn resolve_sim_daemon(cx: &Ctx, n: usize, d: &SimDaemonSection) -> Result<SimDaemon, ConfigError> {
+    if let Some(core) = d.cpu_core
+        && core > MAX_CPU_CORE
+    {
+        return Err(cx.err(
+            "sim_daemon.cpu_core",
+            format!("{core} is not a CPU index (at most {MAX_CPU_CORE})"),
+        ));
+    }
     let fallback_damping = match &d.fallback_damping {
         Some(f) => cx.per_joint("sim_daemon.fallback_damping", f, n, false)?,
         None => DVector::from_element(n, 2.0),

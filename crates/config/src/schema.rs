@@ -282,7 +282,8 @@ pub enum WaitStrategy {
 #[derive(Clone, Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerDaemonSection {
-    /// CPU core to pin the control thread to.
+    /// CPU core to pin the control thread to; the daemon refuses to start
+    /// when this core is not available to it.
     pub cpu_core: Option<usize>,
     /// SCHED_FIFO priority 1..=99 (none: normal scheduling).
     pub sched_priority: Option<i32>,
@@ -293,7 +294,8 @@ pub struct ControllerDaemonSection {
     pub wait_strategy: WaitStrategy,
     /// Torque limits, Nm (scalar or per joint; default: the URDF effort limits).
     pub torque_limits: Option<PerJoint>,
-    /// A joint state older than this is stale, ms (default 5).
+    /// No joint state for this long: the driver is declared lost, ms
+    /// (default three control periods, 3 ms at 1 kHz).
     pub stale_timeout_ms: Option<f64>,
 }
 
@@ -312,7 +314,8 @@ pub enum SimMode {
 #[derive(Clone, Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct SimDaemonSection {
-    /// CPU core to pin the simulator thread to.
+    /// CPU core to pin the simulator thread to (checked like
+    /// `controller_daemon.cpu_core`).
     pub cpu_core: Option<usize>,
     #[serde(default)]
     pub mode: SimMode,

@@ -569,3 +569,29 @@ fn shipped_scenarios_load() {
         assert_eq!(s.simulation.duration_s, 3.0, "{f}");
     }
 }
+
+#[test]
+fn cpu_cores_are_checked_against_the_available_ones() {
+    // The loader accepts any CPU index (the scenario may be meant for
+    // another machine); the daemon that pins checks it at start-up.
+    let s = load(BASE).unwrap();
+    assert_eq!(s.controller_daemon.cpu_core, Some(1));
+    assert!(s.check_cpu_core("controller_daemon", &[0, 1]).is_ok());
+    assert!(
+        s.check_cpu_core("sim_daemon", &[0]).is_ok(),
+        "none configured"
+    );
+    let e = s.check_cpu_core("controller_daemon", &[0]).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("controller_daemon.cpu_core") && msg.contains("available: 0"),
+        "{msg}"
+    );
+    let e = load(&edit("cpu_core = 1", "cpu_core = 4096")).unwrap_err();
+    assert!(e.to_string().contains("controller_daemon.cpu_core"), "{e}");
+    assert_eq!(e.line(), Some(49));
+    // The default stale timeout is three control periods.
+    assert_eq!(s.controller_daemon.stale_timeout_ms, 3.0);
+    let slow = load(&edit("control_rate_hz = 1000.0", "control_rate_hz = 500.0")).unwrap();
+    assert_eq!(slow.controller_daemon.stale_timeout_ms, 6.0);
+}

@@ -10,8 +10,9 @@
 //! # Safe command
 //!
 //! A state that fails validation (schema, joint count, NaN/Inf, unknown
-//! status or flags), goes backwards in sequence, or disagrees with the
-//! controller about who adds gravity, is answered with mode
+//! status or flags), goes backwards in sequence, jumps further ahead than the
+//! driver can have advanced in the elapsed time ([`max_plausible_gap`]), or
+//! disagrees with the controller about who adds gravity, is answered with mode
 //! [`CommandMode::SafeHold`] and τ = g(q_v), the gravity torque at the last
 //! valid configuration q_v, when the controller includes gravity (and τ = 0
 //! otherwise, or before any valid state, or on a gravity conflict, where the
@@ -19,21 +20,28 @@
 //! valid state is stale, and a torque −D q̇_v held over several cycles would not
 //! be dissipative; damping is the driver's fallback (see the hcc-msgs timing
 //! contract). A numerical failure of the control law (which its damped
-//! inversions should prevent) is answered the same way. A duplicate state is
-//! not answered again.
+//! inversions should prevent), including a non-finite τ, is answered the same
+//! way. The safe command is saturated like any other. A duplicate state is not
+//! answered again. Every rejection is counted (`invalid_states`,
+//! `sequence_errors`, `numerical_failures`) and logged by the non-real-time
+//! thread.
 //!
 //! # Stale state and peer restart
 //!
-//! When no state arrives for `stale_timeout`, the cycle counts a stale event,
-//! marks the peer lost (once per loss), publishes a telemetry sample carrying
-//! the counters, and keeps waiting. The first state after a loss, or three
-//! consecutive states going backwards (a restarted driver counts from 0),
-//! reset the [`SequenceChecker`], and control resumes. The controller's
-//! null-space basis memory is kept: the control law continues the previous
-//! basis only while it still overlaps the new null space and takes a fresh one
-//! after a jump of the state (hcc-control, "Basis continuity"), and the torque
-//! does not depend on the basis — so a state that merely comes late (a loaded
-//! machine, a lockstep peer) changes nothing, not even the last bits.
+//! When no state arrives for `stale_timeout` (by default three control
+//! periods: the third missing state), the cycle counts a stale event, marks
+//! the peer lost (once per loss), publishes a telemetry sample flagged
+//! [`TELEMETRY_FLAG_PEER_LOST`] carrying the counters (one per further timeout while the peer stays away), and keeps
+//! waiting; it never exits because a driver died. When states come back, the
+//! stream tells a new peer from the old one: a state that continues the old
+//! sequence (the same driver after a stall) is used as is, while one that
+//! does not (a restarted driver counts from 0), or three consecutive
+//! rejected states that follow each other (a driver restarted without an
+//! outage), reset the [`SequenceChecker`] and the controller's null-space
+//! basis memory (`Controller::reset`), and control resumes with that peer.
+//! (The torque does not depend on the basis, only its last bits do: a state
+//! that merely comes late changes nothing, so a lockstep run over IPC stays
+//! bit-identical to the in-process one on a loaded machine.)
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -46,7 +54,8 @@ use hcc_msgs::ipc::{
 };
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM,
-    SeqEvent, SequenceChecker, Telemetry, TelemetryCounters, TorqueCommand, monotonic_now_ns,
+    SeqEvent, SequenceChecker, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
+    TorqueCommand, monotonic_now_ns,
 };
 
 use crate::rt;
@@ -55,8 +64,24 @@ use hcc_timing::LatencyHistogram;
 /// Longest single blocking wait, so that a stop request is seen promptly.
 const MAX_WAIT_NS: u64 = 20_000_000;
 
-/// Consecutive backwards sequence numbers taken as a restarted peer.
-const BACKWARDS_RESTART: u32 = 3;
+/// Consecutive rejected sequence numbers (backwards or implausible jumps)
+/// that follow each other, taken as a restarted peer.
+const RESYNC_RUN: u32 = 3;
+
+/// Slack of [`max_plausible_gap`], in states.
+const GAP_SLACK: u64 = 16;
+
+/// The largest number of states a driver publishing one state per period can
+/// have skipped in `elapsed_ns`: twice the periods elapsed plus
+/// [`GAP_SLACK`] (wake-up jitter, a driver running slightly fast). A larger
+/// jump of the sequence number is a corrupt or foreign stream and is rejected.
+pub const fn max_plausible_gap(elapsed_ns: u64, period_ns: u64) -> u64 {
+    let periods = match elapsed_ns.checked_div(period_ns) {
+        Some(p) => p,
+        None => 0,
+    };
+    periods.saturating_mul(2).saturating_add(GAP_SLACK)
+}
 
 /// The ports the loop uses.
 pub struct Ports {
@@ -75,12 +100,17 @@ pub struct Ports {
 impl Ports {
     /// Creates the controller's ports on the opened services.
     pub fn open(services: &Services) -> Result<Ports, IpcError> {
+        let commands = services.torque_command_publisher()?;
+        let telemetry = services.telemetry_publisher()?;
+        let command_ready = services.command_ready_notifier()?;
+        let states = services.joint_state_subscriber(LATEST_BUFFER)?;
+        let state_ready = services.state_ready_listener()?;
         Ok(Ports {
-            commands: services.torque_command_publisher()?,
-            telemetry: services.telemetry_publisher()?,
-            command_ready: services.command_ready_notifier()?,
-            states: services.joint_state_subscriber(LATEST_BUFFER)?,
-            state_ready: services.state_ready_listener()?,
+            commands,
+            telemetry,
+            command_ready,
+            states,
+            state_ready,
         })
     }
 }
@@ -146,6 +176,12 @@ pub struct Status {
     pub peer_restarts: AtomicU64,
     /// The peer is currently lost (no state within the stale timeout).
     pub peer_lost: AtomicBool,
+    /// When the current (or last) loss was detected, CLOCK_MONOTONIC ns.
+    pub peer_lost_at_ns: AtomicU64,
+    /// Wake-up time of the last state received, CLOCK_MONOTONIC ns.
+    pub last_state_ns: AtomicU64,
+    /// `header.seq` of the last state received.
+    pub last_state_seq: AtomicU64,
     /// At least one state was received.
     pub connected: AtomicBool,
     /// Worst compute time so far, ns.
@@ -233,7 +269,12 @@ pub struct Cycle {
     /// g(q) at the last valid state.
     gravity_last: [f64; MAX_JOINTS],
     have_valid: bool,
-    backwards_run: u32,
+    /// Consecutive rejected sequence numbers that follow each other.
+    resync_run: u32,
+    /// Sequence number of the last rejected state of that run.
+    resync_last: u64,
+    /// Wake-up time of the last state whose sequence number was accepted.
+    last_accepted_ns: u64,
     last_state_ns: Option<u64>,
     stale_deadline_ns: u64,
     last_wake_ns: u64,
@@ -304,7 +345,9 @@ impl Cycle {
             telemetry_seq: 0,
             gravity_last: [0.0; MAX_JOINTS],
             have_valid: false,
-            backwards_run: 0,
+            resync_run: 0,
+            resync_last: 0,
+            last_accepted_ns: 0,
             last_state_ns: None,
             stale_deadline_ns: u64::MAX,
             last_wake_ns: 0,
@@ -429,6 +472,7 @@ impl Cycle {
         if !self.peer_lost {
             self.peer_lost = true;
             self.counters.peer_lost_events += 1;
+            self.status.peer_lost_at_ns.store(now, Ordering::Relaxed);
             self.status.peer_lost.store(true, Ordering::Relaxed);
         }
         self.stale_deadline_ns = now.saturating_add(self.settings.stale_timeout_ns);
@@ -436,17 +480,68 @@ impl Cycle {
         let t = &mut *self.telemetry;
         t.header.seq = self.telemetry_seq;
         t.header.stamp_ns = now;
+        t.flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST;
         t.counters = self.counters;
         let _ = ports.telemetry.send_copy(*t);
         self.status
             .publish(&self.counters, self.numerical_failures, self.restarts);
     }
 
-    /// Forgets the peer's sequence.
+    /// Forgets the peer's sequence and the controller's basis memory (a new peer).
     fn restart_peer(&mut self) {
         self.checker.reset();
-        self.backwards_run = 0;
+        self.controller.reset();
+        self.resync_run = 0;
         self.restarts += 1;
+    }
+
+    /// Classifies the sequence number of the (well-formed) state in
+    /// `self.state`: `Ok(Some(missed))` to use it, `Ok(None)` for a duplicate
+    /// (not answered), `Err(())` to reject it with the safe command.
+    /// `resumed`: the first state after a peer loss.
+    fn check_sequence(&mut self, wake: u64, resumed: bool) -> Result<Option<u64>, ()> {
+        let seq = self.state.header.seq;
+        let mut probe = self.checker;
+        let event = probe.observe(seq);
+        let plausible = match event {
+            SeqEvent::First | SeqEvent::Next => true,
+            SeqEvent::Gap { missed } => {
+                missed
+                    <= max_plausible_gap(
+                        wake.saturating_sub(self.last_accepted_ns),
+                        self.settings.period_ns,
+                    )
+            }
+            SeqEvent::Duplicate | SeqEvent::Backwards { .. } => false,
+        };
+        if plausible {
+            self.checker = probe;
+            self.resync_run = 0;
+            self.last_accepted_ns = wake;
+            return Ok(Some(match event {
+                SeqEvent::Gap { missed } => missed,
+                _ => 0,
+            }));
+        }
+        if event == SeqEvent::Duplicate && !resumed {
+            return Ok(None);
+        }
+        // A stream that does not continue the old one: after an outage it is
+        // a new peer; otherwise only once RESYNC_RUN rejected states follow
+        // each other (a restarted driver), never for a single corrupt one.
+        self.resync_run = if self.resync_run > 0 && seq == self.resync_last.wrapping_add(1) {
+            self.resync_run + 1
+        } else {
+            1
+        };
+        self.resync_last = seq;
+        if resumed || self.resync_run >= RESYNC_RUN {
+            self.restart_peer();
+            self.checker.observe(seq);
+            self.last_accepted_ns = wake;
+            return Ok(Some(0));
+        }
+        Err(())
     }
 
     /// Handles the state in `self.state`, received at `wake` (ns).
@@ -458,10 +553,14 @@ impl Cycle {
         self.last_wake_ns = wake;
         self.stale_deadline_ns = wake.saturating_add(self.settings.stale_timeout_ns);
         self.status.connected.store(true, Ordering::Relaxed);
-        if self.peer_lost {
+        self.status.last_state_ns.store(wake, Ordering::Relaxed);
+        self.status
+            .last_state_seq
+            .store(self.state.header.seq, Ordering::Relaxed);
+        let resumed = self.peer_lost;
+        if resumed {
             self.peer_lost = false;
             self.status.peer_lost.store(false, Ordering::Relaxed);
-            self.restart_peer();
         }
         self.counters.cycles += 1;
 
@@ -471,26 +570,15 @@ impl Cycle {
             && self.state.driver_compensates_gravity() == self.settings.gravity_compensation;
         let mut valid = well_formed && !gravity_conflict;
         if valid {
-            let mut event = self.checker.observe(self.state.header.seq);
-            if let SeqEvent::Backwards { .. } = event {
-                self.backwards_run += 1;
-                if self.backwards_run >= BACKWARDS_RESTART {
-                    self.restart_peer();
-                    event = self.checker.observe(self.state.header.seq);
-                }
-            } else {
-                self.backwards_run = 0;
-            }
-            match event {
-                SeqEvent::First | SeqEvent::Next => {}
-                SeqEvent::Gap { missed } => self.counters.missed_states += missed,
-                SeqEvent::Duplicate => {
+            match self.check_sequence(wake, resumed) {
+                Ok(Some(missed)) => self.counters.missed_states += missed,
+                Ok(None) => {
                     self.counters.sequence_errors += 1;
                     self.status
                         .publish(&self.counters, self.numerical_failures, self.restarts);
                     return Outcome::Duplicate;
                 }
-                SeqEvent::Backwards { .. } => {
+                Err(()) => {
                     self.counters.sequence_errors += 1;
                     valid = false;
                 }
@@ -508,7 +596,7 @@ impl Cycle {
                 .step
                 .record(monotonic_now_ns().saturating_sub(step_start));
             match result {
-                Ok(out) => {
+                Ok(out) if out.tau.iter().all(|t| t.is_finite()) => {
                     tau[..n].copy_from_slice(out.tau.as_slice());
                     self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
                     self.have_valid = true;
@@ -519,7 +607,7 @@ impl Cycle {
                         CommandMode::Normal
                     };
                 }
-                Err(_) => {
+                _ => {
                     self.numerical_failures += 1;
                     valid = false;
                 }

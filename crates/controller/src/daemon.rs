@@ -114,6 +114,7 @@ struct Setup {
 
 fn load(args: &Args) -> Result<Setup> {
     let scenario = Scenario::load(&args.config)?;
+    scenario.check_cpu_core("controller_daemon", &rt::available_cores())?;
     let namespace = args
         .namespace
         .clone()
@@ -145,6 +146,9 @@ pub fn run(args: Args) -> Result<()> {
     rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     set_log_level_from_env_or(LogLevel::Warn);
 
+    if let Some(line) = rt::cleanup_stale_resources(setup.file_prefix.as_deref()) {
+        eprintln!("hcc-controller: {line}");
+    }
     let node = ipc::create_node(
         "hcc-controller",
         SignalHandlingMode::Disabled,
@@ -301,11 +305,18 @@ fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
         if lost != last_lost {
             last_lost = lost;
             if lost {
+                let last = status.last_state_ns.load(Ordering::Relaxed);
+                let at = status.peer_lost_at_ns.load(Ordering::Relaxed);
                 eprintln!(
-                    "hcc-controller: peer lost: no joint state within the stale timeout; waiting"
+                    "hcc-controller: peer lost: no joint state for {:.1} ms after state seq {} (detected at {at} ns); still running, waiting for a driver",
+                    at.saturating_sub(last) as f64 / 1e6,
+                    status.last_state_seq.load(Ordering::Relaxed),
                 );
             } else {
-                eprintln!("hcc-controller: joint states are back; control resumed");
+                eprintln!(
+                    "hcc-controller: joint states are back (state seq {}); control resumed",
+                    status.last_state_seq.load(Ordering::Relaxed)
+                );
             }
         }
         let c = status.counters();
@@ -316,6 +327,7 @@ fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
                 c.invalid_states,
             ),
             ("saturated cycles", last.saturations, c.saturations),
+            ("peer losses", last.peer_lost_events, c.peer_lost_events),
             ("singular cycles", last.singular_cycles, c.singular_cycles),
             ("missed states", last.missed_states, c.missed_states),
             ("sequence errors", last.sequence_errors, c.sequence_errors),

@@ -111,6 +111,37 @@ pub fn prepare_rt_thread(settings: &RtSettings) -> RtReport {
     report
 }
 
+/// The CPU cores this process may run on (its affinity mask); empty if it
+/// cannot be read.
+pub fn available_cores() -> Vec<usize> {
+    core_affinity::get_core_ids()
+        .map(|ids| ids.into_iter().map(|c| c.id).collect())
+        .unwrap_or_default()
+}
+
+/// Removes the iceoryx2 resources that crashed processes left under
+/// `file_prefix` (see [`hcc_msgs::ipc::cleanup_dead_nodes`]) and returns a
+/// line for the log when there were any. Run at start-up, before the node is
+/// created, so that a daemon restarted after a crash (its own or its peer's)
+/// finds the namespace's single-publisher slots free.
+pub fn cleanup_stale_resources(file_prefix: Option<&str>) -> Option<String> {
+    match hcc_msgs::ipc::cleanup_dead_nodes(file_prefix) {
+        Ok(r) if r.dead == 0 => None,
+        Ok(r) => Some(format!(
+            "removed the stale iceoryx2 resources of {} dead process(es){}",
+            r.removed,
+            if r.failed > 0 {
+                format!(" ({} could not be removed)", r.failed)
+            } else {
+                String::new()
+            }
+        )),
+        Err(e) => Some(format!(
+            "warning: cannot look for stale iceoryx2 resources: {e}"
+        )),
+    }
+}
+
 /// Switches the calling thread to `SCHED_FIFO` at `priority`.
 pub fn set_fifo(priority: i32) -> std::io::Result<()> {
     let param = libc::sched_param {

@@ -192,14 +192,38 @@ pub fn create_node(
         .create::<Ipc>()
         .map_err(|e| IpcError::Node {
             name: name.to_owned(),
-            reason: match e {
-                NodeCreationFailure::InsufficientPermissions => {
+            reason: match (e, root_access_problem(&config)) {
+                (_, Some(problem)) => problem,
+                (NodeCreationFailure::InsufficientPermissions, None) => {
                     "insufficient permissions for the iceoryx2 files (peers must run as the same user)"
                         .to_owned()
                 }
-                other => format!("iceoryx2 failure {other:?}"),
+                (other, None) => format!("iceoryx2 failure {other:?}"),
             },
         })
+}
+
+/// Why this process cannot use iceoryx2's directory, if it cannot: its
+/// resources belong to another user (iceoryx2 creates them owner-only).
+fn root_access_problem(config: &Config) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
+    let root =
+        PathBuf::from(String::from_utf8_lossy(config.global.root_path().as_bytes()).as_ref());
+    let meta = std::fs::metadata(&root).ok()?;
+    let c_path = std::ffi::CString::new(root.as_os_str().as_encoded_bytes()).ok()?;
+    // SAFETY: a valid NUL-terminated path; access() only reads it.
+    let ok = unsafe { libc::access(c_path.as_ptr(), libc::R_OK | libc::W_OK | libc::X_OK) } == 0;
+    if ok {
+        return None;
+    }
+    // SAFETY: geteuid cannot fail.
+    let me = unsafe { libc::geteuid() };
+    Some(format!(
+        "insufficient permissions: iceoryx2's directory {} belongs to uid {} (mode {:o}) and this process runs as uid {me}; all peers of a robot must run as the same user",
+        root.display(),
+        meta.uid(),
+        meta.mode() & 0o7777
+    ))
 }
 
 fn pubsub_open_reason(e: PublishSubscribeOpenError) -> String {

@@ -121,7 +121,8 @@ pub use service::{
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
     JOINT_STATE, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAGS_KNOWN, TELEMETRY,
-    TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
+    TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings,
+    TorqueCommand,
 };
 
 /// Version of this message schema. Bump it on any change of a type's layout

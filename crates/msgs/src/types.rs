@@ -37,6 +37,13 @@ pub const COMMAND_FLAG_GRAVITY_INCLUDED: u32 = 1 << 0;
 /// All [`TorqueCommand::flags`] bits defined by this schema.
 pub const COMMAND_FLAGS_KNOWN: u32 = COMMAND_FLAG_GRAVITY_INCLUDED;
 
+/// [`Telemetry::flags`] bit: no joint state arrived within the controller's
+/// stale timeout, the driver is considered lost and this sample answers no
+/// state (no command was sent; `state_seq`, `command_seq`, `mode` and the
+/// diagnostics are those of the last answer, the counters are current). Set
+/// in every sample until states come back. Never set in a command.
+pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
+
 /// Header shared by all messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[type_name("hcc_msgs::Header@schema1")]
@@ -560,7 +567,8 @@ pub struct Telemetry {
     pub task_dims: [u32; MAX_LEVELS],
     /// Bit i set: level i (0-based) is singular (σ_min below threshold).
     pub singular_levels: u32,
-    /// `COMMAND_FLAG_*` bits of the command sent.
+    /// `COMMAND_FLAG_*` bits of the command sent, and
+    /// [`TELEMETRY_FLAG_PEER_LOST`] in samples that report a lost driver.
     pub flags: u32,
     /// Total commanded τ, Eq. (19).
     pub tau: [f64; MAX_JOINTS],
@@ -710,6 +718,11 @@ impl Telemetry {
         } else {
             &[]
         }
+    }
+
+    /// Whether this sample reports a lost driver ([`TELEMETRY_FLAG_PEER_LOST`]).
+    pub fn peer_lost(&self) -> bool {
+        self.flags & TELEMETRY_FLAG_PEER_LOST != 0
     }
 
     /// Whether level `level` (0-based) is flagged singular.

@@ -469,6 +469,7 @@ fn log_loop(shared: &Shared, done: &AtomicBool) {
 /// Runs the daemon.
 pub fn run(args: Args) -> Result<()> {
     let scenario = Scenario::load(&args.config)?;
+    scenario.check_cpu_core("sim_daemon", &rt::available_cores())?;
     let namespace = args
         .namespace
         .clone()
@@ -501,6 +502,9 @@ pub fn run(args: Args) -> Result<()> {
     rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     set_log_level_from_env_or(LogLevel::Warn);
 
+    if let Some(line) = rt::cleanup_stale_resources(file_prefix.as_deref()) {
+        eprintln!("hcc-sim: {line}");
+    }
     let node = ipc::create_node(
         "hcc-sim",
         SignalHandlingMode::Disabled,

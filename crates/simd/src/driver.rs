@@ -12,10 +12,12 @@
 //! * the newest command, if it passes [`TorqueCommand::validate`], agrees on
 //!   gravity ([`hcc_msgs::check_gravity_agreement`]), answers state k
 //!   ([`hcc_msgs::command_freshness`] = `Current`) and its mode applies torque;
-//! * otherwise a **miss**: the last applied command is held for `hold_cycles`
-//!   periods, then the **fallback** τ = g(q_k) − D q̇_k (gravity held, strong
-//!   joint damping: a braking robot) is applied with status `FallbackActive`
-//!   until fresh commands arrive again (e.g. from a restarted controller);
+//! * otherwise a **miss**, detected in the period whose command is missing:
+//!   status `FallbackActive` from that period on (counted in `missed_commands`
+//!   and `fallback_cycles`); the last applied command is held for
+//!   `hold_cycles` periods, then τ = g(q_k) − D q̇_k (gravity held, strong
+//!   joint damping: a braking robot) until fresh commands arrive again (e.g.
+//!   from a restarted controller, which is accepted at its first command);
 //! * before the first command ever (controller not up yet) the fallback is
 //!   applied without counting misses, so the arm does not fall;
 //! * a `Stop` command ends control for the session: status `Stopped`,
@@ -58,7 +60,7 @@ pub enum Applied {
 pub struct DriverCounters {
     /// Periods with no applicable command (after the first command).
     pub missed_commands: u64,
-    /// Periods in the fallback.
+    /// Periods in the fallback (holding or braking; also before the first command).
     pub fallback_cycles: u64,
     /// Commands applied.
     pub applied_commands: u64,
@@ -274,11 +276,13 @@ impl SimDriver {
                 None => {
                     self.counters.missed_commands += 1;
                     self.consecutive_misses = self.consecutive_misses.saturating_add(1);
+                    // The fallback starts with the first miss: hold, then brake.
+                    self.status = DriverStatus::FallbackActive;
+                    self.counters.fallback_cycles += 1;
                     if self.consecutive_misses <= self.hold_cycles {
                         self.tau.copy_from(&self.last_command_tau);
                         Applied::Held
                     } else {
-                        self.status = DriverStatus::FallbackActive;
                         Applied::Fallback
                     }
                 }
@@ -286,7 +290,8 @@ impl SimDriver {
         };
         match applied {
             Applied::Command | Applied::Held => {}
-            Applied::Fallback | Applied::WaitingForController | Applied::Stopped => {
+            Applied::Fallback => self.fallback_torque(),
+            Applied::WaitingForController | Applied::Stopped => {
                 self.fallback_torque();
                 self.counters.fallback_cycles += 1;
             }
