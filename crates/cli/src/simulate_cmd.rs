@@ -47,6 +47,15 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
         hcc_report::write_run(&args.out, &run.trajectory, &run.description)?.metrics
     };
     print!("{}", metrics.summary());
+    if let Some(n) = run
+        .description
+        .settings
+        .get("saturated_cycles")
+        .and_then(|v| v.as_u64())
+        && n > 0
+    {
+        println!("  torque saturated to the limits in {n} cycles");
+    }
     println!("results in {}", args.out.display());
     Ok(())
 }

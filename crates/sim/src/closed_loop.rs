@@ -371,9 +371,15 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
     })
 }
 
-/// The hierarchical compliance controller of hcc-control as a [`ControlLaw`].
+/// The hierarchical compliance controller of hcc-control as a [`ControlLaw`],
+/// its torque saturated to `[controller_daemon] torque_limits` exactly as the
+/// controller daemon saturates its commands (|τ_k| ≤ limit_k, per joint), so
+/// that the in-process run and the daemons apply the same torque.
 pub struct HierarchicalLaw {
     controller: Controller,
+    limits: DVector<f64>,
+    tau: DVector<f64>,
+    saturated_cycles: u64,
 }
 
 impl HierarchicalLaw {
@@ -381,24 +387,54 @@ impl HierarchicalLaw {
     pub fn new(scenario: &Scenario) -> Result<HierarchicalLaw, SimError> {
         let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
             .map_err(|e| SimError::Invalid(format!("controller: {e}")))?;
-        Ok(HierarchicalLaw { controller })
+        let n = scenario.model.nq();
+        Ok(HierarchicalLaw {
+            controller,
+            limits: scenario.controller_daemon.torque_limits.clone(),
+            tau: DVector::zeros(n),
+            saturated_cycles: 0,
+        })
     }
 
     /// The wrapped controller.
     pub fn controller(&self) -> &Controller {
         &self.controller
     }
+
+    /// Cycles whose torque had to be saturated.
+    pub fn saturated_cycles(&self) -> u64 {
+        self.saturated_cycles
+    }
 }
 
 impl ControlLaw for HierarchicalLaw {
     fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), SimError> {
-        self.controller
+        let out = self
+            .controller
             .step(q.as_slice(), qd.as_slice())
-            .map(|_| ())
-            .map_err(|e| SimError::Invalid(format!("controller: {e}")))
+            .map_err(|e| SimError::Invalid(format!("controller: {e}")))?;
+        let mut saturated = false;
+        for ((t, &u), &limit) in self
+            .tau
+            .iter_mut()
+            .zip(out.tau.iter())
+            .zip(self.limits.iter())
+        {
+            // As the daemon: never panics, whatever the limit.
+            *t = if u > limit {
+                limit
+            } else if u < -limit {
+                -limit
+            } else {
+                u
+            };
+            saturated |= *t != u;
+        }
+        self.saturated_cycles += u64::from(saturated);
+        Ok(())
     }
     fn tau(&self) -> &DVector<f64> {
-        &self.controller.output().tau
+        &self.tau
     }
     fn level_torque(&self, i: usize) -> &DVector<f64> {
         &self.controller.output().tau_level[i]
@@ -429,7 +465,14 @@ impl ControlLaw for HierarchicalLaw {
 
 /// Runs the closed loop of `scenario` with the hierarchical compliance controller
 /// of hcc-control (Sec. IV of the paper), as configured in `scenario.spec`.
+/// The torque is saturated as the daemon saturates it; the number of
+/// saturated cycles is in the run's settings (`saturated_cycles`).
 pub fn simulate(scenario: &Scenario) -> Result<Run, SimError> {
     let mut law = HierarchicalLaw::new(scenario)?;
-    simulate_with(scenario, &mut law)
+    let mut run = simulate_with(scenario, &mut law)?;
+    run.description.settings.insert(
+        "saturated_cycles".into(),
+        serde_json::json!(law.saturated_cycles()),
+    );
+    Ok(run)
 }
