@@ -2,8 +2,8 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemv, gemv_t,
-    null_space_basis, orthonormalize_polar, procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemm_tn_sym,
+    gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, TaskSpec};
 use hcc_model::{Data, Model};
@@ -99,22 +99,29 @@ struct NullSpace {
     gram_inv: DMatrix<f64>,
     t1: DMatrix<f64>,
     t2: DMatrix<f64>,
+    /// M V and Ṁ V (n × (n − k)).
     mv: DMatrix<f64>,
     mdv: DMatrix<f64>,
-    vs: DMatrix<f64>,
-    tmp_nd: DMatrix<f64>,
+    /// VᵀMV, S = (VᵀMV)⁻¹ and X = d/dt (VᵀMV) = V̇ᵀMV + VᵀṀV + VᵀMV̇, so Ṡ = −S X S.
+    vtmv: DMatrix<f64>,
     s: DMatrix<f64>,
-    s_inv_src: DMatrix<f64>,
-    sdot: DMatrix<f64>,
     x: DMatrix<f64>,
     tmp_dd: DMatrix<f64>,
-    /// P = V (VᵀMV)⁻¹ Vᵀ = M⁻¹ N_i (eq. 9), n × n, and its time derivative.
-    p: DMatrix<f64>,
-    pdot: DMatrix<f64>,
+    /// Thin factors of Z_i = J_i P, P = V S Vᵀ = M⁻¹ N_i (eqs. 9, 12), for the levels
+    /// above the lowest (m_i × (n − k)): A = J_i V, Ȧ, A S and (Ȧ − A S X) S. P and Ṗ
+    /// (n × n) are never formed.
+    a: DMatrix<f64>,
+    adot: DMatrix<f64>,
+    a_s: DMatrix<f64>,
+    b: DMatrix<f64>,
+    /// Vᵀ x and S Vᵀ x for the classical projector form.
+    y_nd: DVector<f64>,
+    y_nd2: DVector<f64>,
     spd_k: SpdWork,
     spd_d: SpdWork,
     align: AlignWork,
     gram_cond: Conditioning,
+    s_cond: Conditioning,
 }
 
 /// The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer (IROS 2013).
@@ -133,12 +140,13 @@ pub struct Controller {
     null: Vec<NullSpace>,
     q: DVector<f64>,
     qd: DVector<f64>,
-    minv: DMatrix<f64>,
+    /// Cholesky factor of M (M⁻¹ is applied by solves, never formed).
     chol: DMatrix<f64>,
     mdot: DMatrix<f64>,
     frame_j: DMatrix<f64>,
     frame_jdot: DMatrix<f64>,
-    jminv: DMatrix<f64>,
+    /// M⁻¹ J_1ᵀ (n × m_1).
+    minv_j1t: DMatrix<f64>,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
@@ -213,6 +221,8 @@ impl Controller {
                 spd: SpdWork::new(d),
             });
             let nd = n - k;
+            // The thin factors of Z_i are used by the levels above the lowest only.
+            let mt = if i > 0 && i < r - 1 { m } else { 0 };
             null.push(NullSpace {
                 jaug: DMatrix::zeros(k, n),
                 jaug_dot: DMatrix::zeros(k, n),
@@ -228,19 +238,21 @@ impl Controller {
                 t2: DMatrix::zeros(k, nd),
                 mv: DMatrix::zeros(n, nd),
                 mdv: DMatrix::zeros(n, nd),
-                vs: DMatrix::zeros(n, nd),
-                tmp_nd: DMatrix::zeros(n, nd),
+                vtmv: DMatrix::zeros(nd, nd),
                 s: DMatrix::zeros(nd, nd),
-                s_inv_src: DMatrix::zeros(nd, nd),
-                sdot: DMatrix::zeros(nd, nd),
                 x: DMatrix::zeros(nd, nd),
                 tmp_dd: DMatrix::zeros(nd, nd),
-                p: DMatrix::zeros(n, n),
-                pdot: DMatrix::zeros(n, n),
+                a: DMatrix::zeros(mt, nd),
+                adot: DMatrix::zeros(mt, nd),
+                a_s: DMatrix::zeros(mt, nd),
+                b: DMatrix::zeros(mt, nd),
+                y_nd: DVector::zeros(nd),
+                y_nd2: DVector::zeros(nd),
                 spd_k: SpdWork::new(k),
                 spd_d: SpdWork::new(nd),
                 align: AlignWork::new(n, nd),
                 gram_cond: Conditioning::default(),
+                s_cond: Conditioning::default(),
             });
             k += m;
         }
@@ -268,12 +280,11 @@ impl Controller {
             null,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
-            minv: DMatrix::zeros(n, n),
             chol: DMatrix::zeros(n, n),
             mdot: DMatrix::zeros(n, n),
             frame_j: DMatrix::zeros(6, n),
             frame_jdot: DMatrix::zeros(6, n),
-            jminv: DMatrix::zeros(m1, n),
+            minv_j1t: DMatrix::zeros(n, m1),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
@@ -461,13 +472,10 @@ impl Controller {
         let r = self.levels.len();
         let eps = self.spec.singular_ratio;
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
-        // M⁻¹ and Ṁ = C + Cᵀ (Sec. II).
+        // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
         self.chol.copy_from(&self.data.m);
         hcc_model::linalg::cholesky_in_place(&mut self.chol)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        self.minv.fill_with_identity();
-        hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.minv)
-            .map_err(|_| ControlError::Numerical("M⁻¹"))?;
         for j in 0..n {
             for i in 0..n {
                 self.mdot[(i, j)] = self.data.c[(i, j)] + self.data.c[(j, i)];
@@ -483,48 +491,66 @@ impl Controller {
         // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
         {
             let l = &mut self.levels[0];
-            gemm(&mut self.jminv, 1.0, &l.j, &self.minv, 0.0);
-            gemm_nt(&mut l.lambda_inv, 1.0, &self.jminv, &l.j, 0.0);
+            for a in 0..l.m {
+                for b in 0..n {
+                    self.minv_j1t[(b, a)] = l.j[(a, b)];
+                }
+            }
+            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.minv_j1t)
+                .map_err(|_| ControlError::Numerical("M⁻¹ J_1ᵀ"))?;
+            gemm(&mut l.lambda_inv, 1.0, &l.j, &self.minv_j1t, 0.0);
             let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
             self.out.conditioning[0] = c.ratio;
             self.out.singular[0] = c.damping > 0.0;
             l.jbar.copy_from(&l.j);
             l.jbar_dot.copy_from(&l.jdot);
             // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
-            gemm_tn(&mut l.jbar_inv, 1.0, &self.jminv, &l.lambda, 0.0);
+            gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
         }
 
         // Null-space levels (eqs. 5–13, 16–18).
         for i in 1..r {
             let lowest = i == r - 1;
-            self.null_space(i, lowest)?;
-            let (upper, rest) = self.levels.split_at_mut(i);
-            let _ = upper;
-            let l = &mut rest[0];
+            self.null_space(i)?;
+            let l = &mut self.levels[i];
             let ns = &mut self.null[i];
-            if lowest {
-                // Z_r = V_{r−1}ᵀ.
+            let gc = ns.gram_cond;
+            let c = if lowest {
+                // Z_r = V_{r−1}ᵀ: Z M = (M V)ᵀ, Z Ṁ = (Ṁ V)ᵀ, Λ_r = Vᵀ M V (eq. 18) with its
+                // inverse S and derivative X, all from the null space already.
                 for a in 0..l.d {
                     for b in 0..n {
                         l.z[(a, b)] = ns.v[(b, a)];
                         l.zdot[(a, b)] = ns.vdot[(b, a)];
+                        l.zm[(a, b)] = ns.mv[(b, a)];
+                        l.zmdot[(a, b)] = ns.mdv[(b, a)];
                     }
                 }
+                l.lambda.copy_from(&ns.vtmv);
+                l.lambda_inv.copy_from(&ns.s);
+                l.lambda_dot.copy_from(&ns.x);
+                ns.s_cond
             } else {
-                // Z_i = J_i V (VᵀMV)⁻¹ Vᵀ = J_i P (eq. 12), Ż_i = J̇_i P + J_i Ṗ.
-                gemm(&mut l.z, 1.0, &l.j, &ns.p, 0.0);
-                gemm(&mut l.zdot, 1.0, &l.jdot, &ns.p, 0.0);
-                gemm(&mut l.zdot, 1.0, &l.j, &ns.pdot, 1.0);
-            }
-            // Λ_i = Z M Zᵀ (eq. 18) and its derivative.
-            gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
-            gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
-            gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
-            let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
-            let gc = ns.gram_cond;
+                // Z_i = J_i V S Vᵀ = J_i P (eq. 12) and Ż_i = J̇_i P + J_i Ṗ in thin form:
+                // with A = J_i V and Ṡ = −S X S, Ż_i = (Ȧ − A S X) S Vᵀ + A S V̇ᵀ.
+                gemm(&mut ns.a, 1.0, &l.j, &ns.v, 0.0);
+                gemm(&mut ns.adot, 1.0, &l.jdot, &ns.v, 0.0);
+                gemm(&mut ns.adot, 1.0, &l.j, &ns.vdot, 1.0);
+                gemm(&mut ns.a_s, 1.0, &ns.a, &ns.s, 0.0);
+                gemm_nt(&mut l.z, 1.0, &ns.a_s, &ns.v, 0.0);
+                gemm(&mut ns.adot, -1.0, &ns.a_s, &ns.x, 1.0);
+                gemm(&mut ns.b, 1.0, &ns.adot, &ns.s, 0.0);
+                gemm_nt(&mut l.zdot, 1.0, &ns.b, &ns.v, 0.0);
+                gemm_nt(&mut l.zdot, 1.0, &ns.a_s, &ns.vdot, 1.0);
+                // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
+                gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
+                gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
+                gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
+                damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR)
+            };
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
             // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
@@ -558,8 +584,11 @@ impl Controller {
                         gemv_t(tau_i, -1.0, &l.jbar, &l.y_d, 0.0);
                     }
                     Form::ClassicalProjector => {
-                        // N_i J_iᵀ F_i with N_i = M P (eq. 9).
-                        gemv(&mut self.tmp_n2, 1.0, &self.null[i].p, &self.tmp_n, 0.0);
+                        // N_i J_iᵀ F_i with N_i = M P, P = V S Vᵀ (eq. 9), applied thin.
+                        let ns = &mut self.null[i];
+                        gemv_t(&mut ns.y_nd, 1.0, &ns.v, &self.tmp_n, 0.0);
+                        gemv(&mut ns.y_nd2, 1.0, &ns.s, &ns.y_nd, 0.0);
+                        gemv(&mut self.tmp_n2, 1.0, &ns.v, &ns.y_nd2, 0.0);
                         gemv(tau_i, -1.0, &self.data.m, &self.tmp_n2, 0.0);
                     }
                 }
@@ -580,8 +609,9 @@ impl Controller {
                 let l = &mut self.levels[i];
                 self.tmp_n.copy_from(qd);
                 gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
-                gemv(&mut self.tmp_n2, 1.0, &self.data.c, &self.tmp_n, 0.0);
-                gemv(&mut self.tmp_n3, 1.0, &self.minv, &self.tmp_n2, 0.0);
+                gemv(&mut self.tmp_n3, 1.0, &self.data.c, &self.tmp_n, 0.0);
+                hcc_model::linalg::cholesky_solve_in_place(&self.chol, &mut self.tmp_n3)
+                    .map_err(|_| ControlError::Numerical("M⁻¹ C"))?;
                 gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
                 gemv(&mut l.y_d, -1.0, &l.jbar_dot, &self.tmp_n, 1.0);
                 gemv(&mut l.y_d2, 1.0, &l.lambda, &l.y_d, 0.0);
@@ -604,10 +634,11 @@ impl Controller {
         Ok(())
     }
 
-    /// Null space of the augmented Jacobian above level `i`: V, V̇ = −J⁺ J̇ V (parallel
-    /// transport), P = V (VᵀMV)⁻¹ Vᵀ and Ṗ. The basis is kept continuous in time (it
-    /// matters for Z_r = V_{r−1}ᵀ; for the other levels P does not depend on it).
-    fn null_space(&mut self, i: usize, lowest: bool) -> Result<(), ControlError> {
+    /// Null space of the augmented Jacobian above level `i` (eqs. 6–9): the basis V, its
+    /// derivative V̇ = −J⁺ J̇ V (parallel transport), M V, Ṁ V, Vᵀ M V, its inverse
+    /// S = (VᵀMV)⁻¹ and X = d/dt (VᵀMV). The basis is kept continuous in time (it matters
+    /// for Z_r = V_{r−1}ᵀ; for the other levels P = V S Vᵀ does not depend on it).
+    fn null_space(&mut self, i: usize) -> Result<(), ControlError> {
         let n = self.n;
         let eps = self.spec.singular_ratio;
         let ns = &mut self.null[i];
@@ -653,29 +684,17 @@ impl Controller {
         gemm(&mut ns.t1, 1.0, &ns.jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
         gemm_tn(&mut ns.vdot, -1.0, &ns.jaug, &ns.t2, 0.0);
-        // S = (VᵀMV)⁻¹ (always positive definite), Ṡ = −S (V̇ᵀMV + VᵀṀV + VᵀMV̇) S.
+        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
-        gemm_tn(&mut ns.s_inv_src, 1.0, &ns.v, &ns.mv, 0.0);
-        damped_spd_inverse(&ns.s_inv_src, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
+        gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
+        ns.s_cond = damped_spd_inverse(&ns.vtmv, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
-        gemm_tn(&mut ns.x, 1.0, &ns.v, &ns.mdv, 0.0);
+        gemm_tn_sym(&mut ns.x, &ns.v, &ns.mdv);
         gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
         for a in 0..ns.x.nrows() {
             for b in 0..ns.x.ncols() {
                 ns.x[(a, b)] += ns.tmp_dd[(a, b)] + ns.tmp_dd[(b, a)];
             }
-        }
-        gemm(&mut ns.tmp_dd, 1.0, &ns.x, &ns.s, 0.0);
-        gemm(&mut ns.sdot, -1.0, &ns.s, &ns.tmp_dd, 0.0);
-        if !lowest || self.spec.form == Form::ClassicalProjector {
-            // P = V S Vᵀ; Ṗ = V̇ S Vᵀ + V Ṡ Vᵀ + V S V̇ᵀ.
-            gemm(&mut ns.vs, 1.0, &ns.v, &ns.s, 0.0);
-            gemm_nt(&mut ns.p, 1.0, &ns.vs, &ns.v, 0.0);
-            gemm(&mut ns.tmp_nd, 1.0, &ns.vdot, &ns.s, 0.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 0.0);
-            gemm(&mut ns.tmp_nd, 1.0, &ns.v, &ns.sdot, 0.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 1.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.vs, &ns.vdot, 1.0);
         }
         Ok(())
     }
@@ -808,8 +827,13 @@ impl Controller {
             lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
             row += l.d;
         }
+        let mut minv = DMatrix::identity(n, n);
+        // The factor is valid after any cycle that got past M (else M⁻¹ is NaN).
+        if hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut minv).is_err() {
+            minv.fill(f64::NAN);
+        }
         let mu = if total == n {
-            &lambda * (&jbar * &self.minv * &self.data.c - &jbar_dot) * &jbar_inv
+            &lambda * (&jbar * &minv * &self.data.c - &jbar_dot) * &jbar_inv
         } else {
             DMatrix::zeros(total, total)
         };
@@ -823,7 +847,7 @@ impl Controller {
             lambda,
             mu,
             m: self.data.m.clone(),
-            minv: self.minv.clone(),
+            minv,
             c: self.data.c.clone(),
         }
     }
