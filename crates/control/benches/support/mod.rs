@@ -2,6 +2,8 @@
 //! every call, warm-up cycles dropped, order statistics of the rest.
 #![allow(dead_code)]
 
+pub mod chain;
+
 use hcc_control::{Controller, ControllerSpec};
 use hcc_model::Model;
 use nalgebra::DVector;
