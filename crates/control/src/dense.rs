@@ -5,8 +5,8 @@
 //! Every function assumes outputs of the right size (checked by the caller at
 //! construction). The products work on the column-major storage with small register
 //! blocks (no packing buffer, so nothing to allocate — the matrices of a robot
-//! controller are at most a few dozen rows); each element is summed in the same order
-//! as the plain triple loop, so the results do not depend on the blocking.
+//! controller are at most a few dozen rows). Every element is summed in the order of
+//! the plain triple loop, so the results do not depend on the blocking.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -56,7 +56,8 @@ fn gemm_cols<'b, I: Iterator<Item = &'b f64>>(
     }
 }
 
-/// Rows i..i+W of [`gemm_cols`].
+/// Rows i..i+W of [`gemm_cols`], one output column at a time (W accumulators, which
+/// the compiler keeps in vector registers across the rows).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn rows<'b, const W: usize, I: Iterator<Item = &'b f64>>(
@@ -70,35 +71,17 @@ fn rows<'b, const W: usize, I: Iterator<Item = &'b f64>>(
     beta: f64,
 ) {
     assert!(i + W <= m);
-    let mut j = 0;
-    while j + 2 <= n {
-        let mut s0 = [0.0; W];
-        let mut s1 = [0.0; W];
-        for ((al, &b0), &b1) in a.chunks_exact(m).zip(bcol(j)).zip(bcol(j + 1)) {
-            let al = &al[i..i + W];
+    for j in 0..n {
+        let mut s = [0.0; W];
+        for (al, &bl) in a.chunks_exact(m).zip(bcol(j)) {
+            let al: &[f64; W] = al[i..i + W].try_into().unwrap();
             for t in 0..W {
-                s0[t] += al[t] * b0;
-                s1[t] += al[t] * b1;
+                s[t] += al[t] * bl;
             }
         }
-        let (c0, c1) = c[j * m..(j + 2) * m].split_at_mut(m);
+        let cj = &mut c[j * m + i..j * m + i + W];
         for t in 0..W {
-            c0[i + t] = scale(alpha, s0[t], beta, c0[i + t]);
-            c1[i + t] = scale(alpha, s1[t], beta, c1[i + t]);
-        }
-        j += 2;
-    }
-    if j < n {
-        let mut s0 = [0.0; W];
-        for (al, &b0) in a.chunks_exact(m).zip(bcol(j)) {
-            let al = &al[i..i + W];
-            for t in 0..W {
-                s0[t] += al[t] * b0;
-            }
-        }
-        let c0 = &mut c[j * m..(j + 1) * m];
-        for t in 0..W {
-            c0[i + t] = scale(alpha, s0[t], beta, c0[i + t]);
+            cj[t] = scale(alpha, s[t], beta, cj[t]);
         }
     }
 }
