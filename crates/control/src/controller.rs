@@ -81,13 +81,60 @@ struct Level {
     y_d: DVector<f64>,
     y_d2: DVector<f64>,
     spd: SpdWork,
+    /// Eq. (11) with (8) for 2 ≤ i < r (k = Σ_{j<i} m_j; empty otherwise):
+    /// Z_i = J_i M⁻¹ N_i = Y_i − T Y_aug with Y = J M⁻¹, G = J_aug M⁻¹ J_augᵀ (k × k),
+    /// H = J_i M⁻¹ J_augᵀ (m × k), T = H G⁻¹, and the derivatives of G, H, T, Y.
+    proj: Projection,
 }
 
-/// Null space of the augmented Jacobian of the levels above level i (eq. 6–9).
+/// The blocks of eq. (8) for one level above the lowest.
+#[derive(Clone, Debug)]
+struct Projection {
+    k: usize,
+    g: DMatrix<f64>,
+    g_inv: DMatrix<f64>,
+    gdot: DMatrix<f64>,
+    h: DMatrix<f64>,
+    hdot: DMatrix<f64>,
+    t: DMatrix<f64>,
+    tdot: DMatrix<f64>,
+    y_aug: DMatrix<f64>,
+    y_aug_dot: DMatrix<f64>,
+    /// Vectors for the classical form N_i x = x − J_augᵀ G⁻¹ Y_aug x (eq. 8).
+    y_k: DVector<f64>,
+    y_top: DVector<f64>,
+    spd: SpdWork,
+    g_cond: Conditioning,
+}
+
+impl Projection {
+    fn new(k: usize, m: usize, n: usize, top: usize) -> Projection {
+        Projection {
+            k,
+            g: DMatrix::zeros(k, k),
+            g_inv: DMatrix::zeros(k, k),
+            gdot: DMatrix::zeros(k, k),
+            h: DMatrix::zeros(m, k),
+            hdot: DMatrix::zeros(m, k),
+            t: DMatrix::zeros(m, k),
+            tdot: DMatrix::zeros(m, k),
+            y_aug: DMatrix::zeros(k, n),
+            y_aug_dot: DMatrix::zeros(k, n),
+            y_k: DVector::zeros(k),
+            y_top: DVector::zeros(top),
+            spd: SpdWork::new(k),
+            g_cond: Conditioning {
+                ratio: 1.0,
+                damping: 0.0,
+            },
+        }
+    }
+}
+
+/// Null space of the augmented Jacobian of the levels above the lowest one
+/// (eqs. 6–9), for Z_r = V_{r−1}ᵀ.
 #[derive(Clone, Debug)]
 struct NullSpace {
-    jaug: DMatrix<f64>,
-    jaug_dot: DMatrix<f64>,
     qr_work: DMatrix<f64>,
     qr_q: DMatrix<f64>,
     /// V_{i−1}: orthonormal basis (n × (n − k)).
@@ -107,13 +154,6 @@ struct NullSpace {
     s: DMatrix<f64>,
     x: DMatrix<f64>,
     tmp_dd: DMatrix<f64>,
-    /// Thin factors of Z_i = J_i P, P = V S Vᵀ = M⁻¹ N_i (eqs. 9, 12), for the levels
-    /// above the lowest (m_i × (n − k)): A = J_i V, Ȧ, A S and (Ȧ − A S X) S. P and Ṗ
-    /// (n × n) are never formed.
-    a: DMatrix<f64>,
-    adot: DMatrix<f64>,
-    a_s: DMatrix<f64>,
-    b: DMatrix<f64>,
     /// Vᵀ x and S Vᵀ x for the classical projector form.
     y_nd: DVector<f64>,
     y_nd2: DVector<f64>,
@@ -136,8 +176,20 @@ pub struct Controller {
     spec: ControllerSpec,
     n: usize,
     levels: Vec<Level>,
-    /// `null[i]` is the null space used by level i (index 0 unused).
-    null: Vec<NullSpace>,
+    /// The null space of the lowest level (empty with a single level).
+    basis: NullSpace,
+    /// J and J̇ of the levels above the lowest stacked (level 1 alone for r = 1),
+    /// K = Σ m_i rows; J_aug of level i is its first k_i rows (eq. 6).
+    jtop: DMatrix<f64>,
+    jtop_dot: DMatrix<f64>,
+    /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
+    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and Ẇ.
+    yt: DMatrix<f64>,
+    yt_dot: DMatrix<f64>,
+    y: DMatrix<f64>,
+    y_dot: DMatrix<f64>,
+    w: DMatrix<f64>,
+    w_dot: DMatrix<f64>,
     q: DVector<f64>,
     qd: DVector<f64>,
     /// Cholesky factor of M (M⁻¹ is applied by solves, never formed).
@@ -147,6 +199,8 @@ pub struct Controller {
     frame_jdot: DMatrix<f64>,
     /// M⁻¹ J_1ᵀ (n × m_1).
     minv_j1t: DMatrix<f64>,
+    /// Ẏ and Ẇ are needed (a level between the first and the lowest exists).
+    middle: bool,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
@@ -172,8 +226,10 @@ impl Controller {
         }
         let dims = spec.task_dims(n);
 
+        // The levels whose Jacobians are stacked in `jtop`: all above the lowest.
+        let top = if r == 1 { 1 } else { r - 1 };
+        let ktop: usize = dims[..top].iter().sum();
         let mut levels = Vec::with_capacity(r);
-        let mut null = Vec::with_capacity(r);
         let mut k = 0;
         for (i, l) in spec.levels.iter().enumerate() {
             let m = dims[i];
@@ -189,6 +245,11 @@ impl Controller {
                     Rotation3::from_euler_angles(l.goal[0], l.goal[1], l.goal[2])
                 }
                 _ => Rotation3::identity(),
+            };
+            let proj = if i > 0 && i < r - 1 {
+                Projection::new(k, m, n, ktop)
+            } else {
+                Projection::new(0, 0, 0, 0)
             };
             levels.push(Level {
                 m,
@@ -219,43 +280,40 @@ impl Controller {
                 y_d: DVector::zeros(d),
                 y_d2: DVector::zeros(d),
                 spd: SpdWork::new(d),
-            });
-            let nd = n - k;
-            // The thin factors of Z_i are used by the levels above the lowest only.
-            let mt = if i > 0 && i < r - 1 { m } else { 0 };
-            null.push(NullSpace {
-                jaug: DMatrix::zeros(k, n),
-                jaug_dot: DMatrix::zeros(k, n),
-                qr_work: DMatrix::zeros(n, k),
-                qr_q: DMatrix::zeros(n, n),
-                v: DMatrix::zeros(n, nd),
-                v_prev: DMatrix::zeros(n, nd),
-                has_prev: false,
-                vdot: DMatrix::zeros(n, nd),
-                gram: DMatrix::zeros(k, k),
-                gram_inv: DMatrix::zeros(k, k),
-                t1: DMatrix::zeros(k, nd),
-                t2: DMatrix::zeros(k, nd),
-                mv: DMatrix::zeros(n, nd),
-                mdv: DMatrix::zeros(n, nd),
-                vtmv: DMatrix::zeros(nd, nd),
-                s: DMatrix::zeros(nd, nd),
-                x: DMatrix::zeros(nd, nd),
-                tmp_dd: DMatrix::zeros(nd, nd),
-                a: DMatrix::zeros(mt, nd),
-                adot: DMatrix::zeros(mt, nd),
-                a_s: DMatrix::zeros(mt, nd),
-                b: DMatrix::zeros(mt, nd),
-                y_nd: DVector::zeros(nd),
-                y_nd2: DVector::zeros(nd),
-                spd_k: SpdWork::new(k),
-                spd_d: SpdWork::new(nd),
-                align: AlignWork::new(n, nd),
-                gram_cond: Conditioning::default(),
-                s_cond: Conditioning::default(),
+                proj,
             });
             k += m;
         }
+        // The lowest level's null space: k = K rows above it, n − K columns.
+        let (kb, nd) = if r > 1 { (ktop, n - ktop) } else { (0, 0) };
+        let nb = if r > 1 { n } else { 0 };
+        let basis = NullSpace {
+            qr_work: DMatrix::zeros(nb, kb),
+            qr_q: DMatrix::zeros(nb, nb),
+            v: DMatrix::zeros(nb, nd),
+            v_prev: DMatrix::zeros(nb, nd),
+            has_prev: false,
+            vdot: DMatrix::zeros(nb, nd),
+            gram: DMatrix::zeros(kb, kb),
+            gram_inv: DMatrix::zeros(kb, kb),
+            t1: DMatrix::zeros(kb, nd),
+            t2: DMatrix::zeros(kb, nd),
+            mv: DMatrix::zeros(nb, nd),
+            mdv: DMatrix::zeros(nb, nd),
+            vtmv: DMatrix::zeros(nd, nd),
+            s: DMatrix::zeros(nd, nd),
+            x: DMatrix::zeros(nd, nd),
+            tmp_dd: DMatrix::zeros(nd, nd),
+            y_nd: DVector::zeros(nd),
+            y_nd2: DVector::zeros(nd),
+            spd_k: SpdWork::new(kb),
+            spd_d: SpdWork::new(nd),
+            align: AlignWork::new(nb, nd),
+            gram_cond: Conditioning::default(),
+            s_cond: Conditioning::default(),
+        };
+        let middle = r > 2;
+        let kd = if middle { ktop } else { 0 };
         let m1 = dims[0];
         let out = Output {
             tau: DVector::zeros(n),
@@ -277,7 +335,16 @@ impl Controller {
             spec,
             n,
             levels,
-            null,
+            basis,
+            jtop: DMatrix::zeros(ktop, n),
+            jtop_dot: DMatrix::zeros(ktop, n),
+            yt: DMatrix::zeros(n, ktop),
+            yt_dot: DMatrix::zeros(n, kd),
+            y: DMatrix::zeros(ktop, n),
+            y_dot: DMatrix::zeros(kd, n),
+            w: DMatrix::zeros(ktop, ktop),
+            w_dot: DMatrix::zeros(kd, kd),
+            middle,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
             chol: DMatrix::zeros(n, n),
@@ -324,13 +391,17 @@ impl Controller {
                 }
             }
             if i > 0 {
-                let ns = &self.null[i];
-                if ns.gram_cond.ratio < eps {
+                let gc = if i == r - 1 {
+                    self.basis.gram_cond
+                } else {
+                    lv.proj.g_cond
+                };
+                if gc.ratio < eps {
                     return Err(ControlError::Level {
                         level: name,
                         why: format!(
                             "the Jacobians of the levels above it are not independent at the initial configuration (augmented Jacobian eigenvalue ratio {:.3e})",
-                            ns.gram_cond.ratio
+                            gc.ratio
                         ),
                     });
                 }
@@ -348,7 +419,7 @@ impl Controller {
             }
             if i == r - 1 && r > 1 {
                 // The lowest level must span the remaining null space: J_r V_{r-1} of full column rank.
-                let ns = &self.null[i];
+                let ns = &self.basis;
                 let d = ns.v.ncols();
                 let mut jv = DMatrix::zeros(lv.m, d);
                 gemm(&mut jv, 1.0, &lv.j, &ns.v, 0.0);
@@ -373,9 +444,7 @@ impl Controller {
     /// Forgets the null-space basis of the previous cycle (call when the state jumps,
     /// e.g. a new robot connection). The next cycle picks a fresh basis.
     pub fn reset(&mut self) {
-        for ns in &mut self.null {
-            ns.has_prev = false;
-        }
+        self.basis.has_prev = false;
     }
 
     /// Number of joints.
@@ -488,17 +557,52 @@ impl Controller {
             self.evaluate_task(i, q, qd);
         }
 
+        // The levels above the lowest, stacked: Y = J M⁻¹ (by solves, M⁻¹ is never
+        // formed), W = J M⁻¹ Jᵀ, whose diagonal blocks are J_i M⁻¹ J_iᵀ and whose
+        // leading blocks are J_aug M⁻¹ J_augᵀ (eq. 8), and their derivatives with
+        // d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹.
+        {
+            let mut row = 0;
+            let top = self.jtop.nrows();
+            for l in &self.levels {
+                if row == top {
+                    break;
+                }
+                for a in 0..l.m {
+                    for b in 0..n {
+                        self.jtop[(row + a, b)] = l.j[(a, b)];
+                        self.jtop_dot[(row + a, b)] = l.jdot[(a, b)];
+                    }
+                }
+                row += l.m;
+            }
+            transpose_into(&mut self.yt, &self.jtop);
+            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
+                .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
+            transpose_into(&mut self.y, &self.yt);
+            gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
+            if self.middle {
+                transpose_into(&mut self.yt_dot, &self.jtop_dot);
+                gemm(&mut self.yt_dot, -1.0, &self.mdot, &self.yt, 1.0);
+                hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt_dot)
+                    .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
+                transpose_into(&mut self.y_dot, &self.yt_dot);
+                gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
+                gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
+            }
+        }
+
         // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
         {
             let l = &mut self.levels[0];
             for a in 0..l.m {
+                for b in 0..l.m {
+                    l.lambda_inv[(a, b)] = self.w[(a, b)];
+                }
                 for b in 0..n {
-                    self.minv_j1t[(b, a)] = l.j[(a, b)];
+                    self.minv_j1t[(b, a)] = self.yt[(b, a)];
                 }
             }
-            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.minv_j1t)
-                .map_err(|_| ControlError::Numerical("M⁻¹ J_1ᵀ"))?;
-            gemm(&mut l.lambda_inv, 1.0, &l.j, &self.minv_j1t, 0.0);
             let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
             self.out.conditioning[0] = c.ratio;
             self.out.singular[0] = c.damping > 0.0;
@@ -511,13 +615,14 @@ impl Controller {
         // Null-space levels (eqs. 5–13, 16–18).
         for i in 1..r {
             let lowest = i == r - 1;
-            self.null_space(i)?;
+            if lowest {
+                self.null_space()?;
+            }
             let l = &mut self.levels[i];
-            let ns = &mut self.null[i];
-            let gc = ns.gram_cond;
-            let c = if lowest {
+            let (c, gc) = if lowest {
                 // Z_r = V_{r−1}ᵀ: Z M = (M V)ᵀ, Z Ṁ = (Ṁ V)ᵀ, Λ_r = Vᵀ M V (eq. 18) with its
                 // inverse S and derivative X, all from the null space already.
+                let ns = &self.basis;
                 for a in 0..l.d {
                     for b in 0..n {
                         l.z[(a, b)] = ns.v[(b, a)];
@@ -529,19 +634,40 @@ impl Controller {
                 l.lambda.copy_from(&ns.vtmv);
                 l.lambda_inv.copy_from(&ns.s);
                 l.lambda_dot.copy_from(&ns.x);
-                ns.s_cond
+                (ns.s_cond, ns.gram_cond)
             } else {
-                // Z_i = J_i V S Vᵀ = J_i P (eq. 12) and Ż_i = J̇_i P + J_i Ṗ in thin form:
-                // with A = J_i V and Ṡ = −S X S, Ż_i = (Ȧ − A S X) S Vᵀ + A S V̇ᵀ.
-                gemm(&mut ns.a, 1.0, &l.j, &ns.v, 0.0);
-                gemm(&mut ns.adot, 1.0, &l.jdot, &ns.v, 0.0);
-                gemm(&mut ns.adot, 1.0, &l.j, &ns.vdot, 1.0);
-                gemm(&mut ns.a_s, 1.0, &ns.a, &ns.s, 0.0);
-                gemm_nt(&mut l.z, 1.0, &ns.a_s, &ns.v, 0.0);
-                gemm(&mut ns.adot, -1.0, &ns.a_s, &ns.x, 1.0);
-                gemm(&mut ns.b, 1.0, &ns.adot, &ns.s, 0.0);
-                gemm_nt(&mut l.zdot, 1.0, &ns.b, &ns.v, 0.0);
-                gemm_nt(&mut l.zdot, 1.0, &ns.a_s, &ns.vdot, 1.0);
+                // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
+                // Z_i = Y_i − T Y_aug, T = H G⁻¹, and Ż_i = Ẏ_i − Ṫ Y_aug − T Ẏ_aug with
+                // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
+                let p = &mut l.proj;
+                let (k, m) = (p.k, l.m);
+                for a in 0..k {
+                    for b in 0..k {
+                        p.g[(a, b)] = self.w[(a, b)];
+                        p.gdot[(a, b)] = self.w_dot[(a, b)];
+                    }
+                    for b in 0..m {
+                        p.h[(b, a)] = self.w[(k + b, a)];
+                        p.hdot[(b, a)] = self.w_dot[(k + b, a)];
+                    }
+                }
+                for b in 0..n {
+                    for a in 0..k {
+                        p.y_aug[(a, b)] = self.y[(a, b)];
+                        p.y_aug_dot[(a, b)] = self.y_dot[(a, b)];
+                    }
+                    for a in 0..m {
+                        l.z[(a, b)] = self.y[(k + a, b)];
+                        l.zdot[(a, b)] = self.y_dot[(k + a, b)];
+                    }
+                }
+                p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+                gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
+                gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
+                gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
+                gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
+                gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
+                gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
                 // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
                 gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
                 gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
@@ -549,7 +675,9 @@ impl Controller {
                 gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
                 gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
                 gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
-                damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR)
+                let c =
+                    damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+                (c, p.g_cond)
             };
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
@@ -583,13 +711,29 @@ impl Controller {
                         gemv(&mut l.y_d, 1.0, &l.z, &self.tmp_n, 0.0);
                         gemv_t(tau_i, -1.0, &l.jbar, &l.y_d, 0.0);
                     }
-                    Form::ClassicalProjector => {
-                        // N_i J_iᵀ F_i with N_i = M P, P = V S Vᵀ (eq. 9), applied thin.
-                        let ns = &mut self.null[i];
+                    Form::ClassicalProjector if i == r - 1 => {
+                        // N_r J_rᵀ F_r with N_r = M V S Vᵀ (eq. 9).
+                        let ns = &mut self.basis;
                         gemv_t(&mut ns.y_nd, 1.0, &ns.v, &self.tmp_n, 0.0);
                         gemv(&mut ns.y_nd2, 1.0, &ns.s, &ns.y_nd, 0.0);
                         gemv(&mut self.tmp_n2, 1.0, &ns.v, &ns.y_nd2, 0.0);
                         gemv(tau_i, -1.0, &self.data.m, &self.tmp_n2, 0.0);
+                    }
+                    Form::ClassicalProjector => {
+                        // N_i J_iᵀ F_i with N_i = I − J_augᵀ G⁻¹ J_aug M⁻¹ (eq. 8).
+                        let p = &mut l.proj;
+                        gemv(&mut p.y_k, 1.0, &p.y_aug, &self.tmp_n, 0.0);
+                        p.y_top.fill(0.0);
+                        let (yk, gi) = (&p.y_k, &p.g_inv);
+                        for a in 0..p.k {
+                            let mut s = 0.0;
+                            for b in 0..p.k {
+                                s += gi[(a, b)] * yk[b];
+                            }
+                            p.y_top[a] = s;
+                        }
+                        tau_i.copy_from(&self.tmp_n);
+                        gemv_t(tau_i, 1.0, &self.jtop, &p.y_top, -1.0);
                     }
                 }
             }
@@ -634,27 +778,16 @@ impl Controller {
         Ok(())
     }
 
-    /// Null space of the augmented Jacobian above level `i` (eqs. 6–9): the basis V, its
-    /// derivative V̇ = −J⁺ J̇ V (parallel transport), M V, Ṁ V, Vᵀ M V, its inverse
-    /// S = (VᵀMV)⁻¹ and X = d/dt (VᵀMV). The basis is kept continuous in time (it matters
-    /// for Z_r = V_{r−1}ᵀ; for the other levels P = V S Vᵀ does not depend on it).
-    fn null_space(&mut self, i: usize) -> Result<(), ControlError> {
-        let n = self.n;
+    /// Null space of the augmented Jacobian above the lowest level (eqs. 6–9): the
+    /// basis V_{r−1}, its derivative V̇ = −J⁺ J̇ V (parallel transport), M V, Ṁ V,
+    /// Vᵀ M V, its inverse S and X = d/dt (VᵀMV). The basis is kept continuous in
+    /// time (Z_r = V_{r−1}ᵀ depends on it).
+    fn null_space(&mut self) -> Result<(), ControlError> {
         let eps = self.spec.singular_ratio;
-        let ns = &mut self.null[i];
-        // Stack J_1..J_{i−1} and their derivatives (eq. 6).
-        let mut row = 0;
-        for l in &self.levels[..i] {
-            for a in 0..l.m {
-                for b in 0..n {
-                    ns.jaug[(row + a, b)] = l.j[(a, b)];
-                    ns.jaug_dot[(row + a, b)] = l.jdot[(a, b)];
-                }
-            }
-            row += l.m;
-        }
+        let ns = &mut self.basis;
+        let (jaug, jaug_dot) = (&self.jtop, &self.jtop_dot);
         // J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
-        gemm_nt(&mut ns.gram, 1.0, &ns.jaug, &ns.jaug, 0.0);
+        gemm_nt(&mut ns.gram, 1.0, jaug, jaug, 0.0);
         ns.gram_cond =
             damped_spd_inverse(&ns.gram, &mut ns.gram_inv, &mut ns.spd_k, eps, GRAM_FLOOR);
         // The basis V: the previous cycle's basis projected onto the null space,
@@ -666,14 +799,14 @@ impl Controller {
         // aligned to the previous basis when there is one.
         let mut continued = false;
         if ns.has_prev {
-            gemm(&mut ns.t1, 1.0, &ns.jaug, &ns.v_prev, 0.0);
+            gemm(&mut ns.t1, 1.0, jaug, &ns.v_prev, 0.0);
             gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
             ns.v.copy_from(&ns.v_prev);
-            gemm_tn(&mut ns.v, -1.0, &ns.jaug, &ns.t2, 1.0);
+            gemm_tn(&mut ns.v, -1.0, jaug, &ns.t2, 1.0);
             continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
         }
         if !continued {
-            null_space_basis(&ns.jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
+            null_space_basis(jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
             if ns.has_prev {
                 procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
             }
@@ -681,9 +814,9 @@ impl Controller {
         ns.v_prev.copy_from(&ns.v);
         ns.has_prev = true;
         // V̇ = −J⁺ J̇ V (parallel transport).
-        gemm(&mut ns.t1, 1.0, &ns.jaug_dot, &ns.v, 0.0);
+        gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
-        gemm_tn(&mut ns.vdot, -1.0, &ns.jaug, &ns.t2, 0.0);
+        gemm_tn(&mut ns.vdot, -1.0, jaug, &ns.t2, 0.0);
         // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
         gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
@@ -901,4 +1034,13 @@ fn wrap_angle(a: f64) -> f64 {
         x += two_pi;
     }
     x
+}
+
+/// `out = aᵀ`.
+fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    for j in 0..a.ncols() {
+        for i in 0..a.nrows() {
+            out[(j, i)] = a[(i, j)];
+        }
+    }
 }
