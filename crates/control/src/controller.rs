@@ -73,13 +73,12 @@ struct Level {
     lambda_inv: DMatrix<f64>,
     lambda_dot: DMatrix<f64>,
     jbar: DMatrix<f64>,
-    jbar_dot: DMatrix<f64>,
     /// The block column of J̄⁻¹ belonging to this level (eq. 13), n × d.
     jbar_inv: DMatrix<f64>,
-    w_dn: DMatrix<f64>,
     v: DVector<f64>,
     y_d: DVector<f64>,
     y_d2: DVector<f64>,
+    y_d3: DVector<f64>,
     spd: SpdWork,
     /// Eq. (11) with (8) for 2 ≤ i < r (k = Σ_{j<i} m_j; empty otherwise):
     /// Z_i = J_i M⁻¹ N_i = Y_i − T Y_aug with Y = J M⁻¹, G = J_aug M⁻¹ J_augᵀ (k × k),
@@ -267,18 +266,17 @@ impl Controller {
                 potential: 0.0,
                 z: DMatrix::zeros(d, n),
                 zdot: DMatrix::zeros(d, n),
-                zm: DMatrix::zeros(d, n),
-                zmdot: DMatrix::zeros(d, n),
+                zm: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
+                zmdot: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
                 lambda: DMatrix::zeros(d, d),
                 lambda_inv: DMatrix::zeros(d, d),
                 lambda_dot: DMatrix::zeros(d, d),
                 jbar: DMatrix::zeros(d, n),
-                jbar_dot: DMatrix::zeros(d, n),
                 jbar_inv: DMatrix::zeros(n, d),
-                w_dn: DMatrix::zeros(d, n),
                 v: DVector::zeros(d),
                 y_d: DVector::zeros(d),
                 y_d2: DVector::zeros(d),
+                y_d3: DVector::zeros(d),
                 spd: SpdWork::new(d),
                 proj,
             });
@@ -607,7 +605,6 @@ impl Controller {
             self.out.conditioning[0] = c.ratio;
             self.out.singular[0] = c.damping > 0.0;
             l.jbar.copy_from(&l.j);
-            l.jbar_dot.copy_from(&l.jdot);
             // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
             gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
         }
@@ -620,20 +617,15 @@ impl Controller {
             }
             let l = &mut self.levels[i];
             let (c, gc) = if lowest {
-                // Z_r = V_{r−1}ᵀ: Z M = (M V)ᵀ, Z Ṁ = (Ṁ V)ᵀ, Λ_r = Vᵀ M V (eq. 18) with its
-                // inverse S and derivative X, all from the null space already.
+                // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
+                // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
                 let ns = &self.basis;
-                for a in 0..l.d {
-                    for b in 0..n {
-                        l.z[(a, b)] = ns.v[(b, a)];
-                        l.zdot[(a, b)] = ns.vdot[(b, a)];
-                        l.zm[(a, b)] = ns.mv[(b, a)];
-                        l.zmdot[(a, b)] = ns.mdv[(b, a)];
-                    }
-                }
+                transpose_into(&mut l.z, &ns.v);
+                transpose_into(&mut l.zdot, &ns.vdot);
                 l.lambda.copy_from(&ns.vtmv);
                 l.lambda_inv.copy_from(&ns.s);
                 l.lambda_dot.copy_from(&ns.x);
+                gemm_nt(&mut l.jbar, 1.0, &ns.s, &ns.mv, 0.0);
                 (ns.s_cond, ns.gram_cond)
             } else {
                 // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
@@ -677,17 +669,12 @@ impl Controller {
                 gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
                 let c =
                     damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+                // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
+                gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
                 (c, p.g_cond)
             };
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
-            // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
-            gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
-            // J̄̇_i = Λ_i⁻¹ (Ż M + Z Ṁ − Λ̇_i J̄_i).
-            gemm(&mut l.w_dn, 1.0, &l.zdot, &self.data.m, 0.0);
-            l.w_dn += &l.zmdot;
-            gemm(&mut l.w_dn, -1.0, &l.lambda_dot, &l.jbar, 1.0);
-            gemm(&mut l.jbar_dot, 1.0, &l.lambda_inv, &l.w_dn, 0.0);
             // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
             for a in 0..l.d {
                 for b in 0..n {
@@ -746,7 +733,9 @@ impl Controller {
         }
 
         // τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22) with μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17):
-        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i, so each level needs one matrix-vector chain.
+        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i = u, so each level needs one
+        // matrix-vector chain, J̄̇_i u = Λ_i⁻¹ (Ż_i M u + Z_i Ṁ u − Λ̇_i J̄_i u) included
+        // (J̄̇_1 = J̇_1): J̄̇_i itself is never formed.
         self.out.tau_mu.fill(0.0);
         if self.spec.coriolis_cancellation {
             for i in 0..r {
@@ -757,7 +746,17 @@ impl Controller {
                 hcc_model::linalg::cholesky_solve_in_place(&self.chol, &mut self.tmp_n3)
                     .map_err(|_| ControlError::Numerical("M⁻¹ C"))?;
                 gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
-                gemv(&mut l.y_d, -1.0, &l.jbar_dot, &self.tmp_n, 1.0);
+                if i == 0 {
+                    gemv(&mut l.y_d, -1.0, &l.jdot, &self.tmp_n, 1.0);
+                } else {
+                    gemv(&mut self.tmp_n2, 1.0, &self.data.m, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, 1.0, &l.zdot, &self.tmp_n2, 0.0);
+                    gemv(&mut self.tmp_n3, 1.0, &self.mdot, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, 1.0, &l.z, &self.tmp_n3, 1.0);
+                    gemv(&mut l.y_d2, 1.0, &l.jbar, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, -1.0, &l.lambda_dot, &l.y_d2, 1.0);
+                    gemv(&mut l.y_d, -1.0, &l.lambda_inv, &l.y_d3, 1.0);
+                }
                 gemv(&mut l.y_d2, 1.0, &l.lambda, &l.y_d, 0.0);
                 gemv_t(&mut self.out.tau_mu, 1.0, &l.jbar, &l.y_d2, 1.0);
             }
@@ -955,7 +954,14 @@ impl Controller {
         let mut row = 0;
         for l in &self.levels {
             jbar.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar);
-            jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar_dot);
+            // J̄̇_1 = J̇_1, J̄̇_i = Λ_i⁻¹ (Ż M + Z Ṁ − Λ̇_i J̄_i) (not formed by the step).
+            let jd = if row == 0 {
+                l.jdot.clone()
+            } else {
+                &l.lambda_inv
+                    * (&l.zdot * &self.data.m + &l.z * &self.mdot - &l.lambda_dot * &l.jbar)
+            };
+            jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&jd);
             jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&l.jbar_inv);
             lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
             row += l.d;
