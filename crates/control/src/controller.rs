@@ -196,6 +196,8 @@ pub struct Controller {
     mdot: DMatrix<f64>,
     frame_j: DMatrix<f64>,
     frame_jdot: DMatrix<f64>,
+    /// The frame whose J, J̇ and placement `frame_j`, `frame_jdot` hold in this cycle.
+    frame_cache: Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
     /// M⁻¹ J_1ᵀ (n × m_1).
     minv_j1t: DMatrix<f64>,
     /// Ẏ and Ẇ are needed (a level between the first and the lowest exists).
@@ -349,6 +351,7 @@ impl Controller {
             mdot: DMatrix::zeros(n, n),
             frame_j: DMatrix::zeros(6, n),
             frame_jdot: DMatrix::zeros(6, n),
+            frame_cache: None,
             minv_j1t: DMatrix::zeros(n, m1),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
@@ -543,14 +546,12 @@ impl Controller {
         self.chol.copy_from(&self.data.m);
         hcc_model::linalg::cholesky_in_place(&mut self.chol)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        for j in 0..n {
-            for i in 0..n {
-                self.mdot[(i, j)] = self.data.c[(i, j)] + self.data.c[(j, i)];
-            }
-        }
+        transpose_into(&mut self.mdot, &self.data.c);
+        self.mdot += &self.data.c;
         self.out.gravity.copy_from(&self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
+        self.frame_cache = None;
         for i in 0..r {
             self.evaluate_task(i, q, qd);
         }
@@ -566,12 +567,8 @@ impl Controller {
                 if row == top {
                     break;
                 }
-                for a in 0..l.m {
-                    for b in 0..n {
-                        self.jtop[(row + a, b)] = l.j[(a, b)];
-                        self.jtop_dot[(row + a, b)] = l.jdot[(a, b)];
-                    }
-                }
+                copy_block(&mut self.jtop, row, 0, &l.j, 0, 0, l.m, n);
+                copy_block(&mut self.jtop_dot, row, 0, &l.jdot, 0, 0, l.m, n);
                 row += l.m;
             }
             transpose_into(&mut self.yt, &self.jtop);
@@ -593,14 +590,8 @@ impl Controller {
         // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
         {
             let l = &mut self.levels[0];
-            for a in 0..l.m {
-                for b in 0..l.m {
-                    l.lambda_inv[(a, b)] = self.w[(a, b)];
-                }
-                for b in 0..n {
-                    self.minv_j1t[(b, a)] = self.yt[(b, a)];
-                }
-            }
+            copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
+            copy_block(&mut self.minv_j1t, 0, 0, &self.yt, 0, 0, n, l.m);
             let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
             self.out.conditioning[0] = c.ratio;
             self.out.singular[0] = c.damping > 0.0;
@@ -633,26 +624,14 @@ impl Controller {
                 // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
                 let p = &mut l.proj;
                 let (k, m) = (p.k, l.m);
-                for a in 0..k {
-                    for b in 0..k {
-                        p.g[(a, b)] = self.w[(a, b)];
-                        p.gdot[(a, b)] = self.w_dot[(a, b)];
-                    }
-                    for b in 0..m {
-                        p.h[(b, a)] = self.w[(k + b, a)];
-                        p.hdot[(b, a)] = self.w_dot[(k + b, a)];
-                    }
-                }
-                for b in 0..n {
-                    for a in 0..k {
-                        p.y_aug[(a, b)] = self.y[(a, b)];
-                        p.y_aug_dot[(a, b)] = self.y_dot[(a, b)];
-                    }
-                    for a in 0..m {
-                        l.z[(a, b)] = self.y[(k + a, b)];
-                        l.zdot[(a, b)] = self.y_dot[(k + a, b)];
-                    }
-                }
+                copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
+                copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
+                copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
+                copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
+                copy_block(&mut p.y_aug, 0, 0, &self.y, 0, 0, k, n);
+                copy_block(&mut p.y_aug_dot, 0, 0, &self.y_dot, 0, 0, k, n);
+                copy_block(&mut l.z, 0, 0, &self.y, k, 0, m, n);
+                copy_block(&mut l.zdot, 0, 0, &self.y_dot, k, 0, m, n);
                 p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
                 gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
                 gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
@@ -676,11 +655,7 @@ impl Controller {
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
             // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-            for a in 0..l.d {
-                for b in 0..n {
-                    l.jbar_inv[(b, a)] = l.z[(a, b)];
-                }
-            }
+            transpose_into(&mut l.jbar_inv, &l.z);
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
 
@@ -823,11 +798,8 @@ impl Controller {
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
         gemm_tn_sym(&mut ns.x, &ns.v, &ns.mdv);
         gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
-        for a in 0..ns.x.nrows() {
-            for b in 0..ns.x.ncols() {
-                ns.x[(a, b)] += ns.tmp_dd[(a, b)] + ns.tmp_dd[(b, a)];
-            }
-        }
+        ns.x += &ns.tmp_dd;
+        transpose_add(&mut ns.x, &ns.tmp_dd);
         Ok(())
     }
 
@@ -844,6 +816,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let p = placement.translation.vector;
                 for (a, &ax) in axes.iter().enumerate() {
@@ -862,6 +835,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let rot = placement.rotation.to_rotation_matrix();
                 let m = rot.matrix();
@@ -884,6 +858,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let rot = placement.rotation.to_rotation_matrix();
                 let re = l.goal_rotation.inverse() * rot;
@@ -1012,17 +987,27 @@ pub struct Diagnostics {
 }
 
 /// Frame Jacobian J and its time derivative J̇ (world axes at the frame origin) into
-/// the given buffers, and the frame's world placement.
+/// the given buffers, and the frame's world placement. `cache` names the frame the
+/// buffers hold in this cycle (consecutive tasks on one frame, e.g. TCP position and
+/// orientation, compute them once).
 fn frame_terms(
     model: &Model,
     data: &Data,
     frame: hcc_model::FrameId,
     j: &mut DMatrix<f64>,
     jdot: &mut DMatrix<f64>,
+    cache: &mut Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
 ) -> nalgebra::Isometry3<f64> {
+    if let Some((f, placement)) = *cache
+        && f == frame
+    {
+        return placement;
+    }
     hcc_model::frame_jacobian(model, data, frame, j);
     hcc_model::frame_jacobian_time_variation(model, data, frame, jdot);
-    hcc_model::frame_placement(model, data, frame)
+    let placement = hcc_model::frame_placement(model, data, frame);
+    *cache = Some((frame, placement));
+    placement
 }
 
 /// V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
@@ -1042,11 +1027,55 @@ fn wrap_angle(a: f64) -> f64 {
     x
 }
 
-/// `out = aᵀ`.
+/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
 fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
-    for j in 0..a.ncols() {
-        for i in 0..a.nrows() {
-            out[(j, i)] = a[(i, j)];
+    let (r, c) = a.shape();
+    assert_eq!(out.shape(), (c, r));
+    if r == 0 || c == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (i, col) in out.as_mut_slice().chunks_exact_mut(c).enumerate() {
+        for (o, x) in col.iter_mut().zip(a[i..].iter().step_by(r)) {
+            *o = *x;
         }
+    }
+}
+
+/// `out += aᵀ`.
+fn transpose_add(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    let (r, c) = a.shape();
+    assert_eq!(out.shape(), (c, r));
+    if r == 0 || c == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (i, col) in out.as_mut_slice().chunks_exact_mut(c).enumerate() {
+        for (o, x) in col.iter_mut().zip(a[i..].iter().step_by(r)) {
+            *o += *x;
+        }
+    }
+}
+
+/// `dst[dr.., dc..] = src[sr..sr + rows, sc..sc + cols]`, column by column.
+#[allow(clippy::too_many_arguments)]
+fn copy_block(
+    dst: &mut DMatrix<f64>,
+    dr: usize,
+    dc: usize,
+    src: &DMatrix<f64>,
+    sr: usize,
+    sc: usize,
+    rows: usize,
+    cols: usize,
+) {
+    let (dm, sm) = (dst.nrows(), src.nrows());
+    assert!(dr + rows <= dm && sr + rows <= sm);
+    assert!(dc + cols <= dst.ncols() && sc + cols <= src.ncols());
+    let (d, s) = (dst.as_mut_slice(), src.as_slice());
+    for j in 0..cols {
+        let o = (dc + j) * dm + dr;
+        let i = (sc + j) * sm + sr;
+        d[o..o + rows].copy_from_slice(&s[i..i + rows]);
     }
 }
