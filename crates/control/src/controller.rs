@@ -153,6 +153,8 @@ struct NullSpace {
     s: DMatrix<f64>,
     x: DMatrix<f64>,
     tmp_dd: DMatrix<f64>,
+    /// J̄_rᵀ = M V S (n × (n − K)).
+    jbar_t: DMatrix<f64>,
     /// Vᵀ x and S Vᵀ x for the classical projector form.
     y_nd: DVector<f64>,
     y_nd2: DVector<f64>,
@@ -181,6 +183,8 @@ pub struct Controller {
     /// K = Σ m_i rows; J_aug of level i is its first k_i rows (eq. 6).
     jtop: DMatrix<f64>,
     jtop_dot: DMatrix<f64>,
+    /// Jᵀ of the levels above the lowest (n × K).
+    jtop_t: DMatrix<f64>,
     /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
     /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and Ẇ.
     yt: DMatrix<f64>,
@@ -304,6 +308,7 @@ impl Controller {
             s: DMatrix::zeros(nd, nd),
             x: DMatrix::zeros(nd, nd),
             tmp_dd: DMatrix::zeros(nd, nd),
+            jbar_t: DMatrix::zeros(nb, nd),
             y_nd: DVector::zeros(nd),
             y_nd2: DVector::zeros(nd),
             spd_k: SpdWork::new(kb),
@@ -338,6 +343,7 @@ impl Controller {
             basis,
             jtop: DMatrix::zeros(ktop, n),
             jtop_dot: DMatrix::zeros(ktop, n),
+            jtop_t: DMatrix::zeros(n, ktop),
             yt: DMatrix::zeros(n, ktop),
             yt_dot: DMatrix::zeros(n, kd),
             y: DMatrix::zeros(ktop, n),
@@ -571,7 +577,8 @@ impl Controller {
                 copy_block(&mut self.jtop_dot, row, 0, &l.jdot, 0, 0, l.m, n);
                 row += l.m;
             }
-            transpose_into(&mut self.yt, &self.jtop);
+            transpose_into(&mut self.jtop_t, &self.jtop);
+            self.yt.copy_from(&self.jtop_t);
             hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
                 .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
             transpose_into(&mut self.y, &self.yt);
@@ -610,13 +617,14 @@ impl Controller {
             let (c, gc) = if lowest {
                 // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
                 // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
-                let ns = &self.basis;
+                let ns = &mut self.basis;
                 transpose_into(&mut l.z, &ns.v);
                 transpose_into(&mut l.zdot, &ns.vdot);
                 l.lambda.copy_from(&ns.vtmv);
                 l.lambda_inv.copy_from(&ns.s);
                 l.lambda_dot.copy_from(&ns.x);
-                gemm_nt(&mut l.jbar, 1.0, &ns.s, &ns.mv, 0.0);
+                gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
+                transpose_into(&mut l.jbar, &ns.jbar_t);
                 (ns.s_cond, ns.gram_cond)
             } else {
                 // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
@@ -759,7 +767,7 @@ impl Controller {
     fn null_space(&mut self) -> Result<(), ControlError> {
         let eps = self.spec.singular_ratio;
         let ns = &mut self.basis;
-        let (jaug, jaug_dot) = (&self.jtop, &self.jtop_dot);
+        let (jaug, jaug_t, jaug_dot) = (&self.jtop, &self.jtop_t, &self.jtop_dot);
         // J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
         gemm_nt(&mut ns.gram, 1.0, jaug, jaug, 0.0);
         ns.gram_cond =
@@ -776,7 +784,7 @@ impl Controller {
             gemm(&mut ns.t1, 1.0, jaug, &ns.v_prev, 0.0);
             gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
             ns.v.copy_from(&ns.v_prev);
-            gemm_tn(&mut ns.v, -1.0, jaug, &ns.t2, 1.0);
+            gemm(&mut ns.v, -1.0, jaug_t, &ns.t2, 1.0);
             continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
         }
         if !continued {
@@ -790,7 +798,7 @@ impl Controller {
         // V̇ = −J⁺ J̇ V (parallel transport).
         gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
-        gemm_tn(&mut ns.vdot, -1.0, jaug, &ns.t2, 0.0);
+        gemm(&mut ns.vdot, -1.0, jaug_t, &ns.t2, 0.0);
         // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
         gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
