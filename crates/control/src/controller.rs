@@ -2,8 +2,8 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemv, gemv_t,
-    null_space_basis, orthonormalize_polar, procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemm_tn_sym,
+    gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, TaskSpec};
 use hcc_model::{Data, Model};
@@ -73,21 +73,67 @@ struct Level {
     lambda_inv: DMatrix<f64>,
     lambda_dot: DMatrix<f64>,
     jbar: DMatrix<f64>,
-    jbar_dot: DMatrix<f64>,
     /// The block column of J̄⁻¹ belonging to this level (eq. 13), n × d.
     jbar_inv: DMatrix<f64>,
-    w_dn: DMatrix<f64>,
     v: DVector<f64>,
     y_d: DVector<f64>,
     y_d2: DVector<f64>,
+    y_d3: DVector<f64>,
     spd: SpdWork,
+    /// Eq. (11) with (8) for 2 ≤ i < r (k = Σ_{j<i} m_j; empty otherwise):
+    /// Z_i = J_i M⁻¹ N_i = Y_i − T Y_aug with Y = J M⁻¹, G = J_aug M⁻¹ J_augᵀ (k × k),
+    /// H = J_i M⁻¹ J_augᵀ (m × k), T = H G⁻¹, and the derivatives of G, H, T, Y.
+    proj: Projection,
 }
 
-/// Null space of the augmented Jacobian of the levels above level i (eq. 6–9).
+/// The blocks of eq. (8) for one level above the lowest.
+#[derive(Clone, Debug)]
+struct Projection {
+    k: usize,
+    g: DMatrix<f64>,
+    g_inv: DMatrix<f64>,
+    gdot: DMatrix<f64>,
+    h: DMatrix<f64>,
+    hdot: DMatrix<f64>,
+    t: DMatrix<f64>,
+    tdot: DMatrix<f64>,
+    y_aug: DMatrix<f64>,
+    y_aug_dot: DMatrix<f64>,
+    /// Vectors for the classical form N_i x = x − J_augᵀ G⁻¹ Y_aug x (eq. 8).
+    y_k: DVector<f64>,
+    y_top: DVector<f64>,
+    spd: SpdWork,
+    g_cond: Conditioning,
+}
+
+impl Projection {
+    fn new(k: usize, m: usize, n: usize, top: usize) -> Projection {
+        Projection {
+            k,
+            g: DMatrix::zeros(k, k),
+            g_inv: DMatrix::zeros(k, k),
+            gdot: DMatrix::zeros(k, k),
+            h: DMatrix::zeros(m, k),
+            hdot: DMatrix::zeros(m, k),
+            t: DMatrix::zeros(m, k),
+            tdot: DMatrix::zeros(m, k),
+            y_aug: DMatrix::zeros(k, n),
+            y_aug_dot: DMatrix::zeros(k, n),
+            y_k: DVector::zeros(k),
+            y_top: DVector::zeros(top),
+            spd: SpdWork::new(k),
+            g_cond: Conditioning {
+                ratio: 1.0,
+                damping: 0.0,
+            },
+        }
+    }
+}
+
+/// Null space of the augmented Jacobian of the levels above the lowest one
+/// (eqs. 6–9), for Z_r = V_{r−1}ᵀ.
 #[derive(Clone, Debug)]
 struct NullSpace {
-    jaug: DMatrix<f64>,
-    jaug_dot: DMatrix<f64>,
     qr_work: DMatrix<f64>,
     qr_q: DMatrix<f64>,
     /// V_{i−1}: orthonormal basis (n × (n − k)).
@@ -99,22 +145,24 @@ struct NullSpace {
     gram_inv: DMatrix<f64>,
     t1: DMatrix<f64>,
     t2: DMatrix<f64>,
+    /// M V and Ṁ V (n × (n − k)).
     mv: DMatrix<f64>,
     mdv: DMatrix<f64>,
-    vs: DMatrix<f64>,
-    tmp_nd: DMatrix<f64>,
+    /// VᵀMV, S = (VᵀMV)⁻¹ and X = d/dt (VᵀMV) = V̇ᵀMV + VᵀṀV + VᵀMV̇, so Ṡ = −S X S.
+    vtmv: DMatrix<f64>,
     s: DMatrix<f64>,
-    s_inv_src: DMatrix<f64>,
-    sdot: DMatrix<f64>,
     x: DMatrix<f64>,
     tmp_dd: DMatrix<f64>,
-    /// P = V (VᵀMV)⁻¹ Vᵀ = M⁻¹ N_i (eq. 9), n × n, and its time derivative.
-    p: DMatrix<f64>,
-    pdot: DMatrix<f64>,
+    /// J̄_rᵀ = M V S (n × (n − K)).
+    jbar_t: DMatrix<f64>,
+    /// Vᵀ x and S Vᵀ x for the classical projector form.
+    y_nd: DVector<f64>,
+    y_nd2: DVector<f64>,
     spd_k: SpdWork,
     spd_d: SpdWork,
     align: AlignWork,
     gram_cond: Conditioning,
+    s_cond: Conditioning,
 }
 
 /// The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer (IROS 2013).
@@ -129,16 +177,35 @@ pub struct Controller {
     spec: ControllerSpec,
     n: usize,
     levels: Vec<Level>,
-    /// `null[i]` is the null space used by level i (index 0 unused).
-    null: Vec<NullSpace>,
+    /// The null space of the lowest level (empty with a single level).
+    basis: NullSpace,
+    /// J and J̇ of the levels above the lowest stacked (level 1 alone for r = 1),
+    /// K = Σ m_i rows; J_aug of level i is its first k_i rows (eq. 6).
+    jtop: DMatrix<f64>,
+    jtop_dot: DMatrix<f64>,
+    /// Jᵀ of the levels above the lowest (n × K).
+    jtop_t: DMatrix<f64>,
+    /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
+    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and Ẇ.
+    yt: DMatrix<f64>,
+    yt_dot: DMatrix<f64>,
+    y: DMatrix<f64>,
+    y_dot: DMatrix<f64>,
+    w: DMatrix<f64>,
+    w_dot: DMatrix<f64>,
     q: DVector<f64>,
     qd: DVector<f64>,
-    minv: DMatrix<f64>,
+    /// Cholesky factor of M (M⁻¹ is applied by solves, never formed).
     chol: DMatrix<f64>,
     mdot: DMatrix<f64>,
     frame_j: DMatrix<f64>,
     frame_jdot: DMatrix<f64>,
-    jminv: DMatrix<f64>,
+    /// The frame whose J, J̇ and placement `frame_j`, `frame_jdot` hold in this cycle.
+    frame_cache: Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
+    /// M⁻¹ J_1ᵀ (n × m_1).
+    minv_j1t: DMatrix<f64>,
+    /// Ẏ and Ẇ are needed (a level between the first and the lowest exists).
+    middle: bool,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
@@ -164,8 +231,10 @@ impl Controller {
         }
         let dims = spec.task_dims(n);
 
+        // The levels whose Jacobians are stacked in `jtop`: all above the lowest.
+        let top = if r == 1 { 1 } else { r - 1 };
+        let ktop: usize = dims[..top].iter().sum();
         let mut levels = Vec::with_capacity(r);
-        let mut null = Vec::with_capacity(r);
         let mut k = 0;
         for (i, l) in spec.levels.iter().enumerate() {
             let m = dims[i];
@@ -181,6 +250,11 @@ impl Controller {
                     Rotation3::from_euler_angles(l.goal[0], l.goal[1], l.goal[2])
                 }
                 _ => Rotation3::identity(),
+            };
+            let proj = if i > 0 && i < r - 1 {
+                Projection::new(k, m, n, ktop)
+            } else {
+                Projection::new(0, 0, 0, 0)
             };
             levels.push(Level {
                 m,
@@ -198,52 +272,53 @@ impl Controller {
                 potential: 0.0,
                 z: DMatrix::zeros(d, n),
                 zdot: DMatrix::zeros(d, n),
-                zm: DMatrix::zeros(d, n),
-                zmdot: DMatrix::zeros(d, n),
+                zm: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
+                zmdot: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
                 lambda: DMatrix::zeros(d, d),
                 lambda_inv: DMatrix::zeros(d, d),
                 lambda_dot: DMatrix::zeros(d, d),
                 jbar: DMatrix::zeros(d, n),
-                jbar_dot: DMatrix::zeros(d, n),
                 jbar_inv: DMatrix::zeros(n, d),
-                w_dn: DMatrix::zeros(d, n),
                 v: DVector::zeros(d),
                 y_d: DVector::zeros(d),
                 y_d2: DVector::zeros(d),
+                y_d3: DVector::zeros(d),
                 spd: SpdWork::new(d),
-            });
-            let nd = n - k;
-            null.push(NullSpace {
-                jaug: DMatrix::zeros(k, n),
-                jaug_dot: DMatrix::zeros(k, n),
-                qr_work: DMatrix::zeros(n, k),
-                qr_q: DMatrix::zeros(n, n),
-                v: DMatrix::zeros(n, nd),
-                v_prev: DMatrix::zeros(n, nd),
-                has_prev: false,
-                vdot: DMatrix::zeros(n, nd),
-                gram: DMatrix::zeros(k, k),
-                gram_inv: DMatrix::zeros(k, k),
-                t1: DMatrix::zeros(k, nd),
-                t2: DMatrix::zeros(k, nd),
-                mv: DMatrix::zeros(n, nd),
-                mdv: DMatrix::zeros(n, nd),
-                vs: DMatrix::zeros(n, nd),
-                tmp_nd: DMatrix::zeros(n, nd),
-                s: DMatrix::zeros(nd, nd),
-                s_inv_src: DMatrix::zeros(nd, nd),
-                sdot: DMatrix::zeros(nd, nd),
-                x: DMatrix::zeros(nd, nd),
-                tmp_dd: DMatrix::zeros(nd, nd),
-                p: DMatrix::zeros(n, n),
-                pdot: DMatrix::zeros(n, n),
-                spd_k: SpdWork::new(k),
-                spd_d: SpdWork::new(nd),
-                align: AlignWork::new(n, nd),
-                gram_cond: Conditioning::default(),
+                proj,
             });
             k += m;
         }
+        // The lowest level's null space: k = K rows above it, n − K columns.
+        let (kb, nd) = if r > 1 { (ktop, n - ktop) } else { (0, 0) };
+        let nb = if r > 1 { n } else { 0 };
+        let basis = NullSpace {
+            qr_work: DMatrix::zeros(nb, kb),
+            qr_q: DMatrix::zeros(nb, nb),
+            v: DMatrix::zeros(nb, nd),
+            v_prev: DMatrix::zeros(nb, nd),
+            has_prev: false,
+            vdot: DMatrix::zeros(nb, nd),
+            gram: DMatrix::zeros(kb, kb),
+            gram_inv: DMatrix::zeros(kb, kb),
+            t1: DMatrix::zeros(kb, nd),
+            t2: DMatrix::zeros(kb, nd),
+            mv: DMatrix::zeros(nb, nd),
+            mdv: DMatrix::zeros(nb, nd),
+            vtmv: DMatrix::zeros(nd, nd),
+            s: DMatrix::zeros(nd, nd),
+            x: DMatrix::zeros(nd, nd),
+            tmp_dd: DMatrix::zeros(nd, nd),
+            jbar_t: DMatrix::zeros(nb, nd),
+            y_nd: DVector::zeros(nd),
+            y_nd2: DVector::zeros(nd),
+            spd_k: SpdWork::new(kb),
+            spd_d: SpdWork::new(nd),
+            align: AlignWork::new(nb, nd),
+            gram_cond: Conditioning::default(),
+            s_cond: Conditioning::default(),
+        };
+        let middle = r > 2;
+        let kd = if middle { ktop } else { 0 };
         let m1 = dims[0];
         let out = Output {
             tau: DVector::zeros(n),
@@ -265,15 +340,25 @@ impl Controller {
             spec,
             n,
             levels,
-            null,
+            basis,
+            jtop: DMatrix::zeros(ktop, n),
+            jtop_dot: DMatrix::zeros(ktop, n),
+            jtop_t: DMatrix::zeros(n, ktop),
+            yt: DMatrix::zeros(n, ktop),
+            yt_dot: DMatrix::zeros(n, kd),
+            y: DMatrix::zeros(ktop, n),
+            y_dot: DMatrix::zeros(kd, n),
+            w: DMatrix::zeros(ktop, ktop),
+            w_dot: DMatrix::zeros(kd, kd),
+            middle,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
-            minv: DMatrix::zeros(n, n),
             chol: DMatrix::zeros(n, n),
             mdot: DMatrix::zeros(n, n),
             frame_j: DMatrix::zeros(6, n),
             frame_jdot: DMatrix::zeros(6, n),
-            jminv: DMatrix::zeros(m1, n),
+            frame_cache: None,
+            minv_j1t: DMatrix::zeros(n, m1),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
@@ -313,13 +398,17 @@ impl Controller {
                 }
             }
             if i > 0 {
-                let ns = &self.null[i];
-                if ns.gram_cond.ratio < eps {
+                let gc = if i == r - 1 {
+                    self.basis.gram_cond
+                } else {
+                    lv.proj.g_cond
+                };
+                if gc.ratio < eps {
                     return Err(ControlError::Level {
                         level: name,
                         why: format!(
                             "the Jacobians of the levels above it are not independent at the initial configuration (augmented Jacobian eigenvalue ratio {:.3e})",
-                            ns.gram_cond.ratio
+                            gc.ratio
                         ),
                     });
                 }
@@ -337,7 +426,7 @@ impl Controller {
             }
             if i == r - 1 && r > 1 {
                 // The lowest level must span the remaining null space: J_r V_{r-1} of full column rank.
-                let ns = &self.null[i];
+                let ns = &self.basis;
                 let d = ns.v.ncols();
                 let mut jv = DMatrix::zeros(lv.m, d);
                 gemm(&mut jv, 1.0, &lv.j, &ns.v, 0.0);
@@ -362,9 +451,7 @@ impl Controller {
     /// Forgets the null-space basis of the previous cycle (call when the state jumps,
     /// e.g. a new robot connection). The next cycle picks a fresh basis.
     pub fn reset(&mut self) {
-        for ns in &mut self.null {
-            ns.has_prev = false;
-        }
+        self.basis.has_prev = false;
     }
 
     /// Number of joints.
@@ -461,85 +548,122 @@ impl Controller {
         let r = self.levels.len();
         let eps = self.spec.singular_ratio;
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
-        // M⁻¹ and Ṁ = C + Cᵀ (Sec. II).
+        // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
         self.chol.copy_from(&self.data.m);
         hcc_model::linalg::cholesky_in_place(&mut self.chol)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        self.minv.fill_with_identity();
-        hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.minv)
-            .map_err(|_| ControlError::Numerical("M⁻¹"))?;
-        for j in 0..n {
-            for i in 0..n {
-                self.mdot[(i, j)] = self.data.c[(i, j)] + self.data.c[(j, i)];
-            }
-        }
+        transpose_into(&mut self.mdot, &self.data.c);
+        self.mdot += &self.data.c;
         self.out.gravity.copy_from(&self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
+        self.frame_cache = None;
         for i in 0..r {
             self.evaluate_task(i, q, qd);
+        }
+
+        // The levels above the lowest, stacked: Y = J M⁻¹ (by solves, M⁻¹ is never
+        // formed), W = J M⁻¹ Jᵀ, whose diagonal blocks are J_i M⁻¹ J_iᵀ and whose
+        // leading blocks are J_aug M⁻¹ J_augᵀ (eq. 8), and their derivatives with
+        // d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹.
+        {
+            let mut row = 0;
+            let top = self.jtop.nrows();
+            for l in &self.levels {
+                if row == top {
+                    break;
+                }
+                copy_block(&mut self.jtop, row, 0, &l.j, 0, 0, l.m, n);
+                copy_block(&mut self.jtop_dot, row, 0, &l.jdot, 0, 0, l.m, n);
+                row += l.m;
+            }
+            transpose_into(&mut self.jtop_t, &self.jtop);
+            self.yt.copy_from(&self.jtop_t);
+            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
+                .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
+            transpose_into(&mut self.y, &self.yt);
+            gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
+            if self.middle {
+                transpose_into(&mut self.yt_dot, &self.jtop_dot);
+                gemm(&mut self.yt_dot, -1.0, &self.mdot, &self.yt, 1.0);
+                hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt_dot)
+                    .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
+                transpose_into(&mut self.y_dot, &self.yt_dot);
+                gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
+                gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
+            }
         }
 
         // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
         {
             let l = &mut self.levels[0];
-            gemm(&mut self.jminv, 1.0, &l.j, &self.minv, 0.0);
-            gemm_nt(&mut l.lambda_inv, 1.0, &self.jminv, &l.j, 0.0);
+            copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
+            copy_block(&mut self.minv_j1t, 0, 0, &self.yt, 0, 0, n, l.m);
             let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
             self.out.conditioning[0] = c.ratio;
             self.out.singular[0] = c.damping > 0.0;
             l.jbar.copy_from(&l.j);
-            l.jbar_dot.copy_from(&l.jdot);
             // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
-            gemm_tn(&mut l.jbar_inv, 1.0, &self.jminv, &l.lambda, 0.0);
+            gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
         }
 
         // Null-space levels (eqs. 5–13, 16–18).
         for i in 1..r {
             let lowest = i == r - 1;
-            self.null_space(i, lowest)?;
-            let (upper, rest) = self.levels.split_at_mut(i);
-            let _ = upper;
-            let l = &mut rest[0];
-            let ns = &mut self.null[i];
             if lowest {
-                // Z_r = V_{r−1}ᵀ.
-                for a in 0..l.d {
-                    for b in 0..n {
-                        l.z[(a, b)] = ns.v[(b, a)];
-                        l.zdot[(a, b)] = ns.vdot[(b, a)];
-                    }
-                }
-            } else {
-                // Z_i = J_i V (VᵀMV)⁻¹ Vᵀ = J_i P (eq. 12), Ż_i = J̇_i P + J_i Ṗ.
-                gemm(&mut l.z, 1.0, &l.j, &ns.p, 0.0);
-                gemm(&mut l.zdot, 1.0, &l.jdot, &ns.p, 0.0);
-                gemm(&mut l.zdot, 1.0, &l.j, &ns.pdot, 1.0);
+                self.null_space()?;
             }
-            // Λ_i = Z M Zᵀ (eq. 18) and its derivative.
-            gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
-            gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
-            gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
-            let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
-            let gc = ns.gram_cond;
+            let l = &mut self.levels[i];
+            let (c, gc) = if lowest {
+                // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
+                // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
+                let ns = &mut self.basis;
+                transpose_into(&mut l.z, &ns.v);
+                transpose_into(&mut l.zdot, &ns.vdot);
+                l.lambda.copy_from(&ns.vtmv);
+                l.lambda_inv.copy_from(&ns.s);
+                l.lambda_dot.copy_from(&ns.x);
+                gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
+                transpose_into(&mut l.jbar, &ns.jbar_t);
+                (ns.s_cond, ns.gram_cond)
+            } else {
+                // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
+                // Z_i = Y_i − T Y_aug, T = H G⁻¹, and Ż_i = Ẏ_i − Ṫ Y_aug − T Ẏ_aug with
+                // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
+                let p = &mut l.proj;
+                let (k, m) = (p.k, l.m);
+                copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
+                copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
+                copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
+                copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
+                copy_block(&mut p.y_aug, 0, 0, &self.y, 0, 0, k, n);
+                copy_block(&mut p.y_aug_dot, 0, 0, &self.y_dot, 0, 0, k, n);
+                copy_block(&mut l.z, 0, 0, &self.y, k, 0, m, n);
+                copy_block(&mut l.zdot, 0, 0, &self.y_dot, k, 0, m, n);
+                p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+                gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
+                gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
+                gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
+                gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
+                gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
+                gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
+                // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
+                gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
+                gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
+                gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+                gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
+                let c =
+                    damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+                // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
+                gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
+                (c, p.g_cond)
+            };
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
-            // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
-            gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
-            // J̄̇_i = Λ_i⁻¹ (Ż M + Z Ṁ − Λ̇_i J̄_i).
-            gemm(&mut l.w_dn, 1.0, &l.zdot, &self.data.m, 0.0);
-            l.w_dn += &l.zmdot;
-            gemm(&mut l.w_dn, -1.0, &l.lambda_dot, &l.jbar, 1.0);
-            gemm(&mut l.jbar_dot, 1.0, &l.lambda_inv, &l.w_dn, 0.0);
             // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-            for a in 0..l.d {
-                for b in 0..n {
-                    l.jbar_inv[(b, a)] = l.z[(a, b)];
-                }
-            }
+            transpose_into(&mut l.jbar_inv, &l.z);
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
 
@@ -557,10 +681,29 @@ impl Controller {
                         gemv(&mut l.y_d, 1.0, &l.z, &self.tmp_n, 0.0);
                         gemv_t(tau_i, -1.0, &l.jbar, &l.y_d, 0.0);
                     }
-                    Form::ClassicalProjector => {
-                        // N_i J_iᵀ F_i with N_i = M P (eq. 9).
-                        gemv(&mut self.tmp_n2, 1.0, &self.null[i].p, &self.tmp_n, 0.0);
+                    Form::ClassicalProjector if i == r - 1 => {
+                        // N_r J_rᵀ F_r with N_r = M V S Vᵀ (eq. 9).
+                        let ns = &mut self.basis;
+                        gemv_t(&mut ns.y_nd, 1.0, &ns.v, &self.tmp_n, 0.0);
+                        gemv(&mut ns.y_nd2, 1.0, &ns.s, &ns.y_nd, 0.0);
+                        gemv(&mut self.tmp_n2, 1.0, &ns.v, &ns.y_nd2, 0.0);
                         gemv(tau_i, -1.0, &self.data.m, &self.tmp_n2, 0.0);
+                    }
+                    Form::ClassicalProjector => {
+                        // N_i J_iᵀ F_i with N_i = I − J_augᵀ G⁻¹ J_aug M⁻¹ (eq. 8).
+                        let p = &mut l.proj;
+                        gemv(&mut p.y_k, 1.0, &p.y_aug, &self.tmp_n, 0.0);
+                        p.y_top.fill(0.0);
+                        let (yk, gi) = (&p.y_k, &p.g_inv);
+                        for a in 0..p.k {
+                            let mut s = 0.0;
+                            for b in 0..p.k {
+                                s += gi[(a, b)] * yk[b];
+                            }
+                            p.y_top[a] = s;
+                        }
+                        tau_i.copy_from(&self.tmp_n);
+                        gemv_t(tau_i, 1.0, &self.jtop, &p.y_top, -1.0);
                     }
                 }
             }
@@ -573,17 +716,30 @@ impl Controller {
         }
 
         // τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22) with μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17):
-        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i, so each level needs one matrix-vector chain.
+        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i = u, so each level needs one
+        // matrix-vector chain, J̄̇_i u = Λ_i⁻¹ (Ż_i M u + Z_i Ṁ u − Λ̇_i J̄_i u) included
+        // (J̄̇_1 = J̇_1): J̄̇_i itself is never formed.
         self.out.tau_mu.fill(0.0);
         if self.spec.coriolis_cancellation {
             for i in 0..r {
                 let l = &mut self.levels[i];
                 self.tmp_n.copy_from(qd);
                 gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
-                gemv(&mut self.tmp_n2, 1.0, &self.data.c, &self.tmp_n, 0.0);
-                gemv(&mut self.tmp_n3, 1.0, &self.minv, &self.tmp_n2, 0.0);
+                gemv(&mut self.tmp_n3, 1.0, &self.data.c, &self.tmp_n, 0.0);
+                hcc_model::linalg::cholesky_solve_in_place(&self.chol, &mut self.tmp_n3)
+                    .map_err(|_| ControlError::Numerical("M⁻¹ C"))?;
                 gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
-                gemv(&mut l.y_d, -1.0, &l.jbar_dot, &self.tmp_n, 1.0);
+                if i == 0 {
+                    gemv(&mut l.y_d, -1.0, &l.jdot, &self.tmp_n, 1.0);
+                } else {
+                    gemv(&mut self.tmp_n2, 1.0, &self.data.m, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, 1.0, &l.zdot, &self.tmp_n2, 0.0);
+                    gemv(&mut self.tmp_n3, 1.0, &self.mdot, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, 1.0, &l.z, &self.tmp_n3, 1.0);
+                    gemv(&mut l.y_d2, 1.0, &l.jbar, &self.tmp_n, 0.0);
+                    gemv(&mut l.y_d3, -1.0, &l.lambda_dot, &l.y_d2, 1.0);
+                    gemv(&mut l.y_d, -1.0, &l.lambda_inv, &l.y_d3, 1.0);
+                }
                 gemv(&mut l.y_d2, 1.0, &l.lambda, &l.y_d, 0.0);
                 gemv_t(&mut self.out.tau_mu, 1.0, &l.jbar, &l.y_d2, 1.0);
             }
@@ -604,26 +760,16 @@ impl Controller {
         Ok(())
     }
 
-    /// Null space of the augmented Jacobian above level `i`: V, V̇ = −J⁺ J̇ V (parallel
-    /// transport), P = V (VᵀMV)⁻¹ Vᵀ and Ṗ. The basis is kept continuous in time (it
-    /// matters for Z_r = V_{r−1}ᵀ; for the other levels P does not depend on it).
-    fn null_space(&mut self, i: usize, lowest: bool) -> Result<(), ControlError> {
-        let n = self.n;
+    /// Null space of the augmented Jacobian above the lowest level (eqs. 6–9): the
+    /// basis V_{r−1}, its derivative V̇ = −J⁺ J̇ V (parallel transport), M V, Ṁ V,
+    /// Vᵀ M V, its inverse S and X = d/dt (VᵀMV). The basis is kept continuous in
+    /// time (Z_r = V_{r−1}ᵀ depends on it).
+    fn null_space(&mut self) -> Result<(), ControlError> {
         let eps = self.spec.singular_ratio;
-        let ns = &mut self.null[i];
-        // Stack J_1..J_{i−1} and their derivatives (eq. 6).
-        let mut row = 0;
-        for l in &self.levels[..i] {
-            for a in 0..l.m {
-                for b in 0..n {
-                    ns.jaug[(row + a, b)] = l.j[(a, b)];
-                    ns.jaug_dot[(row + a, b)] = l.jdot[(a, b)];
-                }
-            }
-            row += l.m;
-        }
+        let ns = &mut self.basis;
+        let (jaug, jaug_t, jaug_dot) = (&self.jtop, &self.jtop_t, &self.jtop_dot);
         // J⁺ = Jᵀ (J Jᵀ)⁻¹ (damped near singularities).
-        gemm_nt(&mut ns.gram, 1.0, &ns.jaug, &ns.jaug, 0.0);
+        gemm_nt(&mut ns.gram, 1.0, jaug, jaug, 0.0);
         ns.gram_cond =
             damped_spd_inverse(&ns.gram, &mut ns.gram_inv, &mut ns.spd_k, eps, GRAM_FLOOR);
         // The basis V: the previous cycle's basis projected onto the null space,
@@ -635,14 +781,14 @@ impl Controller {
         // aligned to the previous basis when there is one.
         let mut continued = false;
         if ns.has_prev {
-            gemm(&mut ns.t1, 1.0, &ns.jaug, &ns.v_prev, 0.0);
+            gemm(&mut ns.t1, 1.0, jaug, &ns.v_prev, 0.0);
             gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
             ns.v.copy_from(&ns.v_prev);
-            gemm_tn(&mut ns.v, -1.0, &ns.jaug, &ns.t2, 1.0);
+            gemm(&mut ns.v, -1.0, jaug_t, &ns.t2, 1.0);
             continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
         }
         if !continued {
-            null_space_basis(&ns.jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
+            null_space_basis(jaug, &mut ns.qr_work, &mut ns.qr_q, &mut ns.v);
             if ns.has_prev {
                 procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
             }
@@ -650,33 +796,18 @@ impl Controller {
         ns.v_prev.copy_from(&ns.v);
         ns.has_prev = true;
         // V̇ = −J⁺ J̇ V (parallel transport).
-        gemm(&mut ns.t1, 1.0, &ns.jaug_dot, &ns.v, 0.0);
+        gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
-        gemm_tn(&mut ns.vdot, -1.0, &ns.jaug, &ns.t2, 0.0);
-        // S = (VᵀMV)⁻¹ (always positive definite), Ṡ = −S (V̇ᵀMV + VᵀṀV + VᵀMV̇) S.
+        gemm(&mut ns.vdot, -1.0, jaug_t, &ns.t2, 0.0);
+        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
-        gemm_tn(&mut ns.s_inv_src, 1.0, &ns.v, &ns.mv, 0.0);
-        damped_spd_inverse(&ns.s_inv_src, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
+        gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
+        ns.s_cond = damped_spd_inverse(&ns.vtmv, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
-        gemm_tn(&mut ns.x, 1.0, &ns.v, &ns.mdv, 0.0);
+        gemm_tn_sym(&mut ns.x, &ns.v, &ns.mdv);
         gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
-        for a in 0..ns.x.nrows() {
-            for b in 0..ns.x.ncols() {
-                ns.x[(a, b)] += ns.tmp_dd[(a, b)] + ns.tmp_dd[(b, a)];
-            }
-        }
-        gemm(&mut ns.tmp_dd, 1.0, &ns.x, &ns.s, 0.0);
-        gemm(&mut ns.sdot, -1.0, &ns.s, &ns.tmp_dd, 0.0);
-        if !lowest || self.spec.form == Form::ClassicalProjector {
-            // P = V S Vᵀ; Ṗ = V̇ S Vᵀ + V Ṡ Vᵀ + V S V̇ᵀ.
-            gemm(&mut ns.vs, 1.0, &ns.v, &ns.s, 0.0);
-            gemm_nt(&mut ns.p, 1.0, &ns.vs, &ns.v, 0.0);
-            gemm(&mut ns.tmp_nd, 1.0, &ns.vdot, &ns.s, 0.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 0.0);
-            gemm(&mut ns.tmp_nd, 1.0, &ns.v, &ns.sdot, 0.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.tmp_nd, &ns.v, 1.0);
-            gemm_nt(&mut ns.pdot, 1.0, &ns.vs, &ns.vdot, 1.0);
-        }
+        ns.x += &ns.tmp_dd;
+        transpose_add(&mut ns.x, &ns.tmp_dd);
         Ok(())
     }
 
@@ -693,6 +824,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let p = placement.translation.vector;
                 for (a, &ax) in axes.iter().enumerate() {
@@ -711,6 +843,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let rot = placement.rotation.to_rotation_matrix();
                 let m = rot.matrix();
@@ -733,6 +866,7 @@ impl Controller {
                     *frame,
                     &mut self.frame_j,
                     &mut self.frame_jdot,
+                    &mut self.frame_cache,
                 );
                 let rot = placement.rotation.to_rotation_matrix();
                 let re = l.goal_rotation.inverse() * rot;
@@ -803,13 +937,25 @@ impl Controller {
         let mut row = 0;
         for l in &self.levels {
             jbar.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar);
-            jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&l.jbar_dot);
+            // J̄̇_1 = J̇_1, J̄̇_i = Λ_i⁻¹ (Ż M + Z Ṁ − Λ̇_i J̄_i) (not formed by the step).
+            let jd = if row == 0 {
+                l.jdot.clone()
+            } else {
+                &l.lambda_inv
+                    * (&l.zdot * &self.data.m + &l.z * &self.mdot - &l.lambda_dot * &l.jbar)
+            };
+            jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&jd);
             jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&l.jbar_inv);
             lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
             row += l.d;
         }
+        let mut minv = DMatrix::identity(n, n);
+        // The factor is valid after any cycle that got past M (else M⁻¹ is NaN).
+        if hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut minv).is_err() {
+            minv.fill(f64::NAN);
+        }
         let mu = if total == n {
-            &lambda * (&jbar * &self.minv * &self.data.c - &jbar_dot) * &jbar_inv
+            &lambda * (&jbar * &minv * &self.data.c - &jbar_dot) * &jbar_inv
         } else {
             DMatrix::zeros(total, total)
         };
@@ -823,7 +969,7 @@ impl Controller {
             lambda,
             mu,
             m: self.data.m.clone(),
-            minv: self.minv.clone(),
+            minv,
             c: self.data.c.clone(),
         }
     }
@@ -849,17 +995,27 @@ pub struct Diagnostics {
 }
 
 /// Frame Jacobian J and its time derivative J̇ (world axes at the frame origin) into
-/// the given buffers, and the frame's world placement.
+/// the given buffers, and the frame's world placement. `cache` names the frame the
+/// buffers hold in this cycle (consecutive tasks on one frame, e.g. TCP position and
+/// orientation, compute them once).
 fn frame_terms(
     model: &Model,
     data: &Data,
     frame: hcc_model::FrameId,
     j: &mut DMatrix<f64>,
     jdot: &mut DMatrix<f64>,
+    cache: &mut Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
 ) -> nalgebra::Isometry3<f64> {
+    if let Some((f, placement)) = *cache
+        && f == frame
+    {
+        return placement;
+    }
     hcc_model::frame_jacobian(model, data, frame, j);
     hcc_model::frame_jacobian_time_variation(model, data, frame, jdot);
-    hcc_model::frame_placement(model, data, frame)
+    let placement = hcc_model::frame_placement(model, data, frame);
+    *cache = Some((frame, placement));
+    placement
 }
 
 /// V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
@@ -877,4 +1033,57 @@ fn wrap_angle(a: f64) -> f64 {
         x += two_pi;
     }
     x
+}
+
+/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
+fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    let (r, c) = a.shape();
+    assert_eq!(out.shape(), (c, r));
+    if r == 0 || c == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (i, col) in out.as_mut_slice().chunks_exact_mut(c).enumerate() {
+        for (o, x) in col.iter_mut().zip(a[i..].iter().step_by(r)) {
+            *o = *x;
+        }
+    }
+}
+
+/// `out += aᵀ`.
+fn transpose_add(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    let (r, c) = a.shape();
+    assert_eq!(out.shape(), (c, r));
+    if r == 0 || c == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (i, col) in out.as_mut_slice().chunks_exact_mut(c).enumerate() {
+        for (o, x) in col.iter_mut().zip(a[i..].iter().step_by(r)) {
+            *o += *x;
+        }
+    }
+}
+
+/// `dst[dr.., dc..] = src[sr..sr + rows, sc..sc + cols]`, column by column.
+#[allow(clippy::too_many_arguments)]
+fn copy_block(
+    dst: &mut DMatrix<f64>,
+    dr: usize,
+    dc: usize,
+    src: &DMatrix<f64>,
+    sr: usize,
+    sc: usize,
+    rows: usize,
+    cols: usize,
+) {
+    let (dm, sm) = (dst.nrows(), src.nrows());
+    assert!(dr + rows <= dm && sr + rows <= sm);
+    assert!(dc + cols <= dst.ncols() && sc + cols <= src.ncols());
+    let (d, s) = (dst.as_mut_slice(), src.as_slice());
+    for j in 0..cols {
+        let o = (dc + j) * dm + dr;
+        let i = (sc + j) * sm + sr;
+        d[o..o + rows].copy_from_slice(&s[i..i + rows]);
+    }
 }

@@ -3,83 +3,249 @@
 //! inversion and the orthogonal Procrustes alignment of a basis.
 //!
 //! Every function assumes outputs of the right size (checked by the caller at
-//! construction); loops are plain column-major triple loops — the matrices of a
-//! robot controller are at most a few dozen rows, where this is as fast as a
-//! blocked kernel and, unlike one, allocates no packing buffer.
+//! construction). The products work on the column-major storage with small register
+//! blocks (no packing buffer, so nothing to allocate — the matrices of a robot
+//! controller are at most a few dozen rows). Every element is summed in the order of
+//! the plain triple loop, so the results do not depend on the blocking.
 
 use nalgebra::{DMatrix, DVector};
 
-/// `c = alpha * a * b + beta * c`.
-pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, k, n) = (a.nrows(), a.ncols(), b.ncols());
-    debug_assert_eq!(b.nrows(), k);
-    debug_assert_eq!(c.shape(), (m, n));
+/// Rows per register block of the column-oriented kernels.
+const MR: usize = 8;
+
+/// `alpha * s + beta * c` exactly as the reference triple loop forms it.
+#[inline(always)]
+fn scale(alpha: f64, s: f64, beta: f64, c: f64) -> f64 {
+    alpha * s + if beta == 0.0 { 0.0 } else { beta * c }
+}
+
+/// `c = alpha * a * op(b) + beta * c`, `bcol(j)` iterating over column j of op(b).
+/// Column-major: rows in blocks of at most [`MR`] accumulators (a kernel per block
+/// width, so small matrices run fully unrolled), two output columns at a time, so the
+/// inner loop runs down contiguous columns of `a` and vectorises. Every element is
+/// still summed over l in increasing order, so the result is bitwise that of the plain
+/// dot-product loop.
+#[inline(always)]
+fn gemm_cols<'b, I: Iterator<Item = &'b f64>>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &DMatrix<f64>,
+    n: usize,
+    bcol: impl Fn(usize) -> I,
+    beta: f64,
+) {
+    let m = a.nrows();
+    if m == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    let mut i = 0;
+    while i < m {
+        let w = MR.min(m - i);
+        match w {
+            8 => rows::<8, I>(c, alpha, a, m, i, n, &bcol, beta),
+            7 => rows::<7, I>(c, alpha, a, m, i, n, &bcol, beta),
+            6 => rows::<6, I>(c, alpha, a, m, i, n, &bcol, beta),
+            5 => rows::<5, I>(c, alpha, a, m, i, n, &bcol, beta),
+            4 => rows::<4, I>(c, alpha, a, m, i, n, &bcol, beta),
+            3 => rows::<3, I>(c, alpha, a, m, i, n, &bcol, beta),
+            2 => rows::<2, I>(c, alpha, a, m, i, n, &bcol, beta),
+            _ => rows::<1, I>(c, alpha, a, m, i, n, &bcol, beta),
+        }
+        i += w;
+    }
+}
+
+/// Rows i..i+W of [`gemm_cols`], one output column at a time (W accumulators, which
+/// the compiler keeps in vector registers across the rows).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn rows<'b, const W: usize, I: Iterator<Item = &'b f64>>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    m: usize,
+    i: usize,
+    n: usize,
+    bcol: &impl Fn(usize) -> I,
+    beta: f64,
+) {
+    assert!(i + W <= m);
     for j in 0..n {
-        for i in 0..m {
-            let mut s = 0.0;
-            for l in 0..k {
-                s += a[(i, l)] * b[(l, j)];
+        let mut s = [0.0; W];
+        for (al, &bl) in a.chunks_exact(m).zip(bcol(j)) {
+            let al: &[f64; W] = al[i..i + W].try_into().unwrap();
+            for t in 0..W {
+                s[t] += al[t] * bl;
             }
-            c[(i, j)] = alpha * s + if beta == 0.0 { 0.0 } else { beta * c[(i, j)] };
+        }
+        let cj = &mut c[j * m + i..j * m + i + W];
+        for t in 0..W {
+            cj[t] = scale(alpha, s[t], beta, cj[t]);
         }
     }
 }
 
-/// `c = alpha * aᵀ * b + beta * c`.
-pub fn gemm_tn(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, k, n) = (a.ncols(), a.nrows(), b.ncols());
-    debug_assert_eq!(b.nrows(), k);
-    debug_assert_eq!(c.shape(), (m, n));
-    for j in 0..n {
-        for i in 0..m {
-            let mut s = 0.0;
-            for l in 0..k {
-                s += a[(l, i)] * b[(l, j)];
-            }
-            c[(i, j)] = alpha * s + if beta == 0.0 { 0.0 } else { beta * c[(i, j)] };
-        }
-    }
+/// `c = alpha * a * b + beta * c`.
+pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
+    let (m, k, n) = (a.nrows(), a.ncols(), b.ncols());
+    assert_eq!(b.nrows(), k);
+    assert_eq!(c.shape(), (m, n));
+    let bs = b.as_slice();
+    gemm_cols(
+        c.as_mut_slice(),
+        alpha,
+        a,
+        n,
+        |j| bs[j * k..(j + 1) * k].iter(),
+        beta,
+    );
 }
 
 /// `c = alpha * a * bᵀ + beta * c`.
 pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
-    debug_assert_eq!(b.ncols(), k);
-    debug_assert_eq!(c.shape(), (m, n));
+    assert_eq!(b.ncols(), k);
+    assert_eq!(c.shape(), (m, n));
+    let bs = b.as_slice();
+    gemm_cols(
+        c.as_mut_slice(),
+        alpha,
+        a,
+        n,
+        |j| bs[j..].iter().step_by(n),
+        beta,
+    );
+}
+
+/// `c = alpha * aᵀ * b + beta * c`: dot products of contiguous columns, a 4 × 2 block of
+/// them at a time (eight independent sums, each over l in increasing order).
+pub fn gemm_tn(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
+    let (m, k, n) = (a.ncols(), a.nrows(), b.ncols());
+    assert_eq!(b.nrows(), k);
+    assert_eq!(c.shape(), (m, n));
+    gemm_tn_block(c, alpha, a, b, beta, false);
+}
+
+/// `c = aᵀ b` for a product known to be symmetric (e.g. Vᵀ M V with M symmetric): the
+/// upper triangle (and the diagonal blocks) are computed, the lower one mirrored, so
+/// the result is exactly symmetric at about half the cost.
+pub fn gemm_tn_sym(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>) {
+    let (m, k, n) = (a.ncols(), a.nrows(), b.ncols());
+    assert_eq!(b.nrows(), k);
+    assert_eq!(c.shape(), (m, n));
+    assert_eq!(m, n);
+    gemm_tn_block(c, 1.0, a, b, 0.0, true);
     for j in 0..n {
-        for i in 0..m {
-            let mut s = 0.0;
+        for i in (j + 1)..n {
+            c[(i, j)] = c[(j, i)];
+        }
+    }
+}
+
+fn column(x: &[f64], k: usize, j: usize) -> &[f64] {
+    &x[j * k..(j + 1) * k]
+}
+
+/// The dot-product kernel of [`gemm_tn`]; with `upper` only the blocks reaching the
+/// upper triangle (rows i ≤ the block's last column) are computed.
+#[inline(always)]
+fn gemm_tn_block(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+    upper: bool,
+) {
+    let (m, k, n) = (a.ncols(), a.nrows(), b.ncols());
+    let (a, b) = (a.as_slice(), b.as_slice());
+    let c = c.as_mut_slice();
+    let col = |x, j| column(x, k, j);
+    let mut j = 0;
+    while j < n {
+        let nb = 2.min(n - j);
+        let b0 = col(b, j);
+        let b1 = col(b, j + nb - 1);
+        let rows = if upper { (j + nb).min(m) } else { m };
+        let mut i = 0;
+        while i + 4 <= rows {
+            let (a0, a1, a2, a3) = (col(a, i), col(a, i + 1), col(a, i + 2), col(a, i + 3));
+            let mut s = [[0.0; 4]; 2];
             for l in 0..k {
-                s += a[(i, l)] * b[(j, l)];
+                let (x0, x1) = (b0[l], b1[l]);
+                s[0][0] += a0[l] * x0;
+                s[0][1] += a1[l] * x0;
+                s[0][2] += a2[l] * x0;
+                s[0][3] += a3[l] * x0;
+                s[1][0] += a0[l] * x1;
+                s[1][1] += a1[l] * x1;
+                s[1][2] += a2[l] * x1;
+                s[1][3] += a3[l] * x1;
             }
-            c[(i, j)] = alpha * s + if beta == 0.0 { 0.0 } else { beta * c[(i, j)] };
+            for (jj, sj) in s.iter().enumerate().take(nb) {
+                for (t, &v) in sj.iter().enumerate() {
+                    let x = &mut c[(j + jj) * m + i + t];
+                    *x = scale(alpha, v, beta, *x);
+                }
+            }
+            i += 4;
         }
+        while i < rows {
+            let ai = col(a, i);
+            let mut s = [0.0; 2];
+            for l in 0..k {
+                s[0] += ai[l] * b0[l];
+                s[1] += ai[l] * b1[l];
+            }
+            for (jj, &v) in s.iter().enumerate().take(nb) {
+                let x = &mut c[(j + jj) * m + i];
+                *x = scale(alpha, v, beta, *x);
+            }
+            i += 1;
+        }
+        j += nb;
     }
 }
 
-/// `y = alpha * a * x + beta * y`.
+/// `y = alpha * a * x + beta * y` (the kernel of [`gemm`] with one column).
 pub fn gemv(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
-    debug_assert_eq!(a.ncols(), x.len());
-    debug_assert_eq!(a.nrows(), y.len());
-    for i in 0..a.nrows() {
-        let mut s = 0.0;
-        for l in 0..a.ncols() {
-            s += a[(i, l)] * x[l];
-        }
-        y[i] = alpha * s + if beta == 0.0 { 0.0 } else { beta * y[i] };
-    }
+    assert_eq!(a.ncols(), x.len());
+    assert_eq!(a.nrows(), y.len());
+    let xs = x.as_slice();
+    gemm_cols(y.as_mut_slice(), alpha, a, 1, |_| xs.iter(), beta);
 }
 
-/// `y = alpha * aᵀ * x + beta * y`.
+/// `y = alpha * aᵀ * x + beta * y` (dot products of columns, four at a time).
 pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
-    debug_assert_eq!(a.nrows(), x.len());
-    debug_assert_eq!(a.ncols(), y.len());
-    for j in 0..a.ncols() {
-        let mut s = 0.0;
-        for l in 0..a.nrows() {
-            s += a[(l, j)] * x[l];
+    let (k, n) = a.shape();
+    assert_eq!(k, x.len());
+    assert_eq!(n, y.len());
+    let (a, x) = (a.as_slice(), x.as_slice());
+    let y = y.as_mut_slice();
+    let mut j = 0;
+    while j + 4 <= n {
+        let c = &a[j * k..(j + 4) * k];
+        let mut s = [0.0; 4];
+        for l in 0..k {
+            s[0] += c[l] * x[l];
+            s[1] += c[k + l] * x[l];
+            s[2] += c[2 * k + l] * x[l];
+            s[3] += c[3 * k + l] * x[l];
         }
-        y[j] = alpha * s + if beta == 0.0 { 0.0 } else { beta * y[j] };
+        for t in 0..4 {
+            y[j + t] = scale(alpha, s[t], beta, y[j + t]);
+        }
+        j += 4;
+    }
+    while j < n {
+        let c = &a[j * k..(j + 1) * k];
+        let mut s = 0.0;
+        for l in 0..k {
+            s += c[l] * x[l];
+        }
+        y[j] = scale(alpha, s, beta, y[j]);
+        j += 1;
     }
 }
 
@@ -230,6 +396,68 @@ impl SpdWork {
     }
 }
 
+/// Inverse of the symmetric positive definite `a` (lower triangle read) into `out`
+/// through its Cholesky factor `L` (left in `factor`): `A⁻¹ = L⁻ᵀ L⁻¹`, with `L⁻¹`
+/// formed in `out` and overwritten by the product column by column, exactly
+/// symmetric. False (with `out` undefined) when a pivot is not positive and finite.
+pub fn spd_inverse(a: &DMatrix<f64>, factor: &mut DMatrix<f64>, out: &mut DMatrix<f64>) -> bool {
+    let n = a.nrows();
+    assert_eq!(a.shape(), (n, n));
+    assert_eq!(factor.shape(), (n, n));
+    assert_eq!(out.shape(), (n, n));
+    let (a, l, x) = (a.as_slice(), factor.as_mut_slice(), out.as_mut_slice());
+    // A = L Lᵀ (column j from the columns before it).
+    for j in 0..n {
+        let mut d = a[j * n + j];
+        for p in 0..j {
+            d -= l[p * n + j] * l[p * n + j];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let ljj = d.sqrt();
+        l[j * n + j] = ljj;
+        for i in (j + 1)..n {
+            let mut s = a[j * n + i];
+            for p in 0..j {
+                s -= l[p * n + i] * l[p * n + j];
+            }
+            l[j * n + i] = s / ljj;
+        }
+    }
+    // L⁻¹ (lower triangular) into x.
+    for j in 0..n {
+        for i in 0..j {
+            x[j * n + i] = 0.0;
+        }
+        x[j * n + j] = 1.0 / l[j * n + j];
+        for i in (j + 1)..n {
+            let mut s = 0.0;
+            for p in j..i {
+                s += l[p * n + i] * x[j * n + p];
+            }
+            x[j * n + i] = -s / l[i * n + i];
+        }
+    }
+    // (A⁻¹)_ij = Σ_{p ≥ i} (L⁻¹)_pi (L⁻¹)_pj for i ≥ j, in place: entry (i, j) is the last
+    // use of (L⁻¹)_ij, and column i > j is still intact.
+    for j in 0..n {
+        for i in j..n {
+            let mut s = 0.0;
+            for p in i..n {
+                s += x[i * n + p] * x[j * n + p];
+            }
+            x[j * n + i] = s;
+        }
+    }
+    for j in 0..n {
+        for i in (j + 1)..n {
+            x[i * n + j] = x[j * n + i];
+        }
+    }
+    true
+}
+
 /// Result of a damped inversion.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Conditioning {
@@ -265,7 +493,7 @@ pub fn damped_spd_inverse(
             damping: 0.0,
         };
     }
-    if hcc_model::linalg::spd_inverse(a, &mut work.a, out).is_ok() {
+    if spd_inverse(a, &mut work.a, out) {
         let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
         let inv_norm = out.norm();
         let bound = 1.0 / (inv_norm * trace);
@@ -313,6 +541,8 @@ pub fn damped_spd_inverse(
 pub struct AlignWork {
     x: DMatrix<f64>,
     xtx: DMatrix<f64>,
+    pow: DMatrix<f64>,
+    pow2: DMatrix<f64>,
     evals: DVector<f64>,
     evecs: DMatrix<f64>,
     r: DMatrix<f64>,
@@ -324,6 +554,8 @@ impl AlignWork {
         AlignWork {
             x: DMatrix::zeros(d, d),
             xtx: DMatrix::zeros(d, d),
+            pow: DMatrix::zeros(d, d),
+            pow2: DMatrix::zeros(d, d),
             evals: DVector::zeros(d),
             evecs: DMatrix::zeros(d, d),
             r: DMatrix::zeros(d, d),
@@ -381,12 +613,66 @@ pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut Al
     smin
 }
 
+/// Largest ‖I − wᵀw‖_F for which [`orthonormalize_polar`] sums the binomial series
+/// instead of decomposing wᵀw (then at most six terms reach the rounding level).
+const POLAR_SERIES_MAX: f64 = 1e-3;
+
 /// Replaces `w` (n×d, full column rank) by its orthonormal polar factor
 /// `w (wᵀw)^{-1/2}`: the orthonormal basis of span(w) closest to `w` in the Frobenius
 /// norm (Higham, "Functions of Matrices", ch. 8). Returns the smallest singular value
-/// of `w`; at or below `min_sigma` `w` is left unchanged.
+/// of `w` (a lower bound of it on the series path); at or below `min_sigma` `w` is
+/// left unchanged.
+///
+/// For a nearly orthonormal `w` (the usual case: the previous basis projected onto a
+/// null space that moved a little), with E = I − wᵀw and ‖E‖_F ≤ 10⁻³,
+/// (wᵀw)^{-1/2} = (I − E)^{-1/2} = Σ_k binom(2k, k) (E/4)^k is summed until the next
+/// term falls below 10⁻¹⁷ (two or three terms per control cycle), which is the same
+/// matrix to rounding as the eigen-decomposition used otherwise, for a fraction of
+/// its cost.
 pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigma: f64) -> f64 {
-    gemm_tn(&mut work.xtx, 1.0, w, w, 0.0);
+    gemm_tn_sym(&mut work.xtx, w, w);
+    let d = w.ncols();
+    let mut e2 = 0.0;
+    for j in 0..d {
+        for i in 0..d {
+            let e = if i == j { 1.0 } else { 0.0 } - work.xtx[(i, j)];
+            work.pow[(i, j)] = e;
+            e2 += e * e;
+        }
+    }
+    let enorm = e2.sqrt();
+    let smin_bound = (1.0 - enorm).max(0.0).sqrt();
+    if enorm <= POLAR_SERIES_MAX && smin_bound > min_sigma {
+        // R = I + ½ E + ⅜ E² + …, c_k = c_{k−1} (2k − 1) / (2k); ‖E^k‖ ≤ ‖E‖_F^k.
+        let mut coef = 0.5;
+        for j in 0..d {
+            for i in 0..d {
+                work.r[(i, j)] = if i == j { 1.0 } else { 0.0 } + coef * work.pow[(i, j)];
+            }
+        }
+        work.x.copy_from(&work.pow);
+        let mut pnorm = enorm;
+        let mut k = 1.0;
+        loop {
+            let next = coef * (2.0 * k + 1.0) / (2.0 * k + 2.0);
+            pnorm *= enorm;
+            if next * pnorm <= 1e-17 {
+                break;
+            }
+            gemm(&mut work.pow2, 1.0, &work.pow, &work.x, 0.0);
+            std::mem::swap(&mut work.pow, &mut work.pow2);
+            for j in 0..d {
+                for i in 0..d {
+                    work.r[(i, j)] += next * work.pow[(i, j)];
+                }
+            }
+            coef = next;
+            k += 1.0;
+        }
+        work.tmp.copy_from(w);
+        gemm(w, 1.0, &work.tmp, &work.r, 0.0);
+        return smin_bound;
+    }
     let smin = inverse_sqrt(work, min_sigma);
     if smin.is_nan() || smin <= min_sigma {
         return smin;

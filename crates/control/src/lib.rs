@@ -6,19 +6,21 @@
 //! stiffness K_i, damping D_i and goal x_{i,d} ([`spec`]). Per cycle
 //! ([`Controller::step`]):
 //! - the local null-space velocities v_i = J̄_i q̇ (eq. 3) with J̄_1 = J_1 and the
-//!   dynamically consistent J̄_i = (Z_i M Z_iᵀ)⁻¹ Z_i M (eq. 5), Z_i = J_i V_{i−1}
-//!   (V_{i−1}ᵀ M V_{i−1})⁻¹ V_{i−1}ᵀ (eq. 12) for 2 ≤ i < r and Z_r = V_{r−1}ᵀ for the
-//!   lowest level, V_{i−1} an orthonormal basis of the null space of the augmented
-//!   Jacobian (eq. 6) from a Householder QR;
+//!   dynamically consistent J̄_i = (Z_i M Z_iᵀ)⁻¹ Z_i M (eq. 5), Z_i = J_i M⁻¹ N_i
+//!   (eq. 11, equal to eq. 12) with the projector of eq. (8),
+//!   N_i = I − J_augᵀ (J_aug M⁻¹ J_augᵀ)⁻¹ J_aug M⁻¹, for 2 ≤ i < r — k-dimensional
+//!   blocks of one stacked J M⁻¹ Jᵀ, no n × n projector and no basis — and
+//!   Z_r = V_{r−1}ᵀ for the lowest level, V_{r−1} an orthonormal basis of the null
+//!   space of the augmented Jacobian (eq. 6);
 //! - the block-diagonal inertia Λ_i (eqs. 16, 18) and the Coriolis matrix μ (eq. 17),
-//!   with J̄̇ computed analytically from J̇_i, Ṁ = C + Cᵀ and the parallel-transport
-//!   derivative of the basis, V̇ = −J⁺ J̇ V;
+//!   with J̄̇ computed analytically from J̇_i, Ṁ = C + Cᵀ, d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹ and
+//!   the parallel-transport derivative of the basis, V̇ = −J⁺ J̇ V;
 //! - τ = Σ τ_i + τ_μ + g (eq. 19) with τ_1 = −J_1ᵀ F_1 (eq. 20),
 //!   τ_i = −J̄_iᵀ Z_i J_iᵀ F_i (eq. 21), F_i = ∂V_i/∂x_iᵀ + D_i ẋ_i, and the
 //!   power-conserving τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22).
 //!
-//! **Basis continuity.** Z_i for i < r does not depend on the choice of V_{i−1}
-//! (only on the subspace), but Z_r = V_{r−1}ᵀ does, and a QR basis is not a
+//! **Basis continuity.** Z_i for i < r does not depend on a basis (only on the
+//! subspace, eq. 11), but Z_r = V_{r−1}ᵀ does, and a QR basis is not a
 //! continuous function of q. Each cycle the previous basis is therefore projected onto
 //! the new null space, W = (I − J⁺J) V_prev, and orthonormalised by its polar factor —
 //! the orthonormal basis of the new null space closest to V_prev (the orthogonal
@@ -28,16 +30,18 @@
 //! first cycle (and the one after [`Controller::reset`], for a jump of the state)
 //! takes a Householder QR basis, which is deterministic for a given q.
 //!
-//! **Singularities.** Every Gram matrix that is inverted (J_1 M⁻¹ J_1ᵀ, J_aug J_augᵀ,
-//! Z_i M Z_iᵀ) goes through a damped inverse `(A + δI)⁻¹` whose damping δ rises
-//! smoothly from 0 as the eigenvalue ratio λ_min/λ_max falls below
+//! **Singularities.** Every Gram matrix that is inverted (J_1 M⁻¹ J_1ᵀ,
+//! J_aug M⁻¹ J_augᵀ, J_aug J_augᵀ, Z_i M Z_iᵀ) goes through a damped inverse
+//! `(A + δI)⁻¹` whose damping δ rises smoothly from 0 as the eigenvalue ratio
+//! λ_min/λ_max falls below
 //! `singular_ratio` (damped least squares on the Gram matrix). Away from
 //! singularities the law is exact; near one the torques stay finite and bounded and
 //! [`Output::singular`] flags the level. The strict hierarchy and the zero power of τ_μ
 //! are then only approximate.
 //!
 //! **Allocation.** [`Controller::new`] allocates every buffer (an own
-//! `hcc_model::Data` included); [`Controller::step`] allocates nothing.
+//! `hcc_model::Data` included); [`Controller::step`] allocates nothing. M⁻¹ is never
+//! formed: it is applied by Cholesky solves.
 
 pub mod controller;
 pub mod dense;

@@ -5,28 +5,11 @@ mod common;
 use common::*;
 use hcc_control::Controller;
 use nalgebra::DVector;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
+/// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the
+/// test harness's own threads never disturb the count.
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 
 #[test]
 fn ten_thousand_panda_steps_allocate_nothing() {
@@ -39,7 +22,7 @@ fn ten_thousand_panda_steps_allocate_nothing() {
     let mut bad = [0.0; 7];
     bad[3] = f64::NAN;
     c.step(&q, &qd).expect("warm-up");
-    let before = ALLOCS.load(Ordering::SeqCst);
+    let before = hcc_rtalloc::thread_stats().allocs;
     let mut sum = 0.0;
     for k in 0..10_000 {
         for (qi, vi) in q.iter_mut().zip(&qd) {
@@ -53,7 +36,7 @@ fn ten_thousand_panda_steps_allocate_nothing() {
             c.set_goal(0, &[0.4, 0.1, 0.5]).expect("goal");
         }
     }
-    let after = ALLOCS.load(Ordering::SeqCst);
+    let after = hcc_rtalloc::thread_stats().allocs;
     assert!(sum.is_finite());
     assert_eq!(
         after - before,

@@ -10,34 +10,12 @@ use hcc_model::linalg::{
 };
 use hcc_model::*;
 use nalgebra::{DMatrix, DVector};
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
+/// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the
+/// test harness's own threads never disturb the count.
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 
 const ITERATIONS: usize = 1000;
 
@@ -58,7 +36,7 @@ fn run_all(model: &Model) {
     let mut xm = DMatrix::zeros(n, 3);
     let short = DVector::zeros(n + 1);
 
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = hcc_rtalloc::thread_stats().allocs;
     for _ in 0..ITERATIONS {
         forward_kinematics(model, &mut data, &q);
         black_box(frame_placement(model, &data, tip));
@@ -88,7 +66,7 @@ fn run_all(model: &Model) {
         black_box(cholesky_solve_matrix_in_place(&factor, &mut xm).is_ok());
         black_box(spd_inverse(&data.m, &mut factor, &mut inverse).is_ok());
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = hcc_rtalloc::thread_stats().allocs;
     assert_eq!(
         after - before,
         0,
@@ -102,9 +80,9 @@ fn run_all(model: &Model) {
 #[test]
 fn algorithms_do_not_allocate() {
     // The counter works: a heap allocation is seen.
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = hcc_rtalloc::thread_stats().allocs;
     black_box(DVector::<f64>::zeros(black_box(8)));
-    assert!(ALLOCATIONS.load(Ordering::SeqCst) > before);
+    assert!(hcc_rtalloc::thread_stats().allocs > before);
 
     run_all(&panda());
     run_all(&planar());

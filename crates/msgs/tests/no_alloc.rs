@@ -1,33 +1,15 @@
 //! The per-cycle helpers (validation, setters, sequence checks) do not
 //! allocate: a counting global allocator must see zero allocations.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use hcc_msgs::{
     JointState, MsgError, SequenceChecker, Telemetry, TorqueCommand, check_gravity_agreement,
     command_freshness, monotonic_now_ns,
 };
 
-struct Counting;
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
+/// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the
+/// test harness's own threads never disturb the count.
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 
 #[test]
 fn hot_path_helpers_do_not_allocate() {
@@ -38,7 +20,7 @@ fn hot_path_helpers_do_not_allocate() {
     let mut checker = SequenceChecker::new();
     let mut errors = 0usize;
 
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = hcc_rtalloc::thread_stats().allocs;
     for k in 0..1000u64 {
         state.header.seq = k;
         state.header.stamp_ns = monotonic_now_ns();
@@ -69,7 +51,7 @@ fn hot_path_helpers_do_not_allocate() {
             .unwrap_or_else(|_| errors += 1);
         telemetry.validate(7).unwrap_or_else(|_| errors += 1);
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = hcc_rtalloc::thread_stats().allocs;
     assert_eq!(errors, 0);
     assert_eq!(after - before, 0, "allocations in the hot path");
 }

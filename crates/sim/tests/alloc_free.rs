@@ -4,28 +4,11 @@
 use hcc_model::Model;
 use hcc_sim::{ExternalWrench, Plant};
 use nalgebra::{DVector, Vector3};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
+/// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the
+/// test harness's own threads never disturb the count.
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 
 #[test]
 fn step_with_wrench_and_energy_do_not_allocate() {
@@ -50,13 +33,13 @@ fn step_with_wrench_and_energy_do_not_allocate() {
         .unwrap();
     let tau = DVector::from_element(7, 0.5);
     plant.step(&tau, 1e-4).unwrap();
-    let before = ALLOCS.load(Ordering::SeqCst);
+    let before = hcc_rtalloc::thread_stats().allocs;
     let mut e = 0.0;
     for _ in 0..100 {
         plant.step(&tau, 1e-4).unwrap();
         e += plant.energy().total();
     }
-    let after = ALLOCS.load(Ordering::SeqCst);
+    let after = hcc_rtalloc::thread_stats().allocs;
     assert!(e.is_finite());
     assert_eq!(
         after - before,
