@@ -12,7 +12,6 @@ use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -23,36 +22,16 @@ pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// Time a child gets to exit after SIGTERM before it is killed.
 pub const TERMINATE_GRACE: Duration = Duration::from_secs(5);
 
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_signal(_signal: libc::c_int) {
-    // Only an atomic store: async-signal-safe.
-    INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
-/// SIGINT and SIGTERM set [`INTERRUPTED`]; the recorder loop then stops the children.
+/// SIGINT and SIGTERM set the stop flag of `hcc_controller::rt` (the one the
+/// daemons use); the launcher's loops then stop the children.
 pub fn install_signal_handlers() -> anyhow::Result<()> {
-    for signal in [libc::SIGINT, libc::SIGTERM] {
-        // SAFETY: a zeroed sigaction is a valid value; the handler only
-        // stores to an atomic, which is async-signal-safe.
-        let rc = unsafe {
-            let mut action: libc::sigaction = std::mem::zeroed();
-            action.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
-            libc::sigemptyset(&mut action.sa_mask);
-            libc::sigaction(signal, &action, std::ptr::null_mut())
-        };
-        if rc != 0 {
-            bail!(
-                "cannot install the handler of signal {signal}: {}",
-                std::io::Error::last_os_error()
-            );
-        }
-    }
-    Ok(())
+    hcc_controller::rt::install_stop_handler()
+        .map_err(|e| anyhow!("cannot install the SIGINT/SIGTERM handlers: {e}"))
 }
 
+/// Whether SIGINT or SIGTERM was received.
 pub fn interrupted() -> bool {
-    INTERRUPTED.load(Ordering::SeqCst)
+    hcc_controller::rt::stop_requested()
 }
 
 type Tail = Arc<Mutex<VecDeque<String>>>;
