@@ -9,6 +9,23 @@ use crate::spec::{ControllerSpec, Form, TaskSpec};
 use hcc_model::{Data, Model};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
+/// The lower levels' torques and τ_μ fade out between `FADE_RANGE × singular_ratio`
+/// and `singular_ratio` of a level's eigenvalue ratio (see the crate docs, "Singularities").
+pub const FADE_RANGE: f64 = crate::dense::EXACT_RATIO_FACTOR;
+
+/// Smoothstep on the log scale: 0 at or below `eps`, 1 at or above `FADE_RANGE × eps`.
+fn fade_factor(ratio: f64, eps: f64) -> f64 {
+    if ratio.is_nan() || ratio <= eps {
+        return 0.0;
+    }
+    let hi = FADE_RANGE * eps;
+    if ratio >= hi {
+        return 1.0;
+    }
+    let t = (ratio / eps).ln() / FADE_RANGE.ln();
+    t * t * (3.0 - 2.0 * t)
+}
+
 /// Smallest eigenvalue that counts as "not vanished" for a Gram matrix.
 const GRAM_FLOOR: f64 = 1e-12;
 
@@ -44,6 +61,12 @@ pub struct Output {
     pub any_singular: bool,
     /// Per level: the smallest eigenvalue ratio of the Gram matrices inverted for it.
     pub conditioning: Vec<f64>,
+    /// Per level: the factor its torque was scaled by as the Gram matrix of the levels
+    /// above it becomes singular (always 1 for level 1, and away from singularities;
+    /// see the crate docs, "Singularities").
+    pub fade: Vec<f64>,
+    /// The factor τ_μ was scaled by (it fades with the conditioning of every level).
+    pub fade_mu: f64,
 }
 
 /// Per-level workspace.
@@ -333,6 +356,8 @@ impl Controller {
             singular: vec![false; r],
             any_singular: false,
             conditioning: vec![1.0; r],
+            fade: vec![1.0; r],
+            fade_mu: 1.0,
         };
         let mut c = Controller {
             data: Data::new(model),
@@ -662,10 +687,20 @@ impl Controller {
             };
             self.out.conditioning[i] = c.ratio.min(gc.ratio);
             self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
+            // The projection of level i inverts the Gram matrix of the levels above
+            // it: its torque fades as that one becomes singular (crate docs).
+            self.out.fade[i] = fade_factor(gc.ratio, eps);
             // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
             transpose_into(&mut l.jbar_inv, &l.z);
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
+        // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
+        self.out.fade_mu = self
+            .out
+            .conditioning
+            .iter()
+            .map(|&c| fade_factor(c, eps))
+            .product();
 
         // Torques of the levels (eqs. 20, 21) and the local velocities v_i (eq. 3).
         for i in 0..r {
@@ -707,6 +742,9 @@ impl Controller {
                     }
                 }
             }
+            if self.out.fade[i] < 1.0 {
+                *tau_i *= self.out.fade[i];
+            }
             self.out.v[i].copy_from(&l.v);
             self.out.task_error[i].copy_from(&l.err);
             self.out.potential[i] = l.potential;
@@ -743,6 +781,9 @@ impl Controller {
                 gemv(&mut l.y_d2, 1.0, &l.lambda, &l.y_d, 0.0);
                 gemv_t(&mut self.out.tau_mu, 1.0, &l.jbar, &l.y_d2, 1.0);
             }
+        }
+        if self.out.fade_mu < 1.0 {
+            self.out.tau_mu *= self.out.fade_mu;
         }
         self.out.p_mu = self.out.tau_mu.dot(qd);
 

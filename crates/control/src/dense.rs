@@ -458,6 +458,11 @@ pub fn spd_inverse(a: &DMatrix<f64>, factor: &mut DMatrix<f64>, out: &mut DMatri
     true
 }
 
+/// [`damped_spd_inverse`] reports the exact eigenvalue ratio below this multiple of
+/// its threshold ε (the controller fades the lower levels there and needs the ratio
+/// to be continuous in the state).
+pub const EXACT_RATIO_FACTOR: f64 = 100.0;
+
 /// Result of a damped inversion.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Conditioning {
@@ -477,8 +482,10 @@ pub struct Conditioning {
 ///
 /// Fast path: a Cholesky inverse, accepted when the guaranteed lower bound of the
 /// eigenvalue ratio, `1 / (‖A⁻¹‖_F · tr A)` (λ_min ≥ 1/‖A⁻¹‖_F, λ_max ≤ tr A), is at
-/// least `ε` — then no damping is due and the inverse is exact; the reported ratio is
-/// that lower bound. Otherwise the eigen-decomposition decides (exact ratio).
+/// least [`EXACT_RATIO_FACTOR`] `× ε` — then no damping is due and the inverse is
+/// exact; the reported ratio is that lower bound. Otherwise the eigen-decomposition
+/// decides, and the reported ratio is exact (and so continuous in the state) wherever
+/// it is below `EXACT_RATIO_FACTOR × ε`.
 pub fn damped_spd_inverse(
     a: &DMatrix<f64>,
     out: &mut DMatrix<f64>,
@@ -497,7 +504,7 @@ pub fn damped_spd_inverse(
         let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
         let inv_norm = out.norm();
         let bound = 1.0 / (inv_norm * trace);
-        if bound.is_finite() && bound >= eps && trace >= floor {
+        if bound.is_finite() && bound >= EXACT_RATIO_FACTOR * eps && trace >= floor {
             return Conditioning {
                 ratio: bound.min(1.0),
                 damping: 0.0,

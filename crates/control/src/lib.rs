@@ -37,7 +37,19 @@
 //! `singular_ratio` (damped least squares on the Gram matrix). Away from
 //! singularities the law is exact; near one the torques stay finite and bounded and
 //! [`Output::singular`] flags the level. The strict hierarchy and the zero power of τ_μ
-//! are then only approximate.
+//! are then only approximate, and the damped null-space projections of the lower
+//! levels are no longer passive: near a singularity they can feed energy into the
+//! self-motion (an arm pulled straight whips round). So the lower levels' torques and
+//! τ_μ **fade out** inside the singular region: level i ≥ 2 is scaled by β of the
+//! eigenvalue ratio of J_aug M⁻¹ J_augᵀ (resp. J_aug J_augᵀ for the lowest level) of
+//! the levels above it — the inversion its projection depends on — and τ_μ by the
+//! product of β over every level's ratio, where β rises smoothly (a smoothstep on the
+//! log scale) from 0 at `singular_ratio` to 1 at [`FADE_RANGE`] × `singular_ratio`
+//! ([`Output::fade`], [`Output::fade_mu`]). In the singular region the robot is
+//! then held by level 1, τ_1 = −J_1ᵀ F_1, which involves no inversion and is passive
+//! (with gravity compensation the energy ½ q̇ᵀ M q̇ + V_1 cannot grow), and the lower
+//! tasks resume as it is left. Away from singularities every β_j is exactly 1 and the
+//! law is the paper's.
 //!
 //! **Allocation.** [`Controller::new`] allocates every buffer (an own
 //! `hcc_model::Data` included); [`Controller::step`] allocates nothing. M⁻¹ is never
@@ -45,9 +57,11 @@
 
 pub mod controller;
 pub mod dense;
+pub mod saturation;
 pub mod spec;
 
-pub use controller::{Controller, Diagnostics, Output};
+pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
+pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec};
 
 /// Errors of construction and of a cycle.

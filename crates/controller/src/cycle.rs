@@ -589,6 +589,8 @@ impl Cycle {
 
         let mut tau = [0.0; MAX_JOINTS];
         let mut mode = CommandMode::SafeHold;
+        // Whether tau contains g(q_v) = gravity_last (for the saturation).
+        let mut gravity_in_tau = false;
         if valid {
             let step_start = monotonic_now_ns();
             let result = self.controller.step(self.state.q(), self.state.qd());
@@ -600,6 +602,7 @@ impl Cycle {
                     tau[..n].copy_from_slice(out.tau.as_slice());
                     self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
                     self.have_valid = true;
+                    gravity_in_tau = self.settings.gravity_compensation;
                     mode = if out.any_singular {
                         self.counters.singular_cycles += 1;
                         CommandMode::Singular
@@ -619,23 +622,16 @@ impl Cycle {
                 self.settings.gravity_compensation && self.have_valid && !gravity_conflict;
             if hold_gravity {
                 tau[..n].copy_from_slice(&self.gravity_last[..n]);
+                gravity_in_tau = true;
             } else {
                 tau[..n].fill(0.0);
             }
         }
 
-        // Saturation to the torque limits.
-        let mut saturated = false;
-        for (t, &limit) in tau[..n].iter_mut().zip(&self.limits[..n]) {
-            if *t > limit {
-                *t = limit;
-                saturated = true;
-            } else if *t < -limit {
-                *t = -limit;
-                saturated = true;
-            }
-        }
-        if saturated {
+        // Saturation to the torque limits: the control part is scaled as a whole,
+        // which keeps the hierarchy (hcc_control::saturate).
+        let gravity = gravity_in_tau.then_some(&self.gravity_last[..n]);
+        if hcc_control::saturate(&mut tau[..n], gravity, &self.limits[..n]) {
             self.counters.saturations += 1;
         }
 

@@ -373,11 +373,13 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
 
 /// The hierarchical compliance controller of hcc-control as a [`ControlLaw`],
 /// its torque saturated to `[controller_daemon] torque_limits` exactly as the
-/// controller daemon saturates its commands (|τ_k| ≤ limit_k, per joint), so
-/// that the in-process run and the daemons apply the same torque.
+/// controller daemon saturates its commands ([`hcc_control::saturate`]: the
+/// control part scaled as a whole), so that the in-process run and the daemons
+/// apply the same torque.
 pub struct HierarchicalLaw {
     controller: Controller,
     limits: DVector<f64>,
+    gravity_compensation: bool,
     tau: DVector<f64>,
     saturated_cycles: u64,
 }
@@ -391,6 +393,7 @@ impl HierarchicalLaw {
         Ok(HierarchicalLaw {
             controller,
             limits: scenario.controller_daemon.torque_limits.clone(),
+            gravity_compensation: scenario.gravity_compensation,
             tau: DVector::zeros(n),
             saturated_cycles: 0,
         })
@@ -413,23 +416,10 @@ impl ControlLaw for HierarchicalLaw {
             .controller
             .step(q.as_slice(), qd.as_slice())
             .map_err(|e| SimError::Invalid(format!("controller: {e}")))?;
-        let mut saturated = false;
-        for ((t, &u), &limit) in self
-            .tau
-            .iter_mut()
-            .zip(out.tau.iter())
-            .zip(self.limits.iter())
-        {
-            // As the daemon: never panics, whatever the limit.
-            *t = if u > limit {
-                limit
-            } else if u < -limit {
-                -limit
-            } else {
-                u
-            };
-            saturated |= *t != u;
-        }
+        self.tau.copy_from(&out.tau);
+        let gravity = self.gravity_compensation.then_some(out.gravity.as_slice());
+        let saturated =
+            hcc_control::saturate(self.tau.as_mut_slice(), gravity, self.limits.as_slice());
         self.saturated_cycles += u64::from(saturated);
         Ok(())
     }

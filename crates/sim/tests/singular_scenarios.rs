@@ -7,8 +7,10 @@
 //! controller daemon does) stays bounded, the singularity is flagged while
 //! the arm is in the singular region, and after the goal is moved to where the
 //! arm can leave that region, the flag clears and the tasks converge. The
-//! control law's own peak torque is printed: near the singularities it is far
-//! above the limits (see the README, Faults and safety).
+//! control law's own torque stays of the order of its value at the start (the
+//! lower levels and τ_μ fade out near the singularity, and the saturation
+//! scales the torque as a whole instead of clipping joints, so the arm does not
+//! whip round; see the README, Faults and safety).
 
 use std::path::PathBuf;
 
@@ -44,6 +46,7 @@ struct SwitchingLaw {
     /// τ saturated to the scenario's torque limits, as the controller daemon does.
     tau: DVector<f64>,
     limits: DVector<f64>,
+    gravity: bool,
     period_s: f64,
     k: u64,
     switch_s: f64,
@@ -65,9 +68,10 @@ impl ControlLaw for SwitchingLaw {
             .controller
             .step(q.as_slice(), qd.as_slice())
             .map_err(|e| SimError::Invalid(format!("controller at t = {t}: {e}")))?;
-        for k in 0..self.tau.len() {
-            self.tau[k] = out.tau[k].clamp(-self.limits[k], self.limits[k]);
-        }
+        // Saturated as the controller daemon does it (the control part scaled).
+        self.tau.copy_from(&out.tau);
+        let gravity = self.gravity.then_some(out.gravity.as_slice());
+        hcc_control::saturate(self.tau.as_mut_slice(), gravity, self.limits.as_slice());
         self.log.push(Sample {
             t,
             singular: out.singular.clone(),
@@ -116,6 +120,7 @@ fn run(
         controller: Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap(),
         tau: DVector::zeros(scenario.model.nq()),
         limits: scenario.controller_daemon.torque_limits.clone(),
+        gravity: scenario.gravity_compensation,
         period_s: 1.0 / scenario.simulation.control_rate_hz,
         k: 0,
         switch_s,
@@ -156,11 +161,13 @@ fn kinematic_singularity_arm_stretched_out_then_back() {
     let log = run(scenario, 0, &[0.90, 1.30], switch_s, 1.5);
     summary("stretch", &log, 0, switch_s);
     assert!(log.iter().all(|s| s.finite), "a non-finite torque");
-    // The control law's own torque peaks while the arm whips through the
-    // singular region (printed above as max |τ|); what reaches the joints is
+    // The law's own torque: at most its initial K_1 x̃_1 pull (262 N·m) — no
+    // whipping through the singular region. What reaches the joints is
     // saturated to the scenario's limits, as in the controller daemon.
+    let max_tau = log.iter().map(|s| s.max_tau).fold(0.0, f64::max);
+    assert!(max_tau < 500.0, "torque {max_tau} N·m");
     assert!(
-        log.iter().all(|s| s.applied <= 100.0),
+        log.iter().all(|s| s.applied <= 100.0 + 1e-9),
         "applied torque above the limit"
     );
     let before: Vec<&Sample> = log.iter().filter(|s| s.t < switch_s).collect();
@@ -189,9 +196,9 @@ fn algorithmic_singularity_conflicting_levels_then_compatible_goal() {
     summary("algorithmic", &log, 2, switch_s);
     assert!(log.iter().all(|s| s.finite), "a non-finite torque");
     let max_tau = log.iter().map(|s| s.max_tau).fold(0.0, f64::max);
-    assert!(max_tau < 2_000.0, "torque {max_tau} N·m");
+    assert!(max_tau < 500.0, "torque {max_tau} N·m");
     assert!(
-        log.iter().all(|s| s.applied <= 100.0),
+        log.iter().all(|s| s.applied <= 100.0 + 1e-9),
         "applied torque above the limit"
     );
     let before: Vec<&Sample> = log.iter().filter(|s| s.t < switch_s).collect();
@@ -200,7 +207,7 @@ fn algorithmic_singularity_conflicting_levels_then_compatible_goal() {
         before.iter().any(|s| s.singular[2]),
         "the conflict never flagged"
     );
-    // Level 1 keeps its TCP through the conflict to within a few cm: the
+    // Level 1 keeps its TCP through the conflict to within about a cm: the
     // damped inversion gives up a little of the strict hierarchy there.
     let tcp_worst = before
         .iter()
@@ -208,7 +215,7 @@ fn algorithmic_singularity_conflicting_levels_then_compatible_goal() {
         .map(|s| s.errors[0])
         .fold(0.0, f64::max);
     println!("algorithmic: worst TCP error in the conflict after 0.9 s: {tcp_worst:.2e} m");
-    assert!(tcp_worst < 5e-2, "level 1 pushed off by {tcp_worst} m");
+    assert!(tcp_worst < 2.5e-2, "level 1 pushed off by {tcp_worst} m");
     assert!(
         after.iter().all(|s| !s.singular.iter().any(|&f| f)),
         "still flagged 0.5 s after the compatible goal"
