@@ -414,10 +414,11 @@ impl<'a> SimLoop<'a> {
                     published = now;
                 }
                 let wait = deadline.min(published + REPUBLISH_NS).saturating_sub(now);
-                let _ = self
-                    .ports
-                    .command_ready
-                    .timed_wait(|_| {}, Duration::from_nanos(wait.clamp(1_000, 20_000_000)));
+                // Precise to the deadline (the event is consumed by drain()).
+                ipc::wait_for_event_until(
+                    &self.ports.command_ready,
+                    now + wait.clamp(1_000, 20_000_000),
+                );
             }
             if rt::stop_requested() {
                 break;
