@@ -84,24 +84,8 @@ fn a_second_torque_publisher_is_refused_and_the_running_controller_is_unaffected
     let prefix = unique_file_prefix();
     {
         let mut mon = Monitor::new(&ns, &prefix);
-        let mut ctl = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller",
-            &[],
-        );
-        let mut sim = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim",
-            &["--realtime"],
-        );
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller");
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim");
         wait_running(&mut mon, 0, 200);
         let commands_before = mon.commands.len();
         let telemetry_before = mon.telemetry.len();
@@ -186,24 +170,8 @@ fn shared_memory_is_owner_only_and_another_user_cannot_open_the_namespace() {
     let prefix = unique_file_prefix();
     {
         let mut mon = Monitor::new(&ns, &prefix);
-        let mut ctl = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller",
-            &[],
-        );
-        let mut sim = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim",
-            &["--realtime"],
-        );
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller");
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim");
         wait_running(&mut mon, 0, 200);
 
         // Every resource of the namespace: owned by this user, no access for

@@ -27,10 +27,6 @@ use monitor::{Daemon, Monitor};
 
 const LONG: Duration = Duration::from_secs(60);
 
-fn config() -> std::path::PathBuf {
-    repo_root().join("config/paper-sim1.toml")
-}
-
 /// Normal answers in telemetry from index `from` on.
 fn normal_answers(m: &Monitor, from: usize) -> usize {
     m.telemetry[from.min(m.telemetry.len())..]
@@ -54,24 +50,8 @@ fn simulator_killed_controller_reports_keeps_running_and_controls_a_new_one() {
     let prefix = unique_file_prefix();
     {
         let mut mon = Monitor::new(&ns, &prefix);
-        let mut ctl = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller",
-            &[],
-        );
-        let mut sim = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim1",
-            &["--realtime"],
-        );
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller");
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim1");
         mon.wait_until("300 normal cycles with the first simulator", LONG, |m| {
             normal_answers(m, 0) >= 300
         });
@@ -126,15 +106,7 @@ fn simulator_killed_controller_reports_keeps_running_and_controls_a_new_one() {
         // A new simulator on the same namespace: accepted, controlled.
         let states_before = mon.states.len();
         let telemetry_before = mon.telemetry.len();
-        let mut sim2 = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim2",
-            &["--realtime"],
-        );
+        let mut sim2 = Daemon::sim(&ns, &prefix, dir.path(), "sim2");
         mon.wait_until("300 normal cycles with the second simulator", LONG, |m| {
             normal_answers(m, telemetry_before) >= 300 && applied_states(m, states_before) >= 300
         });
@@ -176,24 +148,8 @@ fn controller_killed_simulator_falls_back_at_once_and_accepts_a_new_controller()
     let prefix = unique_file_prefix();
     {
         let mut mon = Monitor::new(&ns, &prefix);
-        let mut sim = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim",
-            &["--realtime"],
-        );
-        let mut ctl = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller1",
-            &[],
-        );
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim");
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller1");
         mon.wait_until("300 applied commands", LONG, |m| {
             applied_states(m, 0) >= 300
         });
@@ -273,15 +229,7 @@ fn controller_killed_simulator_falls_back_at_once_and_accepts_a_new_controller()
         // A new controller: its commands are applied again.
         let states_before = mon.states.len();
         let commands_before = mon.commands.len();
-        let mut ctl2 = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller2",
-            &[],
-        );
+        let mut ctl2 = Daemon::controller(&ns, &prefix, dir.path(), "controller2");
         mon.wait_until("300 applied commands of the new controller", LONG, |m| {
             applied_states(m, states_before) >= 300
         });
@@ -311,52 +259,20 @@ fn both_killed_then_both_restarted_on_the_same_namespace() {
     let prefix = unique_file_prefix();
     {
         let mut mon = Monitor::new(&ns, &prefix);
-        let mut ctl = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller1",
-            &[],
-        );
-        let mut sim = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim1",
-            &["--realtime"],
-        );
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller1");
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim1");
         mon.wait_until("300 normal cycles", LONG, |m| normal_answers(m, 0) >= 300);
         sim.crash();
         ctl.crash();
 
         let (states_before, telemetry_before) = (mon.states.len(), mon.telemetry.len());
-        let mut ctl2 = Daemon::start(
-            "hcc-controller",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "controller2",
-            &[],
-        );
+        let mut ctl2 = Daemon::controller(&ns, &prefix, dir.path(), "controller2");
         let log = ctl2.wait_for_log("waiting for the first joint state", LONG);
         assert!(
             log.contains("removed the stale iceoryx2 resources of 2 dead process"),
             "{log}"
         );
-        let mut sim2 = Daemon::start(
-            "hcc-sim",
-            &config(),
-            &ns,
-            &prefix,
-            dir.path(),
-            "sim2",
-            &["--realtime"],
-        );
+        let mut sim2 = Daemon::sim(&ns, &prefix, dir.path(), "sim2");
         mon.wait_until("300 normal cycles after the restart", LONG, |m| {
             normal_answers(m, telemetry_before) >= 300 && applied_states(m, states_before) >= 300
         });

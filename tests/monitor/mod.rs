@@ -14,7 +14,7 @@ use hcc_msgs::ipc::{
     TelemetrySubscriber,
 };
 use hcc_msgs::{JointState, ServiceNames, Telemetry, TelemetryCounters, TorqueCommand};
-use hcc_system_tests::{ChildGuard, FILE_PREFIX_ENV, bin};
+use hcc_system_tests::{ChildGuard, FILE_PREFIX_ENV, bin, repo_root};
 use iceoryx2::prelude::SignalHandlingMode;
 
 /// The slice of a telemetry sample the tests look at.
@@ -181,6 +181,26 @@ impl Daemon {
             stderr,
             name: tag.to_string(),
         }
+    }
+
+    /// `hcc-controller` on the paper's Sim #1 scenario (the system tests' robot).
+    pub fn controller(namespace: &str, prefix: &str, dir: &Path, tag: &str) -> Daemon {
+        let config = repo_root().join("config/paper-sim1.toml");
+        Daemon::start("hcc-controller", &config, namespace, prefix, dir, tag, &[])
+    }
+
+    /// `hcc-sim --realtime` on the paper's Sim #1 scenario.
+    pub fn sim(namespace: &str, prefix: &str, dir: &Path, tag: &str) -> Daemon {
+        let config = repo_root().join("config/paper-sim1.toml");
+        Daemon::start(
+            "hcc-sim",
+            &config,
+            namespace,
+            prefix,
+            dir,
+            tag,
+            &["--realtime"],
+        )
     }
 
     pub fn pid(&self) -> u32 {
