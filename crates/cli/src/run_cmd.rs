@@ -7,7 +7,7 @@
 //! records the run from the outside: it subscribes to the joint states, the
 //! torque commands and the controller's telemetry (the services of the
 //! hcc-msgs contract) and writes one row per controller cycle in exactly the
-//! column layout of `hcc simulate` (see `hcc_sim::closed_loop`), then
+//! column layout of `hcc simulate` (see `hcc_plant::closed_loop`), then
 //! `trajectory.csv`, `metrics.json` and the plots through hcc-report.
 //!
 //! # Where each column comes from
@@ -54,8 +54,8 @@ use hcc_msgs::{
     CommandMode, DriverStatus, JointState, Namespace, SeqEvent, SequenceChecker, ServiceNames,
     Telemetry, TorqueCommand,
 };
+use hcc_plant::closed_loop::{ControlLaw, HierarchicalLaw, column_names, describe, plant_for};
 use hcc_report::Trajectory;
-use hcc_sim::closed_loop::{ControlLaw, HierarchicalLaw, column_names, describe, plant_for};
 use iceoryx2::prelude::SignalHandlingMode;
 use nalgebra::{DMatrix, DVector};
 use std::collections::VecDeque;
@@ -190,7 +190,7 @@ struct RowBuilder<'a> {
     m_chol: DMatrix<f64>,
     minv_tau: Vec<DVector<f64>>,
     acc: Vec<DVector<f64>>,
-    energy_plant: hcc_sim::Plant,
+    energy_plant: hcc_plant::Plant,
     q: DVector<f64>,
     qd: DVector<f64>,
     row: Vec<f64>,

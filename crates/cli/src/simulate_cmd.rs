@@ -33,7 +33,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     if args.no_coriolis_cancellation {
         scenario.set_coriolis_cancellation(false)?;
     }
-    let run = hcc_sim::closed_loop::simulate(&scenario)
+    let run = hcc_plant::closed_loop::simulate(&scenario)
         .with_context(|| format!("simulation of {} failed", args.config.display()))?;
     let metrics = if args.no_plots {
         std::fs::create_dir_all(&args.out)

@@ -2,7 +2,7 @@
 //! static balance under an external wrench.
 
 use hcc_model::Model;
-use hcc_sim::{ExternalWrench, Plant, SimError};
+use hcc_plant::{ExternalWrench, Plant, SimError};
 use nalgebra::{DMatrix, DVector, Vector3};
 use std::path::PathBuf;
 

@@ -26,7 +26,7 @@ static ALLOCATOR: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 const CONTROLLER_MODE_ENV: &str = "HCC_TEST_CONTROLLER_ARGS";
 
 fn config_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml")
 }
 
 /// In controller mode (set by the parent test), run the controller daemon.
@@ -209,7 +209,7 @@ fn lockstep_sim_and_controller_converge_and_match_the_in_process_loop() {
 
     // The same run in process (hcc simulate): bit-exact up to 1e-12.
     scenario.set_duration(duration).unwrap();
-    let run = hcc_sim::closed_loop::simulate(&scenario).unwrap();
+    let run = hcc_plant::closed_loop::simulate(&scenario).unwrap();
     let n = scenario.model.nq();
     let mut worst = 0.0f64;
     let mut compared = 0;
@@ -309,7 +309,7 @@ fn start_up_errors_exit_nonzero_with_a_clear_message() {
     let dir = std::env::temp_dir().join(format!("hcc-simd-bad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let text = std::fs::read_to_string(config_path()).unwrap();
-    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/planar4.urdf");
+    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/planar4.urdf");
     let text = text
         .replace("planar4.urdf", urdf.to_str().unwrap())
         .replace("[ipc]", "[sim_daemon]\nhold_cycle = 3\n\n[ipc]");

@@ -5,7 +5,7 @@
 //! Per control period k the driver publishes the state (q_k, q̇_k) exactly as
 //! the plant holds it, then applies a torque over [t_k, t_{k+1}] with a
 //! zero-order hold and integrates with the same RK4 sub-steps and time
-//! re-anchoring as `hcc simulate` ([`hcc_sim::run_zoh`]), so a lockstep run over
+//! re-anchoring as `hcc simulate` ([`hcc_plant::run_zoh`]), so a lockstep run over
 //! IPC reproduces the in-process closed loop bit for bit.
 //!
 //! Which torque ([`SimDriver::advance`]):
@@ -37,7 +37,7 @@ use hcc_msgs::{
     STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, TorqueCommand, check_gravity_agreement,
     command_freshness,
 };
-use hcc_sim::{Plant, SimError};
+use hcc_plant::{Plant, SimError};
 use nalgebra::DVector;
 
 /// How the torque of one period was chosen.
@@ -94,10 +94,10 @@ impl SimDriver {
     /// The driver of `scenario`: its plant (model, q0, q̇0, friction,
     /// wrenches), control rate, RK4 sub-steps and `[sim_daemon]` fallback settings.
     pub fn new(scenario: &Scenario) -> Result<SimDriver, SimError> {
-        let plant = hcc_sim::closed_loop::plant_for(scenario)?;
+        let plant = hcc_plant::closed_loop::plant_for(scenario)?;
         let s = &scenario.simulation;
         let n = plant.model().nq();
-        // The same arithmetic as hcc_sim::closed_loop::simulate_with / run_zoh.
+        // The same arithmetic as hcc_plant::closed_loop::simulate_with / run_zoh.
         let period_s = 1.0 / s.control_rate_hz;
         let h = period_s / s.substeps as f64;
         let driver_gravity = !scenario.gravity_compensation;

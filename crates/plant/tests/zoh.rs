@@ -1,7 +1,7 @@
 //! Zero-order-hold semantics of the sampled-data loop.
 
 use hcc_model::Model;
-use hcc_sim::{LoopTiming, Plant, run_zoh};
+use hcc_plant::{LoopTiming, Plant, run_zoh};
 use nalgebra::{DVector, Vector3};
 
 /// One revolute joint about z carrying a 2 kg point mass at 0.5 m: I = 0.5 kg m²,

@@ -2,7 +2,7 @@
 //! simulator daemon). A counting global allocator checks it.
 
 use hcc_model::Model;
-use hcc_sim::{ExternalWrench, Plant};
+use hcc_plant::{ExternalWrench, Plant};
 use nalgebra::{DVector, Vector3};
 
 /// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the

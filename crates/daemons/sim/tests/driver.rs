@@ -9,10 +9,10 @@ use std::path::PathBuf;
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_msgs::{CommandMode, DriverStatus, JointState, TorqueCommand};
-use hcc_sim_daemon::{Applied, SimDriver};
+use hcc_sim::{Applied, SimDriver};
 
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
 }
 
@@ -34,7 +34,7 @@ fn answer(controller: &mut Controller, driver: &SimDriver) -> TorqueCommand {
 fn closed_loop_through_the_driver_is_bit_identical_to_hcc_simulate() {
     let mut scenario = scenario();
     scenario.set_duration(0.2).unwrap();
-    let run = hcc_sim::closed_loop::simulate(&scenario).unwrap();
+    let run = hcc_plant::closed_loop::simulate(&scenario).unwrap();
     let mut driver = SimDriver::new(&scenario).unwrap();
     driver.set_duration(0.2).unwrap();
     let mut controller =
@@ -71,7 +71,7 @@ fn without_a_controller_the_arm_is_held_not_dropped() {
     assert_eq!(driver.counters().fallback_cycles, 500);
 
     // Compare: no torque at all lets it fall.
-    let mut falling = hcc_sim::closed_loop::plant_for(&scenario).unwrap();
+    let mut falling = hcc_plant::closed_loop::plant_for(&scenario).unwrap();
     let zero = nalgebra::DVector::zeros(scenario.model.nq());
     for _ in 0..5000 {
         falling.step(&zero, 1e-4).unwrap();

@@ -14,7 +14,7 @@ use hcc_msgs::{COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, Namespace
 use iceoryx2::prelude::SignalHandlingMode;
 
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
 }
 

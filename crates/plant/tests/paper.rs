@@ -3,7 +3,7 @@
 //! power of τ_μ, and the compliance of level 1 under an external force.
 
 use hcc_config::Scenario;
-use hcc_sim::closed_loop::simulate;
+use hcc_plant::closed_loop::simulate;
 use std::path::PathBuf;
 
 fn config(name: &str) -> PathBuf {

@@ -21,7 +21,7 @@ use hcc_msgs::{
 use iceoryx2::prelude::SignalHandlingMode;
 
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
 }
 
@@ -409,7 +409,7 @@ fn random_states_never_panic_or_command_a_torque_spike() {
 #[test]
 fn torque_limits_default_to_the_urdf_effort_limits_and_saturation_shows_in_telemetry() {
     let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
     let panda = Scenario::load(&path).unwrap();
     let limits: Vec<f64> = panda
         .controller_daemon

@@ -16,8 +16,8 @@ use std::path::PathBuf;
 
 use hcc_config::Scenario;
 use hcc_control::Controller;
-use hcc_sim::SimError;
-use hcc_sim::closed_loop::{ControlLaw, simulate_with};
+use hcc_plant::SimError;
+use hcc_plant::closed_loop::{ControlLaw, simulate_with};
 use nalgebra::DVector;
 
 fn load(name: &str) -> Scenario {

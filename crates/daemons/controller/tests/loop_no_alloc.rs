@@ -24,7 +24,7 @@ const WARM_UP: u64 = 3_000;
 const CYCLES: u64 = 10_000;
 
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
 }
 

@@ -20,8 +20,8 @@ use hcc_msgs::{
     monotonic_now_ns,
 };
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
-use hcc_sim_daemon::SimDriver;
-use hcc_sim_daemon::daemon::{Ports, Shared, SimLoop, SimWait};
+use hcc_sim::SimDriver;
+use hcc_sim::daemon::{Ports, Shared, SimLoop, SimWait};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -35,7 +35,8 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
     assert!(hcc_rtalloc::pool_active());
     let prefix = format!("hccts{}_", std::process::id());
     {
-        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+        let path =
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
         let scenario = Scenario::load(&path).unwrap();
         let n = scenario.model.nq();
         let names = ServiceNames::for_namespace(Namespace::unique("sim_noalloc").unwrap());

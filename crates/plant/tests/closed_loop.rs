@@ -3,8 +3,8 @@
 //! disturbing-acceleration columns.
 
 use hcc_config::Scenario;
-use hcc_sim::SimError;
-use hcc_sim::closed_loop::{ControlLaw, column_names, simulate_with};
+use hcc_plant::SimError;
+use hcc_plant::closed_loop::{ControlLaw, column_names, simulate_with};
 use nalgebra::{DMatrix, DVector};
 use std::path::PathBuf;
 
