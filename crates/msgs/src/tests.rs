@@ -350,3 +350,51 @@ fn monotonic_clock_advances() {
     let b = monotonic_now_ns();
     assert!(a > 0 && b >= a);
 }
+
+#[test]
+fn telemetry_counters_are_listed_once_in_field_order() {
+    assert_eq!(TelemetryCounters::COUNT, 9);
+    assert_eq!(
+        TelemetryCounters::NAMES,
+        [
+            "cycles",
+            "invalid_states",
+            "saturations",
+            "singular_cycles",
+            "stale_events",
+            "peer_lost_events",
+            "missed_states",
+            "sequence_errors",
+            "send_failures",
+        ]
+    );
+    // The wire layout: one u64 each, in the order of NAMES.
+    let offsets = [
+        offset_of!(TelemetryCounters, cycles),
+        offset_of!(TelemetryCounters, invalid_states),
+        offset_of!(TelemetryCounters, saturations),
+        offset_of!(TelemetryCounters, singular_cycles),
+        offset_of!(TelemetryCounters, stale_events),
+        offset_of!(TelemetryCounters, peer_lost_events),
+        offset_of!(TelemetryCounters, missed_states),
+        offset_of!(TelemetryCounters, sequence_errors),
+        offset_of!(TelemetryCounters, send_failures),
+    ];
+    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64]);
+    let c = TelemetryCounters {
+        cycles: 1,
+        invalid_states: 2,
+        saturations: 3,
+        singular_cycles: 4,
+        stale_events: 5,
+        peer_lost_events: 6,
+        missed_states: 7,
+        sequence_errors: 8,
+        send_failures: 9,
+    };
+    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9]);
+    assert_eq!(TelemetryCounters::from_values(c.values()), c);
+    assert_eq!(c.entries()[5], ("peer_lost_events", 6));
+    assert_eq!(TelemetryCounters::ZERO, TelemetryCounters::default());
+    assert!(TelemetryCounters::LABELS.iter().all(|l| !l.is_empty()));
+}

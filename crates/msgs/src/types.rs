@@ -347,12 +347,6 @@ impl JointState {
         set_checked(JOINT_STATE, "qd", &mut self.qd, n, qd)
     }
 
-    /// Sets the measured torques (length must equal `n`, values finite).
-    pub fn set_tau_measured(&mut self, tau: &[f64]) -> Result<(), MsgError> {
-        let n = self.n();
-        set_checked(JOINT_STATE, "tau_measured", &mut self.tau_measured, n, tau)
-    }
-
     /// Sets `n = q.len()` and q, q̇, τ_measured at once (tail zeroed).
     /// Everything is checked first, so on error the message is unchanged.
     pub fn set_joints(&mut self, q: &[f64], qd: &[f64], tau: &[f64]) -> Result<(), MsgError> {
@@ -503,29 +497,96 @@ impl Default for TorqueCommand {
     }
 }
 
-/// Per-cycle event counters of the controller (totals since start).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryCounters@schema1")]
-#[repr(C)]
-pub struct TelemetryCounters {
-    /// Control cycles run.
-    pub cycles: u64,
-    /// States rejected by validation (answered with SafeHold).
-    pub invalid_states: u64,
-    /// Cycles in which at least one torque was saturated.
-    pub saturations: u64,
-    /// Cycles in which a level was flagged singular.
-    pub singular_cycles: u64,
-    /// Wake-ups without a new state within the stale timeout.
-    pub stale_events: u64,
-    /// Times the peer (driver) was detected dead/gone.
-    pub peer_lost_events: u64,
-    /// States missed according to the sequence checker (sum of gaps).
-    pub missed_states: u64,
-    /// Duplicate or backwards state sequence numbers.
-    pub sequence_errors: u64,
-    /// Commands that could not be sent (loan/send failure).
-    pub send_failures: u64,
+/// Defines a set of `u64` event counters once: the struct (each field
+/// `pub NAME: u64`, in the order written, with the attributes given) and, on
+/// it, `COUNT`, `NAMES` (the field names), `LABELS` (a short description
+/// each, for logs), `ZERO`, `values`, `from_values` and `entries`, all in
+/// field order. Adding a counter is one line here; every list of counters
+/// (logs, reports, shared atomics) follows.
+///
+/// ```
+/// hcc_msgs::define_counters! {
+///     /// Two counters.
+///     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+///     pub struct Pair {
+///         /// Things seen.
+///         seen: "things seen",
+///         /// Things lost.
+///         lost: "things lost",
+///     }
+/// }
+/// let p = Pair { seen: 3, lost: 1 };
+/// assert_eq!(Pair::NAMES, ["seen", "lost"]);
+/// assert_eq!(p.entries(), [("seen", 3), ("lost", 1)]);
+/// assert_eq!(Pair::from_values(p.values()), p);
+/// ```
+#[macro_export]
+macro_rules! define_counters {
+    (
+        $(#[$meta:meta])*
+        $vis:vis struct $name:ident {
+            $( $(#[doc = $doc:literal])* $field:ident : $label:literal ),+ $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        $vis struct $name {
+            $( $(#[doc = $doc])* pub $field: u64, )+
+        }
+
+        impl $name {
+            /// Number of counters.
+            pub const COUNT: usize = [$(stringify!($field)),+].len();
+            /// The counters' names (the field names), in field order.
+            pub const NAMES: [&'static str; Self::COUNT] = [$(stringify!($field)),+];
+            /// A short description of each counter, in field order.
+            pub const LABELS: [&'static str; Self::COUNT] = [$($label),+];
+            /// All counters zero.
+            pub const ZERO: Self = Self { $($field: 0),+ };
+
+            /// The values, in field order.
+            pub const fn values(&self) -> [u64; Self::COUNT] {
+                [$(self.$field),+]
+            }
+
+            /// The counters from their values in field order.
+            pub const fn from_values(values: [u64; Self::COUNT]) -> Self {
+                let [$($field),+] = values;
+                Self { $($field),+ }
+            }
+
+            /// (name, value) of every counter, in field order.
+            pub const fn entries(&self) -> [(&'static str, u64); Self::COUNT] {
+                [$((stringify!($field), self.$field)),+]
+            }
+        }
+    };
+}
+
+define_counters! {
+    /// Per-cycle event counters of the controller (totals since start).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+    #[type_name("hcc_msgs::TelemetryCounters@schema1")]
+    #[repr(C)]
+    pub struct TelemetryCounters {
+        /// Control cycles run.
+        cycles: "cycles",
+        /// States rejected by validation (answered with SafeHold).
+        invalid_states: "invalid states (answered with SafeHold)",
+        /// Cycles in which at least one torque was saturated.
+        saturations: "saturated cycles",
+        /// Cycles in which a level was flagged singular.
+        singular_cycles: "singular cycles",
+        /// Wake-ups without a new state within the stale timeout.
+        stale_events: "stale timeouts",
+        /// Times the peer (driver) was detected dead/gone.
+        peer_lost_events: "peer losses",
+        /// States missed according to the sequence checker (sum of gaps).
+        missed_states: "missed states",
+        /// Duplicate or backwards state sequence numbers.
+        sequence_errors: "sequence errors",
+        /// Commands that could not be sent (loan/send failure).
+        send_failures: "send failures",
+    }
 }
 
 /// Timing of one controller cycle, in ns.
@@ -612,17 +673,7 @@ impl Telemetry {
             storage: [0.0; MAX_LEVELS],
             min_singular_value: [0.0; MAX_LEVELS],
             p_mu: 0.0,
-            counters: TelemetryCounters {
-                cycles: 0,
-                invalid_states: 0,
-                saturations: 0,
-                singular_cycles: 0,
-                stale_events: 0,
-                peer_lost_events: 0,
-                missed_states: 0,
-                sequence_errors: 0,
-                send_failures: 0,
-            },
+            counters: TelemetryCounters::ZERO,
             timings: TelemetryTimings {
                 wakeup_latency_ns: 0,
                 compute_ns: 0,
