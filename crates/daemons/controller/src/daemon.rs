@@ -7,30 +7,46 @@
 //! then runs [`Cycle::run_once`] inside an [`hcc_rtalloc::RtSection`] until
 //! SIGINT/SIGTERM. A second, non-real-time thread logs the loop's counters
 //! every 100 ms when they change.
+//!
+//! Logging goes through `tracing` to stderr, filtered by `RUST_LOG` (default
+//! `info`), one line per event prefixed `hcc-controller:` (and `warning:` /
+//! `error:` by level). Only start-up, shutdown and the logging thread log;
+//! the real-time loop never does.
 
 use std::ffi::OsString;
-use std::path::PathBuf;
+use std::fmt;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Parser, ValueEnum};
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
 use hcc_msgs::ServiceNames;
-use hcc_msgs::ipc::{self, Services};
+use hcc_msgs::ipc::{self, IpcNode, Services};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
+use tracing::{Event, Level, Subscriber, error, info, warn};
+use tracing_subscriber::EnvFilter;
+use tracing_subscriber::fmt::format::Writer;
+use tracing_subscriber::fmt::{FmtContext, FormatEvent, FormatFields};
+use tracing_subscriber::registry::LookupSpan;
 
-use crate::cycle::{Cycle, CycleSettings, Outcome, Ports, Status};
-use crate::rt::{self, RtSettings};
+use crate::cycle::{Cycle, CycleSettings, Outcome, Ports};
+use crate::rt::{self, RtReport, RtSettings};
+use crate::status::{LoopCounters, Status};
 
 /// Cycles after which the allocator counters are taken as the baseline.
 const WARM_UP_CYCLES: u64 = 1_000;
 
 /// Stack pre-faulted for the loop.
 const PREFAULT_STACK_BYTES: usize = 512 * 1024;
+
+/// Counters the log of changes leaves out: `cycles` changes every cycle,
+/// `stale_events` every timeout while the peer is lost (logged as a loss).
+const NOT_LOGGED: [&str; 2] = ["cycles", "stale_events"];
 
 /// Wait strategy on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -84,6 +100,7 @@ where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
+    init_logging();
     let args = match Args::try_parse_from(args) {
         Ok(a) => a,
         Err(e) => {
@@ -98,9 +115,48 @@ where
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("hcc-controller: error: {e:#}");
+            error!("{e:#}");
             ExitCode::from(2)
         }
+    }
+}
+
+/// Installs the process's `tracing` subscriber (once; later calls keep it):
+/// stderr, `RUST_LOG` or else `info`, the [`Prefixed`] format.
+pub fn init_logging() {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .event_format(Prefixed)
+        .try_init();
+}
+
+/// One line per event, `hcc-controller: [warning: |error: ]message`: no
+/// timestamp, no colours, the wording the daemon has always printed.
+struct Prefixed;
+
+impl<S, N> FormatEvent<S, N> for Prefixed
+where
+    S: Subscriber + for<'a> LookupSpan<'a>,
+    N: for<'a> FormatFields<'a> + 'static,
+{
+    fn format_event(
+        &self,
+        ctx: &FmtContext<'_, S, N>,
+        mut writer: Writer<'_>,
+        event: &Event<'_>,
+    ) -> fmt::Result {
+        let level = match *event.metadata().level() {
+            Level::ERROR => "error: ",
+            Level::WARN => "warning: ",
+            Level::INFO => "",
+            Level::DEBUG => "debug: ",
+            Level::TRACE => "trace: ",
+        };
+        write!(writer, "hcc-controller: {level}")?;
+        ctx.field_format().format_fields(writer.by_ref(), event)?;
+        writeln!(writer)
     }
 }
 
@@ -136,6 +192,34 @@ fn load(args: &Args) -> Result<Setup> {
     })
 }
 
+/// The iceoryx2 node, services and ports, dropped in that reverse order.
+struct Ipc {
+    ports: Ports,
+    _services: Services,
+    _node: IpcNode,
+}
+
+impl Ipc {
+    /// Removes what dead processes left behind, then opens everything.
+    fn open(setup: &Setup) -> Result<Ipc> {
+        if let Some(line) = rt::cleanup_stale_resources(setup.file_prefix.as_deref()) {
+            info!("{line}");
+        }
+        let node = ipc::create_node(
+            "hcc-controller",
+            SignalHandlingMode::Disabled,
+            setup.file_prefix.as_deref(),
+        )?;
+        let services = Services::open(&node, &setup.names)?;
+        let ports = Ports::open(&services)?;
+        Ok(Ipc {
+            ports,
+            _services: services,
+            _node: node,
+        })
+    }
+}
+
 /// Runs the daemon until SIGINT/SIGTERM.
 pub fn run(args: Args) -> Result<()> {
     let setup = load(&args)?;
@@ -145,17 +229,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut cycle = Cycle::new(controller, setup.settings.clone())?;
     rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     set_log_level_from_env_or(LogLevel::Warn);
-
-    if let Some(line) = rt::cleanup_stale_resources(setup.file_prefix.as_deref()) {
-        eprintln!("hcc-controller: {line}");
-    }
-    let node = ipc::create_node(
-        "hcc-controller",
-        SignalHandlingMode::Disabled,
-        setup.file_prefix.as_deref(),
-    )?;
-    let services = Services::open(&node, &setup.names)?;
-    let ports = Ports::open(&services)?;
+    let ipc = Ipc::open(&setup)?;
 
     let d = &scenario.controller_daemon;
     let rt_settings = RtSettings {
@@ -165,26 +239,7 @@ pub fn run(args: Args) -> Result<()> {
         prefault_stack_bytes: PREFAULT_STACK_BYTES,
     };
     let report = rt::prepare_rt_thread(&rt_settings);
-    for w in &report.warnings {
-        eprintln!("hcc-controller: warning: {w}");
-    }
-    if !hcc_rtalloc::pool_active() {
-        eprintln!(
-            "hcc-controller: warning: the real-time allocator is not installed; loop allocations go to the system allocator"
-        );
-    }
-    eprintln!(
-        "hcc-controller: {} ({} joints, {} levels), namespace {:?}, wait {:?}, pinned {}, SCHED_FIFO {}, mlock {}; waiting for the first joint state on {:?}",
-        scenario.name,
-        scenario.model.nq(),
-        scenario.levels.len(),
-        setup.names.namespace().as_str(),
-        setup.settings.wait,
-        report.pinned,
-        report.fifo,
-        report.memory_locked,
-        setup.names.joint_state(),
-    );
+    log_start(&setup, &report);
 
     let status = cycle.status();
     let baseline = Arc::new(AtomicU64::new(u64::MAX));
@@ -196,87 +251,119 @@ pub fn run(args: Args) -> Result<()> {
             .spawn(move || log_loop(&status, &baseline, &done))
             .context("starting the logging thread")?
     };
-
-    let mut cycles = 0u64;
-    let started = std::time::Instant::now();
-    {
-        let _rt = hcc_rtalloc::RtSection::enter();
-        loop {
-            match cycle.run_once(&ports) {
-                Outcome::Stop => break,
-                Outcome::Answered(_) => {
-                    cycles += 1;
-                    if cycles == WARM_UP_CYCLES {
-                        baseline.store(hcc_rtalloc::stats().rt_system_allocs, Ordering::Relaxed);
-                    }
-                }
-                Outcome::Duplicate | Outcome::Stale => {}
-            }
-        }
-    }
+    let started = Instant::now();
+    control_loop(&mut cycle, &ipc.ports, &baseline);
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
-    let c = status.counters();
+    log_stop(&status, baseline.load(Ordering::Relaxed));
+    if let Some(path) = &args.stats {
+        let rt = report.obtained(&rt_settings);
+        write_stats(path, &cycle, setup.settings.wait, rt, started.elapsed())?;
+    }
+    drop(ipc);
+    Ok(())
+}
+
+/// The real-time loop: [`Cycle::run_once`] until a stop is requested, inside
+/// an [`hcc_rtalloc::RtSection`]; after [`WARM_UP_CYCLES`] answers, the
+/// allocator's count becomes the `baseline` of the logging thread.
+fn control_loop(cycle: &mut Cycle, ports: &Ports, baseline: &AtomicU64) {
+    let _rt = hcc_rtalloc::RtSection::enter();
+    let mut answered = 0u64;
+    loop {
+        match cycle.run_once(ports) {
+            Outcome::Stop => break,
+            Outcome::Answered(_) => {
+                answered += 1;
+                if answered == WARM_UP_CYCLES {
+                    baseline.store(hcc_rtalloc::stats().rt_system_allocs, Ordering::Relaxed);
+                }
+            }
+            Outcome::Duplicate | Outcome::Stale => {}
+        }
+    }
+}
+
+/// The start-up report: what was obtained of the real-time set-up, and what runs.
+fn log_start(setup: &Setup, report: &RtReport) {
+    for w in &report.warnings {
+        warn!("{w}");
+    }
+    if !hcc_rtalloc::pool_active() {
+        warn!(
+            "the real-time allocator is not installed; loop allocations go to the system allocator"
+        );
+    }
+    let scenario = &setup.scenario;
+    info!(
+        "{} ({} joints, {} levels), namespace {:?}, wait {:?}, pinned {}, SCHED_FIFO {}, mlock {}; waiting for the first joint state on {:?}",
+        scenario.name,
+        scenario.model.nq(),
+        scenario.levels.len(),
+        setup.names.namespace().as_str(),
+        setup.settings.wait,
+        report.pinned,
+        report.fifo,
+        report.memory_locked,
+        setup.names.joint_state(),
+    );
+}
+
+/// The shutdown summary: every counter, the worst compute time and the
+/// real-time thread's system allocations after warm-up.
+fn log_stop(status: &Status, baseline: u64) {
+    let c = status.loop_counters();
+    let counters: Vec<String> = c
+        .entries()
+        .iter()
+        .filter(|(name, _, _)| *name != "cycles")
+        .map(|(name, _, value)| format!("{name} {value}"))
+        .collect();
     let s = hcc_rtalloc::stats();
-    let base = baseline.load(Ordering::Relaxed);
-    eprintln!(
-        "hcc-controller: stopped after {} cycles: invalid {}, saturated {}, singular {}, stale {}, peer lost {}, missed states {}, sequence errors {}, send failures {}, max compute {:.1} µs; rt system allocations after warm-up {}, pool high-water {}",
-        c.cycles,
-        c.invalid_states,
-        c.saturations,
-        c.singular_cycles,
-        c.stale_events,
-        c.peer_lost_events,
-        c.missed_states,
-        c.sequence_errors,
-        c.send_failures,
+    let allocs = if baseline == u64::MAX {
+        "n/a (no warm-up)".to_string()
+    } else {
+        s.rt_system_allocs.saturating_sub(baseline).to_string()
+    };
+    info!(
+        "stopped after {} cycles: {}; max compute {:.1} µs; rt system allocations after warm-up {allocs}, pool high-water {}",
+        c.telemetry.cycles,
+        counters.join(", "),
         status.max_compute_ns.load(Ordering::Relaxed) as f64 / 1e3,
-        if base == u64::MAX {
-            "n/a (no warm-up)".to_string()
-        } else {
-            s.rt_system_allocs.saturating_sub(base).to_string()
-        },
         s.pool_high_water,
     );
-    if let Some(path) = &args.stats {
-        let t = cycle.timings();
-        let mut stats = hcc_timing::DaemonTimings {
-            daemon: "hcc-controller".into(),
-            wait: wait_name(setup.settings.wait).into(),
-            rt: report.obtained(&rt_settings),
-            run_s: started.elapsed().as_secs_f64(),
-            ..Default::default()
-        };
-        stats
-            .figures
-            .insert("wakeup_latency".into(), (&t.wakeup).into());
-        stats
-            .figures
-            .insert("compute_time".into(), (&t.compute).into());
-        stats
-            .figures
-            .insert("control_law_time".into(), (&t.step).into());
-        for (name, value) in [
-            ("cycles", c.cycles),
-            ("invalid_states", c.invalid_states),
-            ("saturations", c.saturations),
-            ("singular_cycles", c.singular_cycles),
-            ("stale_events", c.stale_events),
-            ("peer_lost_events", c.peer_lost_events),
-            ("missed_states", c.missed_states),
-            ("sequence_errors", c.sequence_errors),
-            ("send_failures", c.send_failures),
-        ] {
-            stats.counters.insert(name.into(), value);
-        }
-        stats
-            .write_json(path)
-            .context("--stats: writing the timing report")?;
+}
+
+/// `--stats`: the loop's timing report (histograms, every counter, the
+/// real-time set-up obtained) as JSON.
+fn write_stats(
+    path: &Path,
+    cycle: &Cycle,
+    wait: WaitStrategy,
+    rt: hcc_timing::RtObtained,
+    run: Duration,
+) -> Result<()> {
+    let t = cycle.timings();
+    let mut stats = hcc_timing::DaemonTimings {
+        daemon: "hcc-controller".into(),
+        wait: wait_name(wait).into(),
+        rt,
+        run_s: run.as_secs_f64(),
+        ..Default::default()
+    };
+    for (name, histogram) in [
+        ("wakeup_latency", &t.wakeup),
+        ("compute_time", &t.compute),
+        ("control_law_time", &t.step),
+    ] {
+        stats.figures.insert(name.into(), histogram.into());
     }
-    drop(ports);
-    drop(services);
-    drop(node);
-    Ok(())
+    for (name, _, value) in cycle.decider().counters().entries() {
+        stats.counters.insert(name.into(), value);
+    }
+    stats
+        .write_json(path)
+        .context("--stats: writing the timing report")
 }
 
 /// The wait strategy's name on the command line.
@@ -287,79 +374,90 @@ pub fn wait_name(w: WaitStrategy) -> &'static str {
     }
 }
 
+/// What the logging thread has reported so far.
+struct Reported {
+    connected: bool,
+    peer_lost: bool,
+    counters: LoopCounters,
+    rt_allocs: u64,
+}
+
 /// The logging thread: every 100 ms, report what changed.
 fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
-    let mut last = status.counters();
-    let mut last_lost = false;
-    let mut connected = false;
-    let mut last_rt_allocs = 0u64;
-    let mut last_numerical = 0u64;
-    let mut last_restarts = 0u64;
+    let mut reported = Reported {
+        connected: false,
+        peer_lost: false,
+        counters: status.loop_counters(),
+        rt_allocs: 0,
+    };
     while !done.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
-        if !connected && status.connected.load(Ordering::Relaxed) {
-            connected = true;
-            eprintln!("hcc-controller: receiving joint states; control running");
+        reported.peer(status);
+        reported.counters(status.loop_counters());
+        reported.rt_allocations(baseline.load(Ordering::Relaxed));
+    }
+}
+
+impl Reported {
+    /// The first state, a peer lost, a peer back.
+    fn peer(&mut self, status: &Status) {
+        if !self.connected && status.connected.load(Ordering::Relaxed) {
+            self.connected = true;
+            info!("receiving joint states; control running");
         }
         let lost = status.peer_lost.load(Ordering::Relaxed);
-        if lost != last_lost {
-            last_lost = lost;
-            if lost {
-                let last = status.last_state_ns.load(Ordering::Relaxed);
-                let at = status.peer_lost_at_ns.load(Ordering::Relaxed);
-                eprintln!(
-                    "hcc-controller: peer lost: no joint state for {:.1} ms after state seq {} (detected at {at} ns); still running, waiting for a driver",
-                    at.saturating_sub(last) as f64 / 1e6,
-                    status.last_state_seq.load(Ordering::Relaxed),
-                );
-            } else {
-                eprintln!(
-                    "hcc-controller: joint states are back (state seq {}); control resumed",
-                    status.last_state_seq.load(Ordering::Relaxed)
-                );
-            }
+        if lost == self.peer_lost {
+            return;
         }
-        let c = status.counters();
-        let changes = [
-            (
-                "invalid states (answered with SafeHold)",
-                last.invalid_states,
-                c.invalid_states,
-            ),
-            ("saturated cycles", last.saturations, c.saturations),
-            ("peer losses", last.peer_lost_events, c.peer_lost_events),
-            ("singular cycles", last.singular_cycles, c.singular_cycles),
-            ("missed states", last.missed_states, c.missed_states),
-            ("sequence errors", last.sequence_errors, c.sequence_errors),
-            ("send failures", last.send_failures, c.send_failures),
-        ];
-        for (what, before, now) in changes {
-            if now != before {
-                eprintln!("hcc-controller: {what}: {now} (+{})", now - before);
-            }
-        }
-        last = c;
-        let numerical = status.numerical_failures.load(Ordering::Relaxed);
-        if numerical != last_numerical {
-            eprintln!(
-                "hcc-controller: numerical failures of the control law (answered with SafeHold): {numerical}"
+        self.peer_lost = lost;
+        let seq = status.last_state_seq.load(Ordering::Relaxed);
+        if lost {
+            let last = status.last_state_ns.load(Ordering::Relaxed);
+            let at = status.peer_lost_at_ns.load(Ordering::Relaxed);
+            warn!(
+                "peer lost: no joint state for {:.1} ms after state seq {seq} (detected at {at} ns); still running, waiting for a driver",
+                at.saturating_sub(last) as f64 / 1e6,
             );
-            last_numerical = numerical;
+        } else {
+            info!("joint states are back (state seq {seq}); control resumed");
         }
-        let restarts = status.peer_restarts.load(Ordering::Relaxed);
-        if restarts != last_restarts {
-            eprintln!("hcc-controller: new peer detected; sequence checker reset ({restarts})");
-            last_restarts = restarts;
-        }
-        let base = baseline.load(Ordering::Relaxed);
-        if base != u64::MAX {
-            let allocs = hcc_rtalloc::stats().rt_system_allocs.saturating_sub(base);
-            if allocs != last_rt_allocs {
-                eprintln!(
-                    "hcc-controller: warning: {allocs} system allocations on the real-time thread after warm-up"
-                );
-                last_rt_allocs = allocs;
+    }
+
+    /// Every counter that changed (but [`NOT_LOGGED`]): its total and the increase.
+    fn counters(&mut self, now: LoopCounters) {
+        let before = self.counters.values();
+        for ((name, label, value), before) in now.entries().into_iter().zip(before) {
+            if value != before && !NOT_LOGGED.contains(&name) {
+                warn!("{label}: {value} (+{})", value.saturating_sub(before));
             }
+        }
+        self.counters = now;
+    }
+
+    /// System allocations of the real-time thread after warm-up (`baseline`).
+    fn rt_allocations(&mut self, baseline: u64) {
+        if baseline == u64::MAX {
+            return;
+        }
+        let allocs = hcc_rtalloc::stats()
+            .rt_system_allocs
+            .saturating_sub(baseline);
+        if allocs != self.rt_allocs {
+            warn!("{allocs} system allocations on the real-time thread after warm-up");
+            self.rt_allocs = allocs;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_counters_left_out_of_the_log_exist() {
+        let names = LoopCounters::default().entries().map(|e| e.0);
+        for name in NOT_LOGGED {
+            assert!(names.contains(&name), "{name} is not a counter: {names:?}");
         }
     }
 }

@@ -4,12 +4,17 @@
 //! a 1 kHz process that answers every joint state with a torque command over
 //! iceoryx2 (the contract of `hcc-msgs`).
 //!
-//! * [`cycle`]: one control cycle, allocation-free — wait, validate, compute
-//!   τ = Σ τ_i + τ_μ + g (paper Eq. (19)), saturate, publish command and telemetry.
+//! * [`decide`]: the decision for one joint state, without I/O — validate,
+//!   check the sequence, compute τ = Σ τ_i + τ_μ + g (paper Eq. (19)), the
+//!   safe command, saturate ([`Decider`], [`Answer`]).
+//! * [`cycle`]: the allocation-free I/O shell around it — wait, receive the
+//!   newest state, decide, send the command, publish telemetry ([`Cycle`]).
+//! * [`status`]: the counters (defined once: [`LoopCounters`]) and flags the
+//!   loop shares with the logging thread ([`Status`]).
 //! * [`rt`]: real-time thread set-up (core pinning, SCHED_FIFO, mlockall,
 //!   pre-faulting, timer slack), absolute sleeps and the stop signal, shared
 //!   with the plant-simulator daemon.
-//! * [`daemon`]: the `hcc-controller` command line, start-up and shutdown.
+//! * [`daemon`]: the `hcc-controller` command line, start-up, logging and shutdown.
 //!
 //! The binary installs `hcc_rtalloc::RtAllocator` as its global allocator:
 //! iceoryx2 0.10 makes one small allocation per loan, which the real-time
@@ -17,6 +22,10 @@
 
 pub mod cycle;
 pub mod daemon;
+pub mod decide;
 pub mod rt;
+pub mod status;
 
-pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports, Status};
+pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports};
+pub use decide::{Answer, Decider, RESYNC_RUN, max_plausible_gap};
+pub use status::{DaemonCounters, LoopCounters, Status};

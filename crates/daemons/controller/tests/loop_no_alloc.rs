@@ -5,13 +5,15 @@
 //!
 //! After warm-up the real-time thread makes no call into the system
 //! allocator, the pool occupancy is bounded and constant from cycle to cycle,
-//! and the thread takes no page fault.
+//! and the thread takes no page fault. The decision step alone
+//! ([`Decider::decide`], valid and rejected states, stale timeouts) makes no
+//! allocation at all, not even from the pool.
 
 use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::{Cycle, CycleSettings, Outcome, Ports};
+use hcc_controller::{Answer, Cycle, CycleSettings, Decider, Outcome, Ports};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames};
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
@@ -170,4 +172,57 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
     }
     let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
     assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
+}
+
+#[test]
+fn the_decision_step_allocates_nothing() {
+    let scenario = scenario();
+    let n = scenario.model.nq();
+    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    let mut decider = Decider::new(controller, &CycleSettings::from_scenario(&scenario)).unwrap();
+    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut states = Vec::new();
+    for k in 0..2 * WARM_UP {
+        let mut s = JointState::zeroed();
+        let q: Vec<f64> = q0
+            .iter()
+            .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
+            .collect();
+        s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+        s.header.seq = k;
+        match k % 97 {
+            // A NaN, a duplicate, a step backwards: the safe command or no answer.
+            13 => s.q[0] = f64::NAN,
+            29 => s.header.seq = k - 1,
+            61 => s.header.seq = k / 2,
+            _ => {}
+        }
+        states.push(s);
+    }
+    let decide = |decider: &mut Decider, k: u64| {
+        if k % 500 == 499 {
+            decider.stale(k * 1_000_000);
+        }
+        decider.decide(&states[k as usize], k * 1_000_000)
+    };
+    let rt = RtSection::enter();
+    for k in 0..WARM_UP {
+        decide(&mut decider, k);
+    }
+    let before = thread_stats();
+    let mut answers = [0u64; 2];
+    for k in WARM_UP..2 * WARM_UP {
+        match decide(&mut decider, k) {
+            Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
+            Answer::Command(_) => answers[0] += 1,
+            Answer::Duplicate => {}
+        }
+    }
+    let during = thread_stats().since(before);
+    drop(rt);
+    println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
+    assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
+    assert_eq!(during.pool_allocs, 0, "{during:?}");
+    assert_eq!(during.system_allocs, 0, "{during:?}");
+    assert_eq!(during.fallbacks, 0, "{during:?}");
 }

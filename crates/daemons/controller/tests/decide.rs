@@ -1,0 +1,235 @@
+//! The controller's decision step driven directly, without iceoryx2: a valid
+//! state gets the control law's torque (paper Eq. (19)), a bad one the safe
+//! command τ = g(q_v), a duplicate no answer, a restarted peer is recognised,
+//! and a gravity conflict is answered with τ = 0.
+
+use std::path::PathBuf;
+
+use hcc_config::Scenario;
+use hcc_control::Controller;
+use hcc_controller::{Answer, CycleSettings, Decider, RESYNC_RUN};
+use hcc_msgs::{
+    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+};
+
+/// One control period at 1 kHz, ns.
+const PERIOD: u64 = 1_000_000;
+
+fn scenario() -> Scenario {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
+    Scenario::load(&path).unwrap()
+}
+
+fn controller(scenario: &Scenario) -> Controller {
+    Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap()
+}
+
+/// A decider without torque limits (τ is the law's), and the scenario.
+fn decider() -> (Decider, Scenario) {
+    let scenario = scenario();
+    let mut settings = CycleSettings::from_scenario(&scenario);
+    assert!(settings.gravity_compensation, "paper-sim1 includes g(q)");
+    settings.torque_limits = vec![f64::INFINITY; scenario.model.nq()];
+    (
+        Decider::new(controller(&scenario), &settings).unwrap(),
+        scenario,
+    )
+}
+
+/// A valid state at q0 + offset, at rest, with sequence number `seq`.
+fn state(scenario: &Scenario, seq: u64, offset: f64) -> JointState {
+    let n = scenario.model.nq();
+    let q: Vec<f64> = scenario.q0.iter().map(|q| q + offset).collect();
+    let mut s = JointState::zeroed();
+    s.set_joints(&q, &vec![0.1; n], &vec![0.0; n]).unwrap();
+    s.header.seq = seq;
+    s
+}
+
+#[test]
+fn a_valid_state_is_answered_normally_with_the_torque_of_the_law() {
+    let (mut d, scenario) = decider();
+    let mut reference = controller(&scenario);
+    for k in 1..=3u64 {
+        let s = state(&scenario, k, 0.01 * k as f64);
+        assert_eq!(
+            d.decide(&s, k * PERIOD),
+            Answer::Command(CommandMode::Normal)
+        );
+        let tau = reference.step(s.q(), s.qd()).unwrap().tau.clone();
+        let c = d.command();
+        assert_eq!(c.tau(), tau.as_slice(), "state {k}: τ of Eq. (19)");
+        assert_eq!((c.state_seq, c.header.seq), (k, k));
+        assert_eq!(c.mode, CommandMode::Normal.code());
+        assert_eq!(c.flags, COMMAND_FLAG_GRAVITY_INCLUDED);
+        assert!(c.validate(s.n()).is_ok());
+        let t = d.telemetry();
+        assert_eq!((t.state_seq, t.command_seq), (k, k));
+        assert_eq!(t.tau(), tau.as_slice());
+        assert!(d.step_ns().is_some(), "the law ran");
+    }
+    let c = d.counters();
+    assert_eq!(c.telemetry.cycles, 3);
+    assert_eq!(c.telemetry.invalid_states + c.telemetry.sequence_errors, 0);
+    assert_eq!(c.daemon.numerical_failures + c.daemon.peer_restarts, 0);
+}
+
+#[test]
+fn a_nan_state_gets_the_safe_hold_with_gravity_at_the_last_valid_state() {
+    let (mut d, scenario) = decider();
+    // Before any valid state there is no q_v: τ = 0.
+    let mut bad = state(&scenario, 1, 0.0);
+    bad.q[1] = f64::NAN;
+    assert_eq!(
+        d.decide(&bad, PERIOD),
+        Answer::Command(CommandMode::SafeHold)
+    );
+    assert!(d.command().tau().iter().all(|&t| t == 0.0));
+
+    let s = state(&scenario, 2, 0.02);
+    assert_eq!(
+        d.decide(&s, 2 * PERIOD),
+        Answer::Command(CommandMode::Normal)
+    );
+    let gravity: Vec<f64> = d.controller().output().gravity.iter().copied().collect();
+    assert!(gravity.iter().any(|g| g.abs() > 1.0), "{gravity:?}");
+    let levels = d.telemetry().tau_level(0).to_vec();
+
+    let mut bad = state(&scenario, 3, 0.5);
+    bad.qd[2] = f64::NAN;
+    assert_eq!(
+        d.decide(&bad, 3 * PERIOD),
+        Answer::Command(CommandMode::SafeHold)
+    );
+    assert!(d.step_ns().is_none(), "the law did not run");
+    let c = d.command();
+    assert_eq!(c.tau(), gravity.as_slice(), "τ = g(q_v)");
+    assert_eq!(c.state_seq, 3);
+    assert_eq!(c.mode, CommandMode::SafeHold.code());
+    assert_eq!(c.flags, COMMAND_FLAG_GRAVITY_INCLUDED);
+    let t = d.telemetry();
+    assert_eq!(t.mode, CommandMode::SafeHold.code());
+    assert_eq!(
+        t.tau_level(0),
+        levels.as_slice(),
+        "the last valid diagnostics"
+    );
+    assert_eq!(d.counters().telemetry.invalid_states, 2);
+}
+
+#[test]
+fn a_duplicate_is_not_answered() {
+    let (mut d, scenario) = decider();
+    let s = state(&scenario, 7, 0.0);
+    assert_eq!(d.decide(&s, PERIOD), Answer::Command(CommandMode::Normal));
+    let answered = *d.command();
+    assert_eq!(d.decide(&s, 2 * PERIOD), Answer::Duplicate);
+    assert_eq!(*d.command(), answered, "the command buffer is unchanged");
+    let c = d.counters().telemetry;
+    assert_eq!((c.cycles, c.sequence_errors), (2, 1));
+    // The stream continues.
+    let s = state(&scenario, 8, 0.0);
+    assert_eq!(
+        d.decide(&s, 3 * PERIOD),
+        Answer::Command(CommandMode::Normal)
+    );
+    assert_eq!(d.command().header.seq, 2);
+}
+
+#[test]
+fn states_going_backwards_three_times_in_a_row_are_a_restarted_peer() {
+    let (mut d, scenario) = decider();
+    let mut wake = 0;
+    let mut decide = |d: &mut Decider, seq: u64| {
+        wake += PERIOD;
+        d.decide(&state(&scenario, seq, 0.0), wake)
+    };
+    for seq in 100..110 {
+        assert_eq!(decide(&mut d, seq), Answer::Command(CommandMode::Normal));
+    }
+    // A single backwards state is rejected; the stream then continues.
+    assert_eq!(decide(&mut d, 50), Answer::Command(CommandMode::SafeHold));
+    assert_eq!(decide(&mut d, 110), Answer::Command(CommandMode::Normal));
+    // A driver restarted without an outage counts from 0: the third state
+    // that follows the rejected ones resets the checker.
+    let mut answers = Vec::new();
+    for seq in 0..u64::from(RESYNC_RUN) + 1 {
+        answers.push(decide(&mut d, seq));
+    }
+    assert_eq!(
+        answers,
+        [
+            Answer::Command(CommandMode::SafeHold),
+            Answer::Command(CommandMode::SafeHold),
+            Answer::Command(CommandMode::Normal),
+            Answer::Command(CommandMode::Normal),
+        ]
+    );
+    let c = d.counters();
+    assert_eq!(c.daemon.peer_restarts, 1);
+    assert_eq!(c.telemetry.sequence_errors, 3);
+    // An implausible jump ahead is rejected like a backwards step.
+    assert_eq!(
+        decide(&mut d, 1_000_000),
+        Answer::Command(CommandMode::SafeHold)
+    );
+    assert_eq!(decide(&mut d, 4), Answer::Command(CommandMode::Normal));
+}
+
+#[test]
+fn a_new_peer_after_a_stale_timeout_is_accepted_at_once() {
+    let (mut d, scenario) = decider();
+    let s = state(&scenario, 500, 0.0);
+    assert_eq!(d.decide(&s, PERIOD), Answer::Command(CommandMode::Normal));
+    assert!(d.stale(5 * PERIOD), "a new loss");
+    assert!(!d.stale(8 * PERIOD), "the same loss");
+    assert!(d.peer_lost() && d.telemetry().peer_lost());
+    let c = d.counters().telemetry;
+    assert_eq!((c.stale_events, c.peer_lost_events), (2, 1));
+    assert_eq!(d.telemetry().counters, c);
+    let s = state(&scenario, 0, 0.0);
+    assert_eq!(
+        d.decide(&s, 9 * PERIOD),
+        Answer::Command(CommandMode::Normal)
+    );
+    assert!(!d.peer_lost() && !d.telemetry().peer_lost());
+    assert_eq!(d.counters().daemon.peer_restarts, 1);
+}
+
+#[test]
+fn a_gravity_conflict_is_answered_with_zero_torque() {
+    let (mut d, scenario) = decider();
+    let s = state(&scenario, 1, 0.0);
+    assert_eq!(d.decide(&s, PERIOD), Answer::Command(CommandMode::Normal));
+    // The driver adds g(q) too: both would.
+    let mut s = state(&scenario, 2, 0.0);
+    s.flags = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
+    assert_eq!(
+        d.decide(&s, 2 * PERIOD),
+        Answer::Command(CommandMode::SafeHold)
+    );
+    let c = d.command();
+    assert!(c.tau().iter().all(|&t| t == 0.0), "{:?}", c.tau());
+    assert_eq!(c.flags, 0, "the command must not claim to include gravity");
+    assert_eq!(d.counters().telemetry.invalid_states, 1);
+}
+
+#[test]
+fn torque_limits_scale_the_law_and_are_counted() {
+    let scenario = scenario();
+    let n = scenario.model.nq();
+    let mut settings = CycleSettings::from_scenario(&scenario);
+    settings.torque_limits = vec![1.0; n];
+    let mut d = Decider::new(controller(&scenario), &settings).unwrap();
+    let s = state(&scenario, 1, 0.0);
+    assert_eq!(d.decide(&s, PERIOD), Answer::Command(CommandMode::Normal));
+    let tau = d.command().tau();
+    assert!(tau.iter().all(|t| t.abs() <= 1.0), "{tau:?}");
+    assert!(tau.iter().any(|t| t.abs() == 1.0), "{tau:?}");
+    assert_eq!(d.counters().telemetry.saturations, 1);
+    // Bad settings are an error, not a panic.
+    settings.torque_limits = vec![1.0; n - 1];
+    assert!(Decider::new(controller(&scenario), &settings).is_err());
+    settings.torque_limits = vec![-1.0; n];
+    assert!(Decider::new(controller(&scenario), &settings).is_err());
+}
