@@ -19,14 +19,15 @@
 //! - `q`, `qd` from the state; `tau` (τ of eq. 19, gravity included when
 //!   configured), `e<i>_<k>`, `S<i>` (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>`
 //!   (eqs. 20, 21) and `tau_mu_<k>` (eq. 22) from the telemetry,
-//! - the derived columns are computed here, off the real-time path, from the
-//!   recorded state and the telemetry's torques with the same model code the
-//!   in-process run uses: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖ (hcc-model: CRBA,
-//!   Cholesky, frame Jacobians), `accv<i>_<j>` = ‖J̄_i M⁻¹ τ_j‖ and the split
-//!   of S_i into `S<i>_kin` / `S<i>_pot` with J̄ (eq. 4) and V_i (eq. 28) of a
-//!   shadow copy of the controller (hcc-control) fed with the same states,
-//!   and `E_kin`, `E_pot` from the plant model. The shadow's τ is compared
-//!   with the telemetry's τ as a consistency check (reported, not used).
+//! - the derived columns are computed here, off the real-time path, by the
+//!   recorder `hcc simulate` uses (hcc-record), from the recorded state and the
+//!   telemetry's torques: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖, `accv<i>_<j>` =
+//!   ‖J̄_i M⁻¹ τ_j‖ and the split of S_i into `S<i>_kin` / `S<i>_pot`, with J_i,
+//!   J̄ (eq. 4) and V_i (eq. 28) of a shadow copy of the controller
+//!   (hcc-control) fed with the same states, and `E_kin`, `E_pot` from the
+//!   plant model. The shadow's τ is compared with the telemetry's τ as a
+//!   consistency check (reported, not used); where the shadow fails, the
+//!   columns that need it are NaN.
 //!
 //! # Not disturbing the real-time loops
 //!
@@ -48,16 +49,17 @@
 //! order) and receive SIGTERM if the launcher dies.
 
 use anyhow::{Context, anyhow, bail};
-use hcc_config::{Scenario, Task};
+use hcc_config::Scenario;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{
     CommandMode, DriverStatus, JointState, Namespace, SeqEvent, SequenceChecker, ServiceNames,
     Telemetry, TorqueCommand,
 };
-use hcc_plant::closed_loop::{ControlLaw, HierarchicalLaw, column_names, describe, plant_for};
+use hcc_plant::closed_loop::{self, ControlLaw, HierarchicalLaw, Sampled, describe};
+use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder};
 use hcc_report::Trajectory;
 use iceoryx2::prelude::SignalHandlingMode;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -111,61 +113,6 @@ pub struct RunArgs {
 // ---------------------------------------------------------------------------
 // Rows
 
-/// Task Jacobians J_i of the scenario's levels from the model (the analytic
-/// task Jacobian: selection rows of the frame Jacobian for a position,
-/// angular rows for an orientation, selection/weights for joint tasks).
-struct TaskJacobians {
-    frame_jac: DMatrix<f64>,
-    jac: Vec<DMatrix<f64>>,
-}
-
-impl TaskJacobians {
-    fn new(scenario: &Scenario) -> TaskJacobians {
-        let n = scenario.model.nq();
-        TaskJacobians {
-            frame_jac: DMatrix::zeros(6, n),
-            jac: scenario
-                .levels
-                .iter()
-                .map(|l| DMatrix::zeros(l.task.dim(), n))
-                .collect(),
-        }
-    }
-
-    /// Needs forward kinematics at q in `data`.
-    fn update(&mut self, scenario: &Scenario, data: &hcc_model::Data) {
-        let model = &scenario.model;
-        for (l, jac) in scenario.levels.iter().zip(self.jac.iter_mut()) {
-            jac.fill(0.0);
-            match &l.task {
-                Task::Position { frame_id, axes, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for (r, &a) in axes.iter().enumerate() {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(a));
-                    }
-                }
-                Task::Orientation { frame_id, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for r in 0..3 {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(3 + r));
-                    }
-                }
-                Task::PlanarOrientation { frame_id, axis, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    jac.row_mut(0).copy_from(&self.frame_jac.row(3 + axis));
-                }
-                Task::Joint { joints } => {
-                    for (r, &j) in joints.iter().enumerate() {
-                        jac[(r, j)] = 1.0;
-                    }
-                }
-                Task::Posture { .. } => jac.fill_with_identity(),
-                Task::JointCombination { weights } => jac.copy_from(weights),
-            }
-        }
-    }
-}
-
 /// The part of a joint state the recorder keeps.
 #[derive(Clone, Debug)]
 struct StateRecord {
@@ -174,60 +121,68 @@ struct StateRecord {
     qd: Vec<f64>,
 }
 
-/// Builds the rows of `hcc simulate`'s layout from states and telemetry.
+/// The controller's telemetry of one cycle, as the recorder reads it.
+struct TelemetryCycle<'a> {
+    tel: &'a Telemetry,
+    n: usize,
+}
+
+impl CycleOutput for TelemetryCycle<'_> {
+    fn tau(&self) -> &[f64] {
+        self.tel.tau()
+    }
+    fn level_torque(&self, i: usize) -> &[f64] {
+        self.tel.tau_level(i)
+    }
+    fn tau_mu(&self) -> &[f64] {
+        &self.tel.tau_mu[..self.n]
+    }
+    fn task_error(&self, i: usize) -> &[f64] {
+        self.tel.task_error(i)
+    }
+    fn level_energy(&self, i: usize) -> f64 {
+        self.tel.storage[i]
+    }
+    fn p_mu(&self) -> f64 {
+        self.tel.p_mu
+    }
+}
+
+/// Builds the rows of `hcc simulate`'s layout from states and telemetry: the
+/// telemetry gives the law's output, a shadow controller fed with the same
+/// states the terms of the derived columns (J_i, J̄, V_i).
 struct RowBuilder<'a> {
     scenario: &'a Scenario,
     n: usize,
-    r: usize,
     dims: Vec<usize>,
     period: f64,
+    recorder: Recorder,
     traj: Trajectory,
     shadow: HierarchicalLaw,
     shadow_failures: u64,
     shadow_tau_diff: f64,
-    data: hcc_model::Data,
-    jacs: TaskJacobians,
-    m_chol: DMatrix<f64>,
-    minv_tau: Vec<DVector<f64>>,
-    acc: Vec<DVector<f64>>,
-    energy_plant: hcc_plant::Plant,
     q: DVector<f64>,
     qd: DVector<f64>,
-    row: Vec<f64>,
 }
 
 impl<'a> RowBuilder<'a> {
     fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
         let n = scenario.model.nq();
-        let r = scenario.levels.len();
         let s = &scenario.simulation;
         let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
-        let names = column_names(scenario, true);
-        let traj = Trajectory::with_capacity(names, cycles + 1)?;
-        let width = traj.columns().len();
+        let recorder = closed_loop::recorder(scenario, true)?;
         Ok(RowBuilder {
             scenario,
             n,
-            r,
             dims: scenario.levels.iter().map(|l| l.task.dim()).collect(),
             period: 1.0 / s.control_rate_hz,
-            traj,
+            traj: recorder.trajectory(cycles + 1)?,
+            recorder,
             shadow: HierarchicalLaw::new(scenario)?,
             shadow_failures: 0,
             shadow_tau_diff: 0.0,
-            data: hcc_model::Data::new(&scenario.model),
-            jacs: TaskJacobians::new(scenario),
-            m_chol: DMatrix::zeros(n, n),
-            minv_tau: (0..=r).map(|_| DVector::zeros(n)).collect(),
-            acc: scenario
-                .levels
-                .iter()
-                .map(|l| DVector::zeros(l.task.dim()))
-                .collect(),
-            energy_plant: plant_for(scenario)?,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
-            row: Vec::with_capacity(width),
         })
     }
 
@@ -248,108 +203,40 @@ impl<'a> RowBuilder<'a> {
         Ok(())
     }
 
+    /// Runs the shadow controller on the state (a check of the telemetry's
+    /// τ); whether it succeeded.
+    fn step_shadow(&mut self, state: &StateRecord, tel: &Telemetry) -> bool {
+        self.q.as_mut_slice().copy_from_slice(&state.q);
+        self.qd.as_mut_slice().copy_from_slice(&state.qd);
+        if self.shadow.compute(&self.q, &self.qd).is_err() {
+            self.shadow_failures += 1;
+            return false;
+        }
+        let d = self
+            .shadow
+            .tau()
+            .iter()
+            .zip(tel.tau())
+            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        self.shadow_tau_diff = self.shadow_tau_diff.max(d);
+        true
+    }
+
     /// Appends the row of one controller cycle: `tel` answered `state`.
     fn push(&mut self, state: &StateRecord, tel: &Telemetry) -> anyhow::Result<()> {
         self.check_shape(tel)?;
-        let (n, r) = (self.n, self.r);
-        // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
-        let t = state.seq as f64 * self.period;
-        self.q.as_mut_slice().copy_from_slice(&state.q);
-        self.qd.as_mut_slice().copy_from_slice(&state.qd);
-
-        // Shadow controller on the same state: J̄ and V_i, and a check of τ.
-        let shadow_ok = self.shadow.compute(&self.q, &self.qd).is_ok();
-        if shadow_ok {
-            let d = self
-                .shadow
-                .tau()
-                .iter()
-                .zip(tel.tau())
-                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-            self.shadow_tau_diff = self.shadow_tau_diff.max(d);
-        } else {
-            self.shadow_failures += 1;
-        }
-
-        let model = &self.scenario.model;
-        hcc_model::crba(model, &mut self.data, &self.q);
-        self.jacs.update(self.scenario, &self.data);
-        self.m_chol.copy_from(&self.data.m);
-        hcc_model::linalg::cholesky_in_place(&mut self.m_chol)
-            .map_err(|e| anyhow!("M(q) at t = {t} s: {e}"))?;
-
-        let row = &mut self.row;
-        row.clear();
-        row.push(t);
-        row.extend_from_slice(&state.q);
-        row.extend_from_slice(&state.qd);
-        row.extend_from_slice(tel.tau());
-        for i in 0..r {
-            row.extend_from_slice(tel.task_error(i));
-        }
-        row.extend_from_slice(&tel.storage[..r]);
-        row.push(tel.p_mu);
-        for i in 0..r {
-            row.extend_from_slice(tel.tau_level(i));
-        }
-        row.extend_from_slice(&tel.tau_mu[..n]);
-        for (j, x) in self.minv_tau.iter_mut().enumerate() {
-            x.as_mut_slice().copy_from_slice(if j < r {
-                tel.tau_level(j)
-            } else {
-                &tel.tau_mu[..n]
-            });
-            hcc_model::linalg::cholesky_solve_in_place(&self.m_chol, x)
-                .map_err(|e| anyhow!("M(q) solve at t = {t} s: {e}"))?;
-        }
-        // ‖J_i M⁻¹ τ_j‖ for every j ≠ i, then for τ_μ.
-        for (i, acc_i) in self.acc.iter_mut().enumerate() {
-            for (j, x) in self.minv_tau.iter().enumerate() {
-                if j != i {
-                    acc_i.gemv(1.0, &self.jacs.jac[i], x, 0.0);
-                    row.push(acc_i.norm());
-                }
-            }
-        }
-        // ‖J̄_i M⁻¹ τ_j‖ in the local null-space coordinates (J̄ of the shadow).
-        let jbar = if shadow_ok {
-            self.shadow.extended_jacobian()
-        } else {
-            None
+        let shadow_ok = self.step_shadow(state, tel);
+        let output = TelemetryCycle { tel, n: self.n };
+        let shadow = Sampled(&self.shadow);
+        let cycle = Cycle {
+            // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
+            t: state.seq as f64 * self.period,
+            q: &state.q,
+            qd: &state.qd,
+            output: &output,
+            law: shadow_ok.then_some(&shadow as &dyn LawTerms),
         };
-        match jbar {
-            Some((dims, jbar))
-                if dims.len() == r
-                    && jbar.ncols() == n
-                    && dims.iter().sum::<usize>() == jbar.nrows() =>
-            {
-                let mut offset = 0;
-                for (i, &d) in dims.iter().enumerate() {
-                    let block = jbar.rows(offset, d);
-                    for (j, x) in self.minv_tau.iter().enumerate() {
-                        if j != i {
-                            row.push((block * x).norm());
-                        }
-                    }
-                    offset += d;
-                }
-            }
-            _ => row.extend(std::iter::repeat_n(f64::NAN, r * r)),
-        }
-        for i in 0..r {
-            let pot = if shadow_ok {
-                self.shadow.level_potential(i)
-            } else {
-                f64::NAN
-            };
-            row.push(tel.storage[i] - pot);
-            row.push(pot);
-        }
-        self.energy_plant.set_state(t, &self.q, &self.qd)?;
-        let energy = self.energy_plant.energy();
-        row.push(energy.kinetic);
-        row.push(energy.potential);
-        self.traj.push_row(row)?;
+        self.recorder.record(&cycle, &mut self.traj)?;
         Ok(())
     }
 }
@@ -966,7 +853,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     );
     if rows.shadow_failures > 0 {
         println!(
-            "  warning: the shadow controller failed on {} states (accv and S_kin/S_pot are NaN there)",
+            "  warning: the shadow controller failed on {} states (acc, accv and S_kin/S_pot are NaN there)",
             rows.shadow_failures
         );
     }
