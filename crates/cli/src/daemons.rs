@@ -98,6 +98,7 @@ impl Daemon {
         let mut child = cmd
             .spawn()
             .with_context(|| format!("cannot start {name} ({})", exe.display()))?;
+        tracing::debug!(pid = child.id(), exe = %exe.display(), ?args, "started {name}");
         let stderr: Tail = Arc::new(Mutex::new(VecDeque::new()));
         let stdout: Tail = Arc::new(Mutex::new(VecDeque::new()));
         let mut readers = Vec::new();
@@ -149,8 +150,8 @@ impl Daemon {
             }
             std::thread::sleep(Duration::from_millis(5));
         }
-        eprintln!(
-            "hcc: {} (pid {}) did not exit within {:.1} s of SIGTERM; killing it",
+        tracing::warn!(
+            "{} (pid {}) did not exit within {:.1} s of SIGTERM; killing it",
             self.name,
             self.pid(),
             grace.as_secs_f64()

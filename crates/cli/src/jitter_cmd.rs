@@ -44,6 +44,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+use tracing::warn;
 
 use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
@@ -265,19 +266,14 @@ struct Pair {
     run_s: f64,
 }
 
-fn run_pair(
+/// The command lines of the pair: (simulator, controller).
+fn pair_args(
     args: &JitterArgs,
     fifo: Option<i32>,
+    namespace: &Namespace,
     sim_stats: &Path,
     controller_stats: &Path,
-) -> anyhow::Result<Pair> {
-    let namespace = match &args.namespace {
-        Some(ns) => Namespace::new(ns).context("--namespace")?,
-        None => Namespace::unique("hcc_jitter")?,
-    };
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
-    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let names = ServiceNames::for_namespace(namespace.clone());
+) -> (Vec<String>, Vec<String>) {
     let config = args.config.display().to_string();
     let mut common = vec![
         "--namespace".to_string(),
@@ -308,28 +304,11 @@ fn run_pair(
         "--stats".into(),
         sim_stats.display().to_string(),
     ]);
-    let _ = std::fs::remove_file(sim_stats);
-    let _ = std::fs::remove_file(controller_stats);
+    (sim_args, controller_args)
+}
 
-    let node = ipc::create_node(
-        "hcc-jitter-probe",
-        SignalHandlingMode::Disabled,
-        file_prefix.as_deref(),
-    )?;
-    let mut controller = Daemon::spawn(
-        "hcc-controller",
-        &daemon_path("hcc-controller")?,
-        &controller_args,
-        file_prefix.as_deref(),
-    )?;
-    wait_until_controller_listens(&mut controller, &node, &names, 0)?;
-    drop(node);
-    let mut sim = Daemon::spawn(
-        "hcc-sim",
-        &daemon_path("hcc-sim")?,
-        &sim_args,
-        file_prefix.as_deref(),
-    )?;
+/// Waits until the simulator has finished its run; returns the wall time, s.
+fn await_pair(args: &JitterArgs, sim: &mut Daemon, controller: &mut Daemon) -> anyhow::Result<f64> {
     let started = Instant::now();
     let mut next_progress = started + Duration::from_secs(5);
     // The simulated time runs with the wall clock; allow for start-up and overruns.
@@ -337,7 +316,7 @@ fn run_pair(
     loop {
         if let Some(s) = sim.poll() {
             if s.success() {
-                break;
+                return Ok(started.elapsed().as_secs_f64());
             }
             bail!(
                 "hcc-sim (pid {}) failed with {}; its stderr ends with:\n{}",
@@ -380,7 +359,46 @@ fn run_pair(
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    let run_s = started.elapsed().as_secs_f64();
+}
+
+fn run_pair(
+    args: &JitterArgs,
+    fifo: Option<i32>,
+    sim_stats: &Path,
+    controller_stats: &Path,
+) -> anyhow::Result<Pair> {
+    let namespace = match &args.namespace {
+        Some(ns) => Namespace::new(ns).context("--namespace")?,
+        None => Namespace::unique("hcc_jitter")?,
+    };
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let names = ServiceNames::for_namespace(namespace.clone());
+    let (sim_args, controller_args) =
+        pair_args(args, fifo, &namespace, sim_stats, controller_stats);
+    let _ = std::fs::remove_file(sim_stats);
+    let _ = std::fs::remove_file(controller_stats);
+
+    let node = ipc::create_node(
+        "hcc-jitter-probe",
+        SignalHandlingMode::Disabled,
+        file_prefix.as_deref(),
+    )?;
+    let mut controller = Daemon::spawn(
+        "hcc-controller",
+        &daemon_path("hcc-controller")?,
+        &controller_args,
+        file_prefix.as_deref(),
+    )?;
+    wait_until_controller_listens(&mut controller, &node, &names, 0)?;
+    drop(node);
+    let mut sim = Daemon::spawn(
+        "hcc-sim",
+        &daemon_path("hcc-sim")?,
+        &sim_args,
+        file_prefix.as_deref(),
+    )?;
+    let run_s = await_pair(args, &mut sim, &mut controller)?;
     // The controller answers the simulator's last state, then stops on SIGTERM
     // and writes its report.
     std::thread::sleep(Duration::from_millis(100));
@@ -480,85 +498,111 @@ fn curve_us(f: &Figure) -> Vec<(f64, f64)> {
         .collect()
 }
 
-pub fn run(args: JitterArgs) -> anyhow::Result<()> {
-    let scenario = Scenario::load(&args.config)?;
-    if !(args.duration.is_finite() && args.duration >= 0.5) {
-        bail!("--duration {} must be at least 0.5 s", args.duration);
+/// What the measurement runs with, checked against the arguments and the machine.
+struct Plan {
+    floor_s: f64,
+    period_ns: u64,
+    /// The measured cores (one if both daemons share a core).
+    cores: Vec<usize>,
+    fifo: Option<i32>,
+}
+
+impl Plan {
+    fn new(args: &JitterArgs, scenario: &Scenario) -> anyhow::Result<Plan> {
+        if !(args.duration.is_finite() && args.duration >= 0.5) {
+            bail!("--duration {} must be at least 0.5 s", args.duration);
+        }
+        let floor_s = args
+            .floor_duration
+            .unwrap_or(DEFAULT_FLOOR_S.min(args.duration));
+        if !(floor_s.is_finite() && floor_s > 0.0) {
+            bail!("--floor-duration {floor_s} must be positive");
+        }
+        let available: Vec<usize> = core_affinity::get_core_ids()
+            .unwrap_or_default()
+            .iter()
+            .map(|c| c.id)
+            .collect();
+        for (what, core) in [
+            ("--sim-core", args.sim_core),
+            ("--controller-core", args.controller_core),
+        ] {
+            if !available.contains(&core) {
+                bail!("{what} {core}: this process may run on cores {available:?} only");
+            }
+        }
+        if args.sim_core == args.controller_core {
+            warn!(
+                "the simulator and the controller share core {}",
+                args.sim_core
+            );
+        }
+        let cores = if args.sim_core == args.controller_core {
+            vec![args.sim_core]
+        } else {
+            vec![args.sim_core, args.controller_core]
+        };
+        Ok(Plan {
+            floor_s,
+            period_ns: (1e9 / scenario.simulation.control_rate_hz).round() as u64,
+            cores,
+            fifo: (!args.no_fifo).then_some(args.priority),
+        })
     }
-    let floor_s = args
-        .floor_duration
-        .unwrap_or(DEFAULT_FLOOR_S.min(args.duration));
-    if !(floor_s.is_finite() && floor_s > 0.0) {
-        bail!("--floor-duration {floor_s} must be positive");
+
+    /// Cycles later than this count as late.
+    fn late_ns(&self) -> u64 {
+        (self.period_ns as f64 * LATE_FRACTION) as u64
     }
-    let period_ns = (1e9 / scenario.simulation.control_rate_hz).round() as u64;
-    let available: Vec<usize> = core_affinity::get_core_ids()
-        .unwrap_or_default()
-        .iter()
-        .map(|c| c.id)
-        .collect();
-    for (what, core) in [
-        ("--sim-core", args.sim_core),
-        ("--controller-core", args.controller_core),
-    ] {
-        if !available.contains(&core) {
-            bail!("{what} {core}: this process may run on cores {available:?} only");
+}
+
+/// The process-wide settings held during the measurements.
+struct Environment {
+    machine: MachineInfo,
+    /// Held until dropped.
+    dma: Option<CpuDmaLatency>,
+    dma_note: String,
+    memory_locked: bool,
+}
+
+impl Environment {
+    fn set_up() -> Environment {
+        let machine = MachineInfo::read();
+        let (dma, dma_note) = match CpuDmaLatency::request(0) {
+            Ok(d) => {
+                let note = format!("held at {} µs", d.us);
+                (Some(d), note)
+            }
+            Err(e) => (None, format!("not held ({e})")),
+        };
+        // The floor threads run in this process: lock its memory like the daemons'.
+        let memory_locked = hcc_rtalloc::lock_memory().is_ok();
+        Environment {
+            machine,
+            dma,
+            dma_note,
+            memory_locked,
         }
     }
-    if args.sim_core == args.controller_core {
-        eprintln!(
-            "hcc jitter: warning: the simulator and the controller share core {}",
-            args.sim_core
-        );
-    }
-    let cores = if args.sim_core == args.controller_core {
-        vec![args.sim_core]
-    } else {
-        vec![args.sim_core, args.controller_core]
-    };
-    let fifo = (!args.no_fifo).then_some(args.priority);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
-    install_signal_handlers()?;
-    let machine = MachineInfo::read();
-    let dma = CpuDmaLatency::request(0);
-    let dma_note = match &dma {
-        Ok(d) => format!("held at {} µs", d.us),
-        Err(e) => format!("not held ({e})"),
-    };
-    // The floor threads run in this process: lock its memory like the daemons'.
-    let memory_locked = hcc_rtalloc::lock_memory().is_ok();
-    if !args.quiet {
-        eprintln!(
-            "hcc jitter: {} — {} wait, floor {floor_s} s then pair {} s, simulator on core {}, controller on core {}, {}, /dev/cpu_dma_latency {dma_note}, load {}",
-            scenario.name,
-            args.wait.name(),
-            args.duration,
-            args.sim_core,
-            args.controller_core,
-            match fifo {
-                Some(p) => format!("SCHED_FIFO {p} requested"),
-                None => "normal scheduling".into(),
-            },
-            if args.load { "on" } else { "off" },
-        );
-    }
-    let load = if args.load {
-        Some(Load::start(&cores)?)
-    } else {
-        None
-    };
+}
 
-    // 1. The floor.
-    let before = cpu_times(&cores);
-    let floor = measure_floor(&cores, fifo, args.wait, period_ns, floor_s)?;
-    let floor_steal = steal_since(&cores, &before);
+/// The floor measurement, with its warnings and (unless `quiet`) its result lines.
+fn floor_phase(args: &JitterArgs, plan: &Plan) -> anyhow::Result<(Vec<FloorCore>, Value)> {
+    let before = cpu_times(&plan.cores);
+    let floor = measure_floor(
+        &plan.cores,
+        plan.fifo,
+        args.wait,
+        plan.period_ns,
+        plan.floor_s,
+    )?;
+    let steal = steal_since(&plan.cores, &before);
     if interrupted() {
         bail!("interrupted during the floor measurement");
     }
     for f in &floor {
         for w in &f.rt.warnings {
-            eprintln!("hcc jitter: floor core {}: warning: {w}", f.core);
+            warn!("floor core {}: {w}", f.core);
         }
     }
     if !args.quiet {
@@ -570,18 +614,13 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
             );
         }
     }
+    Ok((floor, steal))
+}
 
-    // 2. The pair.
-    let sim_stats = args.out.join("sim-timings.json");
-    let controller_stats = args.out.join("controller-timings.json");
-    let before = cpu_times(&cores);
-    let pair = run_pair(&args, fifo, &sim_stats, &controller_stats)?;
-    let pair_steal = steal_since(&cores, &before);
-    drop(load);
-    drop(dma);
-
+/// The figures of the table, each with the floor of its core.
+fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> [Row<'a>; 5] {
     let floor_of = |core: usize| floor.iter().find(|f| f.core == core);
-    let rows = [
+    [
         Row {
             key: "sim_tick_lateness",
             label: "simulator tick lateness",
@@ -612,19 +651,49 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
             pair: pair.controller.figure("control_law_time"),
             floor: None,
         },
-    ];
+    ]
+}
 
-    // Counts: every period after the first command is answered or missed.
-    let sim = &pair.sim;
-    let periods = sim.counter("periods");
-    let waiting = sim.counter("waiting_for_controller");
-    let stopped = sim.counter("stopped_periods");
-    let received = sim.counter("applied_commands");
-    let missed = sim.counter("missed_commands");
-    let cycles = periods.saturating_sub(waiting + stopped);
-    let consistent = cycles == received + missed;
-    let floor_late: u64 = floor_of(args.controller_core).map_or(0, |f| f.late_cycles);
-    let floor_cycles: u64 = floor_of(args.controller_core).map_or(0, |f| f.lateness.count());
+/// The simulator's counts: every period after the first command is answered or missed.
+struct Counts {
+    periods: u64,
+    waiting: u64,
+    stopped: u64,
+    received: u64,
+    missed: u64,
+    cycles: u64,
+    consistent: bool,
+    /// Late cycles and cycles of the floor on the controller's core.
+    floor_late: u64,
+    floor_cycles: u64,
+}
+
+impl Counts {
+    fn new(sim: &DaemonTimings, controller_floor: Option<&FloorCore>) -> Counts {
+        let periods = sim.counter("periods");
+        let waiting = sim.counter("waiting_for_controller");
+        let stopped = sim.counter("stopped_periods");
+        let received = sim.counter("applied_commands");
+        let missed = sim.counter("missed_commands");
+        let cycles = periods.saturating_sub(waiting + stopped);
+        Counts {
+            periods,
+            waiting,
+            stopped,
+            received,
+            missed,
+            cycles,
+            consistent: cycles == received + missed,
+            floor_late: controller_floor.map_or(0, |f| f.late_cycles),
+            floor_cycles: controller_floor.map_or(0, |f| f.lateness.count()),
+        }
+    }
+}
+
+/// A target: what, the measured value, the limit (figures, not assertions).
+type Target = (&'static str, f64, f64);
+
+fn targets(args: &JitterArgs, rows: &[Row], counts: &Counts) -> Vec<Target> {
     let per_million = |n: u64, of: u64| {
         if of == 0 {
             0.0
@@ -632,10 +701,6 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
             n as f64 * 1e6 / of as f64
         }
     };
-    let miss_rate = per_million(missed, cycles);
-    let floor_late_rate = per_million(floor_late, floor_cycles);
-
-    // Targets (figures, not assertions).
     let s2c = rows[1].pair.summary;
     let tick = rows[0].pair.summary;
     let tick_floor = rows[0].floor.map(|f| f.lateness.summary());
@@ -661,80 +726,102 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
     }
     targets.push((
         "missed commands per million cycles <= floor late cycles per million",
-        miss_rate,
-        floor_late_rate,
+        per_million(counts.missed, counts.cycles),
+        per_million(counts.floor_late, counts.floor_cycles),
     ));
+    targets
+}
 
-    let mut figures = serde_json::Map::new();
-    for row in &rows {
-        let mut v = json!({
-            "pair": summary_json(&row.pair.summary),
-            "curve": row.pair.curve,
-        });
-        if let Some(f) = row.floor {
-            let fs = f.lateness.summary();
-            v["floor_core"] = json!(f.core);
-            v["floor"] = summary_json(&fs);
-            v["ratio"] = ratios_json(&row.pair.summary, &fs);
+/// Everything measured, for the report, the plot and the table.
+struct Measured<'a> {
+    args: &'a JitterArgs,
+    scenario: &'a Scenario,
+    plan: &'a Plan,
+    env: &'a Environment,
+    floor: &'a [FloorCore],
+    pair: &'a Pair,
+    rows: &'a [Row<'a>],
+    counts: Counts,
+    targets: Vec<Target>,
+    floor_steal: Value,
+    pair_steal: Value,
+}
+
+impl Measured<'_> {
+    /// The contents of jitter.json.
+    fn report(&self) -> Value {
+        let (args, plan, pair, floor, c) =
+            (self.args, self.plan, self.pair, self.floor, &self.counts);
+        let sim = &pair.sim;
+        let mut figures = serde_json::Map::new();
+        for row in self.rows {
+            let mut v = json!({
+                "pair": summary_json(&row.pair.summary),
+                "curve": row.pair.curve,
+            });
+            if let Some(f) = row.floor {
+                let fs = f.lateness.summary();
+                v["floor_core"] = json!(f.core);
+                v["floor"] = summary_json(&fs);
+                v["ratio"] = ratios_json(&row.pair.summary, &fs);
+            }
+            figures.insert(row.key.to_string(), v);
         }
-        figures.insert(row.key.to_string(), v);
-    }
-    let report = json!({
-        "settings": {
-            "scenario": scenario.name,
-            "config": args.config.display().to_string(),
-            "wait": args.wait.name(),
-            "duration_s": args.duration,
-            "floor_duration_s": floor_s,
-            "pair_wall_time_s": pair.run_s,
-            "period_ns": period_ns,
-            "late_threshold_ns": (period_ns as f64 * LATE_FRACTION) as u64,
-            "load": args.load,
-            "cores": {"sim": args.sim_core, "controller": args.controller_core},
-            "sched_fifo_requested": fifo,
-            "memory_locked_launcher": memory_locked,
-            "cpu_dma_latency": dma_note,
-            "machine": machine,
-            "obtained": {
-                "sim": sim.rt,
-                "controller": pair.controller.rt,
-                "floor": floor.iter().map(|f| json!({"core": f.core, "rt": f.rt})).collect::<Vec<_>>(),
+        json!({
+            "settings": {
+                "scenario": self.scenario.name,
+                "config": args.config.display().to_string(),
+                "wait": args.wait.name(),
+                "duration_s": args.duration,
+                "floor_duration_s": plan.floor_s,
+                "pair_wall_time_s": pair.run_s,
+                "period_ns": plan.period_ns,
+                "late_threshold_ns": plan.late_ns(),
+                "load": args.load,
+                "cores": {"sim": args.sim_core, "controller": args.controller_core},
+                "sched_fifo_requested": plan.fifo,
+                "memory_locked_launcher": self.env.memory_locked,
+                "cpu_dma_latency": self.env.dma_note,
+                "machine": self.env.machine,
+                "obtained": {
+                    "sim": sim.rt,
+                    "controller": pair.controller.rt,
+                    "floor": floor.iter().map(|f| json!({"core": f.core, "rt": f.rt})).collect::<Vec<_>>(),
+                },
             },
-        },
-        "figures": figures,
-        "counts": {
-            "cycles": cycles,
-            "received_commands": received,
-            "missed_commands": missed,
-            "consistent": consistent,
-            "periods": periods,
-            "waiting_for_controller": waiting,
-            "stopped_periods": stopped,
-            "fallback_cycles": sim.counter("fallback_cycles"),
-            "late_commands": sim.counter("late_commands"),
-            "rejected_commands": sim.counter("rejected_commands"),
-            "overruns": sim.counter("overruns"),
-            "ticks_late": sim.counter("ticks_late"),
-            "controller_cycles": pair.controller.counter("cycles"),
-            "controller_missed_states": pair.controller.counter("missed_states"),
-            "controller_stale_events": pair.controller.counter("stale_events"),
-            "floor": floor.iter().map(|f| json!({
-                "core": f.core, "cycles": f.lateness.count(), "late_cycles": f.late_cycles,
+            "figures": figures,
+            "counts": {
+                "cycles": c.cycles,
+                "received_commands": c.received,
+                "missed_commands": c.missed,
+                "consistent": c.consistent,
+                "periods": c.periods,
+                "waiting_for_controller": c.waiting,
+                "stopped_periods": c.stopped,
+                "fallback_cycles": sim.counter("fallback_cycles"),
+                "late_commands": sim.counter("late_commands"),
+                "rejected_commands": sim.counter("rejected_commands"),
+                "overruns": sim.counter("overruns"),
+                "ticks_late": sim.counter("ticks_late"),
+                "controller_cycles": pair.controller.counter("cycles"),
+                "controller_missed_states": pair.controller.counter("missed_states"),
+                "controller_stale_events": pair.controller.counter("stale_events"),
+                "floor": floor.iter().map(|f| json!({
+                    "core": f.core, "cycles": f.lateness.count(), "late_cycles": f.late_cycles,
+                })).collect::<Vec<_>>(),
+            },
+            "steal_fraction": {"floor": self.floor_steal, "pair": self.pair_steal},
+            "targets": self.targets.iter().map(|(what, value, limit)| json!({
+                "target": what, "value": value, "limit": limit, "met": value <= limit,
             })).collect::<Vec<_>>(),
-        },
-        "steal_fraction": {"floor": floor_steal, "pair": pair_steal},
-        "targets": targets.iter().map(|(what, value, limit)| json!({
-            "target": what, "value": value, "limit": limit, "met": value <= limit,
-        })).collect::<Vec<_>>(),
-    });
-    let json_path = args.out.join("jitter.json");
-    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
-        .with_context(|| format!("cannot write {}", json_path.display()))?;
+        })
+    }
 
-    let png_path = args.out.join("jitter.png");
-    if !args.no_plot {
+    /// jitter.png: latency vs percentile, the floor dashed.
+    fn plot(&self, path: &Path) -> anyhow::Result<()> {
+        let (args, pair) = (self.args, self.pair);
         let mut curves = Vec::new();
-        for (k, row) in rows.iter().enumerate() {
+        for (k, row) in self.rows.iter().enumerate() {
             curves.push(PercentileCurve {
                 label: row.label.trim().to_string(),
                 points: curve_us(&row.pair),
@@ -742,7 +829,7 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
                 color: k,
             });
         }
-        for f in &floor {
+        for f in self.floor {
             // The colour of the figure measured on the same core.
             let color = if f.core == args.sim_core { 0 } else { 2 };
             curves.push(PercentileCurve {
@@ -752,109 +839,203 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
                 color,
             });
         }
-        plot_percentiles(
-            &png_path,
-            &format!(
-                "{}: {} wait, {} s, {}{}",
-                scenario.name,
-                args.wait.name(),
-                args.duration,
-                match (sim.rt.fifo_priority, pair.controller.rt.fifo_priority) {
-                    (Some(_), Some(_)) => "SCHED_FIFO",
-                    _ => "normal scheduling",
-                },
-                if args.load { ", with load" } else { "" }
-            ),
-            &curves,
-        )?;
+        let title = format!(
+            "{}: {} wait, {} s, {}{}",
+            self.scenario.name,
+            args.wait.name(),
+            args.duration,
+            match (pair.sim.rt.fifo_priority, pair.controller.rt.fifo_priority) {
+                (Some(_), Some(_)) => "SCHED_FIFO",
+                _ => "normal scheduling",
+            },
+            if args.load { ", with load" } else { "" }
+        );
+        plot_percentiles(path, &title, &curves)?;
+        Ok(())
     }
 
-    // The table.
-    println!(
-        "hcc jitter: {} — {} wait, pair {} s (floor {floor_s} s), simulator core {} / controller core {}, load {}",
+    /// The heading of the table: the run, the machine, the scheduling obtained.
+    fn print_heading(&self) {
+        let (args, env, pair) = (self.args, self.env, self.pair);
+        let machine = &env.machine;
+        println!(
+            "hcc jitter: {} — {} wait, pair {} s (floor {} s), simulator core {} / controller core {}, load {}",
+            self.scenario.name,
+            args.wait.name(),
+            args.duration,
+            self.plan.floor_s,
+            args.sim_core,
+            args.controller_core,
+            if args.load { "on" } else { "off" }
+        );
+        println!(
+            "  {} ({} CPUs{}), kernel {}, rt throttling {} of {} µs",
+            machine.cpu_model,
+            machine.cpus,
+            if machine.virtual_machine {
+                ", virtual machine"
+            } else {
+                ""
+            },
+            machine.kernel,
+            machine
+                .rt_throttling
+                .runtime_us
+                .map_or("?".into(), |v| v.to_string()),
+            machine
+                .rt_throttling
+                .period_us
+                .map_or("?".into(), |v| v.to_string()),
+        );
+        let sched = |r: &RtObtained| {
+            format!(
+                "{}{}{}",
+                r.fifo_priority
+                    .map_or("normal".into(), |p| format!("SCHED_FIFO {p}")),
+                r.pinned_core
+                    .map_or(", unpinned".into(), |c| format!(", core {c}")),
+                if r.memory_locked { ", mlocked" } else { "" }
+            )
+        };
+        println!(
+            "  obtained: simulator {}; controller {}; floor {}; /dev/cpu_dma_latency {}",
+            sched(&pair.sim.rt),
+            sched(&pair.controller.rt),
+            self.floor
+                .iter()
+                .map(|f| sched(&f.rt))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            env.dma_note,
+        );
+    }
+
+    /// The table, the counts, the steal time and the targets.
+    fn print(&self) {
+        let (args, sim, c) = (self.args, &self.pair.sim, &self.counts);
+        self.print_heading();
+        print!("{}", table(self.rows));
+        println!(
+            "  cycles {} = received commands {} + missed {} ({}); fallback cycles {}, late answers {}, rejected {}, clock overruns {}",
+            c.cycles,
+            c.received,
+            c.missed,
+            if c.consistent {
+                "consistent"
+            } else {
+                "INCONSISTENT"
+            },
+            sim.counter("fallback_cycles"),
+            sim.counter("late_commands"),
+            sim.counter("rejected_commands"),
+            sim.counter("overruns"),
+        );
+        println!(
+            "  late cycles (> {} µs): floor {} of {} on core {}, simulator ticks {} of {}",
+            us(self.plan.late_ns()),
+            c.floor_late,
+            c.floor_cycles,
+            args.controller_core,
+            sim.counter("ticks_late"),
+            self.rows[0].pair.summary.count,
+        );
+        println!(
+            "  steal time: floor {}, pair {}",
+            steal_text(&self.floor_steal),
+            steal_text(&self.pair_steal)
+        );
+        for (what, value, limit) in &self.targets {
+            println!(
+                "  target {what}: {value:.2} vs {limit:.2} — {}",
+                if value <= limit { "met" } else { "missed" }
+            );
+        }
+        println!("results in {}", args.out.display());
+    }
+}
+
+/// The line that says what is about to be measured.
+fn announce(args: &JitterArgs, scenario: &Scenario, plan: &Plan, env: &Environment) {
+    eprintln!(
+        "hcc jitter: {} — {} wait, floor {} s then pair {} s, simulator on core {}, controller on core {}, {}, /dev/cpu_dma_latency {}, load {}",
         scenario.name,
         args.wait.name(),
+        plan.floor_s,
         args.duration,
         args.sim_core,
         args.controller_core,
-        if args.load { "on" } else { "off" }
-    );
-    println!(
-        "  {} ({} CPUs{}), kernel {}, rt throttling {} of {} µs",
-        machine.cpu_model,
-        machine.cpus,
-        if machine.virtual_machine {
-            ", virtual machine"
-        } else {
-            ""
+        match plan.fifo {
+            Some(p) => format!("SCHED_FIFO {p} requested"),
+            None => "normal scheduling".into(),
         },
-        machine.kernel,
-        machine
-            .rt_throttling
-            .runtime_us
-            .map_or("?".into(), |v| v.to_string()),
-        machine
-            .rt_throttling
-            .period_us
-            .map_or("?".into(), |v| v.to_string()),
+        env.dma_note,
+        if args.load { "on" } else { "off" },
     );
-    let sched = |r: &RtObtained| {
-        format!(
-            "{}{}{}",
-            r.fifo_priority
-                .map_or("normal".into(), |p| format!("SCHED_FIFO {p}")),
-            r.pinned_core
-                .map_or(", unpinned".into(), |c| format!(", core {c}")),
-            if r.memory_locked { ", mlocked" } else { "" }
-        )
-    };
-    println!(
-        "  obtained: simulator {}; controller {}; floor {}; /dev/cpu_dma_latency {dma_note}",
-        sched(&sim.rt),
-        sched(&pair.controller.rt),
-        floor
-            .iter()
-            .map(|f| sched(&f.rt))
-            .collect::<Vec<_>>()
-            .join(" / "),
-    );
-    print!("{}", table(&rows));
-    println!(
-        "  cycles {cycles} = received commands {received} + missed {missed} ({}); fallback cycles {}, late answers {}, rejected {}, clock overruns {}",
-        if consistent {
-            "consistent"
-        } else {
-            "INCONSISTENT"
-        },
-        sim.counter("fallback_cycles"),
-        sim.counter("late_commands"),
-        sim.counter("rejected_commands"),
-        sim.counter("overruns"),
-    );
-    println!(
-        "  late cycles (> {} µs): floor {} of {} on core {}, simulator ticks {} of {}",
-        us((period_ns as f64 * LATE_FRACTION) as u64),
-        floor_late,
-        floor_cycles,
-        args.controller_core,
-        sim.counter("ticks_late"),
-        rows[0].pair.summary.count,
-    );
-    println!(
-        "  steal time: floor {}, pair {}",
-        steal_text(&report["steal_fraction"]["floor"]),
-        steal_text(&report["steal_fraction"]["pair"])
-    );
-    for (what, value, limit) in &targets {
-        println!(
-            "  target {what}: {value:.2} vs {limit:.2} — {}",
-            if value <= limit { "met" } else { "missed" }
-        );
+}
+
+pub fn run(args: JitterArgs) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&args.config)?;
+    let plan = Plan::new(&args, &scenario)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    install_signal_handlers()?;
+    let mut env = Environment::set_up();
+    if !args.quiet {
+        announce(&args, &scenario, &plan, &env);
     }
-    println!("results in {}", args.out.display());
-    if !consistent {
+    let load = if args.load {
+        Some(Load::start(&plan.cores)?)
+    } else {
+        None
+    };
+
+    // 1. The floor.
+    let (floor, floor_steal) = floor_phase(&args, &plan)?;
+
+    // 2. The pair.
+    let sim_stats = args.out.join("sim-timings.json");
+    let controller_stats = args.out.join("controller-timings.json");
+    let before = cpu_times(&plan.cores);
+    let pair = run_pair(&args, plan.fifo, &sim_stats, &controller_stats)?;
+    let pair_steal = steal_since(&plan.cores, &before);
+    drop(load);
+    drop(env.dma.take());
+
+    let rows = figure_rows(&args, &pair, &floor);
+    let counts = Counts::new(
+        &pair.sim,
+        floor.iter().find(|f| f.core == args.controller_core),
+    );
+    let measured = Measured {
+        targets: targets(&args, &rows, &counts),
+        args: &args,
+        scenario: &scenario,
+        plan: &plan,
+        env: &env,
+        floor: &floor,
+        pair: &pair,
+        rows: &rows,
+        counts,
+        floor_steal,
+        pair_steal,
+    };
+    let json_path = args.out.join("jitter.json");
+    std::fs::write(
+        &json_path,
+        serde_json::to_string_pretty(&measured.report())? + "\n",
+    )
+    .with_context(|| format!("cannot write {}", json_path.display()))?;
+    if !args.no_plot {
+        measured.plot(&args.out.join("jitter.png"))?;
+    }
+    measured.print();
+    let c = &measured.counts;
+    if !c.consistent {
         bail!(
-            "the simulator's counts do not add up: {cycles} cycles, {received} received, {missed} missed"
+            "the simulator's counts do not add up: {} cycles, {} received, {} missed",
+            c.cycles,
+            c.received,
+            c.missed
         );
     }
     Ok(())

@@ -1,4 +1,9 @@
 //! `hcc`: the user-facing command of the hierarchical compliance controller.
+//!
+//! Results, summaries and progress lines are the command's output (stdout,
+//! progress on stderr); diagnostics are logged with `tracing` to stderr, at
+//! the level `RUST_LOG` selects (default `info`, e.g. `RUST_LOG=debug` for the
+//! daemons' command lines).
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -37,8 +42,25 @@ enum Command {
     Plot(plot_cmd::PlotArgs),
 }
 
+/// Logs to stderr, filtered by `RUST_LOG` (default `info`; invalid
+/// directives are ignored).
+fn init_logging() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::builder()
+        .with_default_directive(tracing_subscriber::filter::LevelFilter::INFO.into())
+        .from_env_lossy();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_target(false)
+        .without_time()
+        .init();
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    init_logging();
     let result = match cli.command {
         Command::Run(args) => run_cmd::run(args),
         Command::Simulate(args) => simulate_cmd::run(args),

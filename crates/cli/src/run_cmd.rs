@@ -19,14 +19,15 @@
 //! - `q`, `qd` from the state; `tau` (τ of eq. 19, gravity included when
 //!   configured), `e<i>_<k>`, `S<i>` (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>`
 //!   (eqs. 20, 21) and `tau_mu_<k>` (eq. 22) from the telemetry,
-//! - the derived columns are computed here, off the real-time path, from the
-//!   recorded state and the telemetry's torques with the same model code the
-//!   in-process run uses: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖ (hcc-model: CRBA,
-//!   Cholesky, frame Jacobians), `accv<i>_<j>` = ‖J̄_i M⁻¹ τ_j‖ and the split
-//!   of S_i into `S<i>_kin` / `S<i>_pot` with J̄ (eq. 4) and V_i (eq. 28) of a
-//!   shadow copy of the controller (hcc-control) fed with the same states,
-//!   and `E_kin`, `E_pot` from the plant model. The shadow's τ is compared
-//!   with the telemetry's τ as a consistency check (reported, not used).
+//! - the derived columns are computed here, off the real-time path, by the
+//!   recorder `hcc simulate` uses (hcc-record), from the recorded state and the
+//!   telemetry's torques: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖, `accv<i>_<j>` =
+//!   ‖J̄_i M⁻¹ τ_j‖ and the split of S_i into `S<i>_kin` / `S<i>_pot`, with J_i,
+//!   J̄ (eq. 4) and V_i (eq. 28) of a shadow copy of the controller
+//!   (hcc-control) fed with the same states, and `E_kin`, `E_pot` from the
+//!   plant model. The shadow's τ is compared with the telemetry's τ as a
+//!   consistency check (reported, not used); where the shadow fails, the
+//!   columns that need it are NaN.
 //!
 //! # Not disturbing the real-time loops
 //!
@@ -48,21 +49,23 @@
 //! order) and receive SIGTERM if the launcher dies.
 
 use anyhow::{Context, anyhow, bail};
-use hcc_config::{Scenario, Task};
+use hcc_config::Scenario;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{
     CommandMode, DriverStatus, JointState, Namespace, SeqEvent, SequenceChecker, ServiceNames,
     Telemetry, TorqueCommand,
 };
-use hcc_plant::closed_loop::{ControlLaw, HierarchicalLaw, column_names, describe, plant_for};
+use hcc_plant::closed_loop::{self, ControlLaw, HierarchicalLaw, Sampled, describe};
+use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder};
 use hcc_report::Trajectory;
 use iceoryx2::prelude::SignalHandlingMode;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
+use tracing::warn;
 
 use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
@@ -111,61 +114,6 @@ pub struct RunArgs {
 // ---------------------------------------------------------------------------
 // Rows
 
-/// Task Jacobians J_i of the scenario's levels from the model (the analytic
-/// task Jacobian: selection rows of the frame Jacobian for a position,
-/// angular rows for an orientation, selection/weights for joint tasks).
-struct TaskJacobians {
-    frame_jac: DMatrix<f64>,
-    jac: Vec<DMatrix<f64>>,
-}
-
-impl TaskJacobians {
-    fn new(scenario: &Scenario) -> TaskJacobians {
-        let n = scenario.model.nq();
-        TaskJacobians {
-            frame_jac: DMatrix::zeros(6, n),
-            jac: scenario
-                .levels
-                .iter()
-                .map(|l| DMatrix::zeros(l.task.dim(), n))
-                .collect(),
-        }
-    }
-
-    /// Needs forward kinematics at q in `data`.
-    fn update(&mut self, scenario: &Scenario, data: &hcc_model::Data) {
-        let model = &scenario.model;
-        for (l, jac) in scenario.levels.iter().zip(self.jac.iter_mut()) {
-            jac.fill(0.0);
-            match &l.task {
-                Task::Position { frame_id, axes, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for (r, &a) in axes.iter().enumerate() {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(a));
-                    }
-                }
-                Task::Orientation { frame_id, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for r in 0..3 {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(3 + r));
-                    }
-                }
-                Task::PlanarOrientation { frame_id, axis, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    jac.row_mut(0).copy_from(&self.frame_jac.row(3 + axis));
-                }
-                Task::Joint { joints } => {
-                    for (r, &j) in joints.iter().enumerate() {
-                        jac[(r, j)] = 1.0;
-                    }
-                }
-                Task::Posture { .. } => jac.fill_with_identity(),
-                Task::JointCombination { weights } => jac.copy_from(weights),
-            }
-        }
-    }
-}
-
 /// The part of a joint state the recorder keeps.
 #[derive(Clone, Debug)]
 struct StateRecord {
@@ -174,60 +122,68 @@ struct StateRecord {
     qd: Vec<f64>,
 }
 
-/// Builds the rows of `hcc simulate`'s layout from states and telemetry.
+/// The controller's telemetry of one cycle, as the recorder reads it.
+struct TelemetryCycle<'a> {
+    tel: &'a Telemetry,
+    n: usize,
+}
+
+impl CycleOutput for TelemetryCycle<'_> {
+    fn tau(&self) -> &[f64] {
+        self.tel.tau()
+    }
+    fn level_torque(&self, i: usize) -> &[f64] {
+        self.tel.tau_level(i)
+    }
+    fn tau_mu(&self) -> &[f64] {
+        &self.tel.tau_mu[..self.n]
+    }
+    fn task_error(&self, i: usize) -> &[f64] {
+        self.tel.task_error(i)
+    }
+    fn level_energy(&self, i: usize) -> f64 {
+        self.tel.storage[i]
+    }
+    fn p_mu(&self) -> f64 {
+        self.tel.p_mu
+    }
+}
+
+/// Builds the rows of `hcc simulate`'s layout from states and telemetry: the
+/// telemetry gives the law's output, a shadow controller fed with the same
+/// states the terms of the derived columns (J_i, J̄, V_i).
 struct RowBuilder<'a> {
     scenario: &'a Scenario,
     n: usize,
-    r: usize,
     dims: Vec<usize>,
     period: f64,
+    recorder: Recorder,
     traj: Trajectory,
     shadow: HierarchicalLaw,
     shadow_failures: u64,
     shadow_tau_diff: f64,
-    data: hcc_model::Data,
-    jacs: TaskJacobians,
-    m_chol: DMatrix<f64>,
-    minv_tau: Vec<DVector<f64>>,
-    acc: Vec<DVector<f64>>,
-    energy_plant: hcc_plant::Plant,
     q: DVector<f64>,
     qd: DVector<f64>,
-    row: Vec<f64>,
 }
 
 impl<'a> RowBuilder<'a> {
     fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
         let n = scenario.model.nq();
-        let r = scenario.levels.len();
         let s = &scenario.simulation;
         let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
-        let names = column_names(scenario, true);
-        let traj = Trajectory::with_capacity(names, cycles + 1)?;
-        let width = traj.columns().len();
+        let recorder = closed_loop::recorder(scenario, true)?;
         Ok(RowBuilder {
             scenario,
             n,
-            r,
             dims: scenario.levels.iter().map(|l| l.task.dim()).collect(),
             period: 1.0 / s.control_rate_hz,
-            traj,
+            traj: recorder.trajectory(cycles + 1)?,
+            recorder,
             shadow: HierarchicalLaw::new(scenario)?,
             shadow_failures: 0,
             shadow_tau_diff: 0.0,
-            data: hcc_model::Data::new(&scenario.model),
-            jacs: TaskJacobians::new(scenario),
-            m_chol: DMatrix::zeros(n, n),
-            minv_tau: (0..=r).map(|_| DVector::zeros(n)).collect(),
-            acc: scenario
-                .levels
-                .iter()
-                .map(|l| DVector::zeros(l.task.dim()))
-                .collect(),
-            energy_plant: plant_for(scenario)?,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
-            row: Vec::with_capacity(width),
         })
     }
 
@@ -248,108 +204,40 @@ impl<'a> RowBuilder<'a> {
         Ok(())
     }
 
+    /// Runs the shadow controller on the state (a check of the telemetry's
+    /// τ); whether it succeeded.
+    fn step_shadow(&mut self, state: &StateRecord, tel: &Telemetry) -> bool {
+        self.q.as_mut_slice().copy_from_slice(&state.q);
+        self.qd.as_mut_slice().copy_from_slice(&state.qd);
+        if self.shadow.compute(&self.q, &self.qd).is_err() {
+            self.shadow_failures += 1;
+            return false;
+        }
+        let d = self
+            .shadow
+            .tau()
+            .iter()
+            .zip(tel.tau())
+            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        self.shadow_tau_diff = self.shadow_tau_diff.max(d);
+        true
+    }
+
     /// Appends the row of one controller cycle: `tel` answered `state`.
     fn push(&mut self, state: &StateRecord, tel: &Telemetry) -> anyhow::Result<()> {
         self.check_shape(tel)?;
-        let (n, r) = (self.n, self.r);
-        // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
-        let t = state.seq as f64 * self.period;
-        self.q.as_mut_slice().copy_from_slice(&state.q);
-        self.qd.as_mut_slice().copy_from_slice(&state.qd);
-
-        // Shadow controller on the same state: J̄ and V_i, and a check of τ.
-        let shadow_ok = self.shadow.compute(&self.q, &self.qd).is_ok();
-        if shadow_ok {
-            let d = self
-                .shadow
-                .tau()
-                .iter()
-                .zip(tel.tau())
-                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-            self.shadow_tau_diff = self.shadow_tau_diff.max(d);
-        } else {
-            self.shadow_failures += 1;
-        }
-
-        let model = &self.scenario.model;
-        hcc_model::crba(model, &mut self.data, &self.q);
-        self.jacs.update(self.scenario, &self.data);
-        self.m_chol.copy_from(&self.data.m);
-        hcc_model::linalg::cholesky_in_place(&mut self.m_chol)
-            .map_err(|e| anyhow!("M(q) at t = {t} s: {e}"))?;
-
-        let row = &mut self.row;
-        row.clear();
-        row.push(t);
-        row.extend_from_slice(&state.q);
-        row.extend_from_slice(&state.qd);
-        row.extend_from_slice(tel.tau());
-        for i in 0..r {
-            row.extend_from_slice(tel.task_error(i));
-        }
-        row.extend_from_slice(&tel.storage[..r]);
-        row.push(tel.p_mu);
-        for i in 0..r {
-            row.extend_from_slice(tel.tau_level(i));
-        }
-        row.extend_from_slice(&tel.tau_mu[..n]);
-        for (j, x) in self.minv_tau.iter_mut().enumerate() {
-            x.as_mut_slice().copy_from_slice(if j < r {
-                tel.tau_level(j)
-            } else {
-                &tel.tau_mu[..n]
-            });
-            hcc_model::linalg::cholesky_solve_in_place(&self.m_chol, x)
-                .map_err(|e| anyhow!("M(q) solve at t = {t} s: {e}"))?;
-        }
-        // ‖J_i M⁻¹ τ_j‖ for every j ≠ i, then for τ_μ.
-        for (i, acc_i) in self.acc.iter_mut().enumerate() {
-            for (j, x) in self.minv_tau.iter().enumerate() {
-                if j != i {
-                    acc_i.gemv(1.0, &self.jacs.jac[i], x, 0.0);
-                    row.push(acc_i.norm());
-                }
-            }
-        }
-        // ‖J̄_i M⁻¹ τ_j‖ in the local null-space coordinates (J̄ of the shadow).
-        let jbar = if shadow_ok {
-            self.shadow.extended_jacobian()
-        } else {
-            None
+        let shadow_ok = self.step_shadow(state, tel);
+        let output = TelemetryCycle { tel, n: self.n };
+        let shadow = Sampled(&self.shadow);
+        let cycle = Cycle {
+            // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
+            t: state.seq as f64 * self.period,
+            q: &state.q,
+            qd: &state.qd,
+            output: &output,
+            law: shadow_ok.then_some(&shadow as &dyn LawTerms),
         };
-        match jbar {
-            Some((dims, jbar))
-                if dims.len() == r
-                    && jbar.ncols() == n
-                    && dims.iter().sum::<usize>() == jbar.nrows() =>
-            {
-                let mut offset = 0;
-                for (i, &d) in dims.iter().enumerate() {
-                    let block = jbar.rows(offset, d);
-                    for (j, x) in self.minv_tau.iter().enumerate() {
-                        if j != i {
-                            row.push((block * x).norm());
-                        }
-                    }
-                    offset += d;
-                }
-            }
-            _ => row.extend(std::iter::repeat_n(f64::NAN, r * r)),
-        }
-        for i in 0..r {
-            let pot = if shadow_ok {
-                self.shadow.level_potential(i)
-            } else {
-                f64::NAN
-            };
-            row.push(tel.storage[i] - pot);
-            row.push(pot);
-        }
-        self.energy_plant.set_state(t, &self.q, &self.qd)?;
-        let energy = self.energy_plant.energy();
-        row.push(energy.kinetic);
-        row.push(energy.potential);
-        self.traj.push_row(row)?;
+        self.recorder.record(&cycle, &mut self.traj)?;
         Ok(())
     }
 }
@@ -400,6 +288,13 @@ struct Recording {
 }
 
 impl Recording {
+    /// Samples lost on the three streams.
+    fn gaps(&self) -> u64 {
+        self.states.checker.missed()
+            + self.commands.checker.missed()
+            + self.telemetry.checker.missed()
+    }
+
     fn new() -> Recording {
         Recording {
             states: Stream::default(),
@@ -699,10 +594,7 @@ fn progress_line(rec: &Recording, rows: &RowBuilder) -> String {
     if let Some(st) = &rec.last_state {
         s.push_str(&format!(", missed commands {}", st.missed_commands));
     }
-    let gaps = rec.states.checker.missed()
-        + rec.commands.checker.missed()
-        + rec.telemetry.checker.missed();
-    s.push_str(&format!(", recorder gaps {gaps}"));
+    s.push_str(&format!(", recorder gaps {}", rec.gaps()));
     s
 }
 
@@ -716,136 +608,149 @@ enum End {
     Failed(String),
 }
 
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let mut scenario = Scenario::load(&args.config)?;
-    if let Some(d) = args.duration {
-        scenario
-            .set_duration(d)
-            .with_context(|| format!("--duration {d}"))?;
-    }
-    let duration = scenario.simulation.duration_s;
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("out").join(&scenario.name));
-    let namespace = match &args.namespace {
-        Some(ns) => Namespace::new(ns).context("--namespace")?,
-        None => Namespace::unique("hcc_run")?,
-    };
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
-    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let sim_exe = daemon_path("hcc-sim")?;
-    let controller_exe = daemon_path("hcc-controller")?;
+/// What `hcc run` starts: the namespace, the daemons and their arguments.
+struct Launch {
+    namespace: Namespace,
+    file_prefix: Option<String>,
+    names: ServiceNames,
+    out: PathBuf,
+    duration: f64,
+    /// "lockstep" or "realtime".
+    mode: &'static str,
+    sim_exe: PathBuf,
+    controller_exe: PathBuf,
+    sim_args: Vec<String>,
+    controller_args: Vec<String>,
+}
 
-    // Subscribe before the children start, so that no sample is missed.
-    let names = ServiceNames::for_namespace(namespace.clone());
-    let receiver = Receiver::start(file_prefix.clone(), names.clone())?;
-    let node = ipc::create_node(
-        "hcc-run-probe",
-        SignalHandlingMode::Disabled,
-        file_prefix.as_deref(),
-    )?;
-    let mut rows = RowBuilder::new(&scenario)?;
-    let mut rec = Recording::new();
-    install_signal_handlers()?;
-
-    let config_arg = args.config.display().to_string();
-    let ns_args = ["--namespace".to_string(), namespace.to_string()];
-    let mut controller_args = vec![config_arg.clone()];
-    controller_args.extend(ns_args.iter().cloned());
-    let mut sim_args = vec![config_arg];
-    sim_args.extend(ns_args.iter().cloned());
-    sim_args.extend(["--duration".to_string(), format!("{duration:?}")]);
-    let lockstep = args.lockstep || scenario.sim_daemon.mode == hcc_config::SimMode::Lockstep;
-    if args.lockstep {
-        sim_args.push("--lockstep".into());
-    }
-    if lockstep {
-        // States come as fast as the loop turns, not once per period: the
-        // controller waits on the state_ready event instead of sleeping until
-        // the next expected period.
-        controller_args.extend(["--wait".to_string(), "event".to_string()]);
-    }
-    let mode = if lockstep { "lockstep" } else { "realtime" };
-    if !args.quiet {
-        eprintln!(
-            "hcc run: {} ({mode}, {duration} s) in namespace {namespace}",
-            scenario.name
-        );
-    }
-
-    let mut controller = Daemon::spawn(
-        "hcc-controller",
-        &controller_exe,
-        &controller_args,
-        file_prefix.as_deref(),
-    )?;
-    // Start the simulator once the controller listens, so that control
-    // starts at t = 0 (in real time the plant does not wait).
-    wait_until_controller_listens(&mut controller, &node, &names, 1)?;
-    drop(node);
-    let mut sim = Daemon::spawn("hcc-sim", &sim_exe, &sim_args, file_prefix.as_deref())?;
-    let started = Instant::now();
-    let mut next_progress = started + Duration::from_secs(1);
-
-    let end = loop {
-        receiver.pump(&mut rec, Duration::from_millis(1))?;
-        rec.join(&mut rows, false)?;
-        if interrupted() {
-            break End::Interrupted;
+impl Launch {
+    fn new(args: &RunArgs, scenario: &Scenario) -> anyhow::Result<Launch> {
+        let duration = scenario.simulation.duration_s;
+        let namespace = match &args.namespace {
+            Some(ns) => Namespace::new(ns).context("--namespace")?,
+            None => Namespace::unique("hcc_run")?,
+        };
+        let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+        ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+        let config_arg = args.config.display().to_string();
+        let ns_args = ["--namespace".to_string(), namespace.to_string()];
+        let mut controller_args = vec![config_arg.clone()];
+        controller_args.extend(ns_args.iter().cloned());
+        let mut sim_args = vec![config_arg];
+        sim_args.extend(ns_args.iter().cloned());
+        sim_args.extend(["--duration".to_string(), format!("{duration:?}")]);
+        let lockstep = args.lockstep || scenario.sim_daemon.mode == hcc_config::SimMode::Lockstep;
+        if args.lockstep {
+            sim_args.push("--lockstep".into());
         }
+        if lockstep {
+            // States come as fast as the loop turns, not once per period: the
+            // controller waits on the state_ready event instead of sleeping until
+            // the next expected period.
+            controller_args.extend(["--wait".to_string(), "event".to_string()]);
+        }
+        Ok(Launch {
+            names: ServiceNames::for_namespace(namespace.clone()),
+            namespace,
+            file_prefix,
+            out: args
+                .out
+                .clone()
+                .unwrap_or_else(|| Path::new("out").join(&scenario.name)),
+            duration,
+            mode: if lockstep { "lockstep" } else { "realtime" },
+            sim_exe: daemon_path("hcc-sim")?,
+            controller_exe: daemon_path("hcc-controller")?,
+            sim_args,
+            controller_args,
+        })
+    }
+
+    /// Starts the controller, waits until it listens (so that control starts
+    /// at t = 0: in real time the plant does not wait), then the simulator.
+    fn spawn(&self) -> anyhow::Result<(Daemon, Daemon)> {
+        let node = ipc::create_node(
+            "hcc-run-probe",
+            SignalHandlingMode::Disabled,
+            self.file_prefix.as_deref(),
+        )?;
+        let mut controller = Daemon::spawn(
+            "hcc-controller",
+            &self.controller_exe,
+            &self.controller_args,
+            self.file_prefix.as_deref(),
+        )?;
+        wait_until_controller_listens(&mut controller, &node, &self.names, 1)?;
+        drop(node);
+        let sim = Daemon::spawn(
+            "hcc-sim",
+            &self.sim_exe,
+            &self.sim_args,
+            self.file_prefix.as_deref(),
+        )?;
+        Ok((controller, sim))
+    }
+}
+
+/// The children of a run.
+struct Children {
+    controller: Daemon,
+    sim: Daemon,
+}
+
+impl Children {
+    /// Why the run must end now, if it must (a child exited, or the daemons
+    /// are silent for too long).
+    fn check(&mut self, rec: &Recording, started: Instant) -> Option<End> {
+        let (sim, controller) = (&mut self.sim, &mut self.controller);
         if let Some(s) = sim.poll() {
             if s.success() {
-                break End::Finished;
+                return Some(End::Finished);
             }
-            break End::Failed(format!(
+            return Some(End::Failed(format!(
                 "hcc-sim (pid {}) failed with {}; its stderr ends with:\n{}",
                 sim.pid(),
                 describe_status(s),
                 sim.stderr_tail()
-            ));
+            )));
         }
         if let Some(s) = controller.poll() {
-            break End::Failed(format!(
+            return Some(End::Failed(format!(
                 "hcc-controller (pid {}) exited with {} before the run ended; its stderr ends with:\n{}",
                 controller.pid(),
                 describe_status(s),
                 controller.stderr_tail()
-            ));
+            )));
         }
         let now = Instant::now();
         match rec.first_state_at {
-            None if now.duration_since(started) > STARTUP_TIMEOUT => {
-                break End::Failed(format!(
-                    "no joint state from hcc-sim within {} s; its stderr ends with:\n{}",
-                    STARTUP_TIMEOUT.as_secs(),
-                    sim.stderr_tail()
-                ));
-            }
+            None if now.duration_since(started) > STARTUP_TIMEOUT => Some(End::Failed(format!(
+                "no joint state from hcc-sim within {} s; its stderr ends with:\n{}",
+                STARTUP_TIMEOUT.as_secs(),
+                sim.stderr_tail()
+            ))),
             Some(_) if now.duration_since(rec.last_sample_at) > STALL_TIMEOUT => {
-                break End::Failed(format!(
+                Some(End::Failed(format!(
                     "no message from the daemons for {} s (hung?); hcc-sim's stderr ends with:\n{}\nhcc-controller's stderr ends with:\n{}",
                     STALL_TIMEOUT.as_secs(),
                     sim.stderr_tail(),
                     controller.stderr_tail()
-                ));
+                )))
             }
-            _ => {}
+            _ => None,
         }
-        if now >= next_progress {
-            if !args.quiet {
-                eprintln!("{}", progress_line(&rec, &rows));
-            }
-            next_progress += Duration::from_secs(1);
-        }
-    };
+    }
 
-    // After the simulator's last state, give the controller a moment to
-    // answer it (its telemetry completes the last row).
-    if matches!(end, End::Finished) {
+    /// After the simulator's last state, gives the controller a moment to
+    /// answer it (its telemetry completes the last row).
+    fn await_last_answer(
+        &mut self,
+        receiver: &Receiver,
+        rec: &mut Recording,
+    ) -> anyhow::Result<()> {
         let until = Instant::now() + FINAL_ANSWER_GRACE;
-        while Instant::now() < until && controller.poll().is_none() {
-            receiver.pump(&mut rec, Duration::from_millis(1))?;
+        while Instant::now() < until && self.controller.poll().is_none() {
+            receiver.pump(rec, Duration::from_millis(1))?;
             let answered = rec
                 .pending_telemetry
                 .back()
@@ -855,149 +760,204 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 break;
             }
         }
+        Ok(())
     }
-    // Stop what still runs, collecting the samples published meanwhile.
-    let sim_status = sim.terminate(TERMINATE_GRACE);
-    let controller_status = controller.terminate(TERMINATE_GRACE);
-    receiver.finish(&mut rec)?;
-    rec.join(&mut rows, true)?;
-    let controller_clean = controller_status.is_some_and(|s| {
-        use std::os::unix::process::ExitStatusExt;
-        s.success() || s.signal() == Some(libc::SIGTERM)
-    });
 
-    let end = match end {
-        End::Finished if !controller_clean => End::Failed(format!(
-            "hcc-controller (pid {}) did not stop cleanly ({}); its stderr ends with:\n{}",
-            controller.pid(),
-            controller_status.map_or("still running".into(), describe_status),
-            controller.stderr_tail()
-        )),
-        other => other,
-    };
-
-    // Figures of the IPC path.
-    let mut lat = rec.latencies_ns.clone();
-    lat.sort_unstable();
-    let us = |p: f64| percentile(&lat, p).map(|v| v as f64 * 1e-3);
-    let last_state = rec.last_state;
-    let last_tel = rec.last_telemetry;
-    let cycles = (duration * scenario.simulation.control_rate_hz).round() as u64;
-    let ipc_json = serde_json::json!({
-        "runner": "hcc run (hcc-sim and hcc-controller over iceoryx2)",
-        "mode": mode,
-        "namespace": namespace.as_str(),
-        "expected_rows": cycles + 1,
-        "rows": rows.traj.n_rows(),
-        "states_received": rec.states.received,
-        "commands_received": rec.commands.received,
-        "telemetry_received": rec.telemetry.received,
-        "recorder_gaps": {
-            "joint_state": rec.states.checker.missed(),
-            "torque_command": rec.commands.checker.missed(),
-            "telemetry": rec.telemetry.checker.missed(),
-        },
-        "telemetry_without_state": rec.unmatched_telemetry,
-        "stale_telemetry": rec.stale_telemetry,
-        "states_not_answered_by_the_controller": rec.unanswered_states,
-        "driver_missed_commands": last_state.map(|s| s.missed_commands),
-        "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
-        "controller_missed_states": last_tel.map(|t| t.counters.missed_states),
-        "controller_stale_events": last_tel.map(|t| t.counters.stale_events),
-        "controller_invalid_states": last_tel.map(|t| t.counters.invalid_states),
-        "controller_saturations": last_tel.map(|t| t.counters.saturations),
-        "controller_max_compute_us": last_tel.map(|t| t.timings.max_compute_ns as f64 * 1e-3),
-        "commands_by_mode": {
-            "normal": rec.modes[0], "safe_hold": rec.modes[1], "singular": rec.modes[2],
-            "stop": rec.modes[3], "unknown": rec.modes[4],
-        },
-        "state_to_command_latency_us": {
-            "p50": us(50.0), "p99": us(99.0), "max": us(100.0), "samples": lat.len(),
-        },
-        "shadow_controller_max_tau_difference": rows.shadow_tau_diff,
-        "shadow_controller_failures": rows.shadow_failures,
-    });
-    let mut description = describe(&scenario);
-    description.settings.insert("ipc".into(), ipc_json.clone());
-
-    let written = if rows.traj.n_rows() == 0 {
-        None
-    } else if args.no_plots {
-        std::fs::create_dir_all(&out)
-            .with_context(|| format!("cannot create {}", out.display()))?;
-        rows.traj
-            .write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
-        let m = hcc_report::Metrics::compute(&rows.traj, &description)?;
-        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
-        Some(m)
-    } else {
-        Some(hcc_report::write_run(&out, &rows.traj, &description)?.metrics)
-    };
-
-    if let Some(m) = &written {
-        print!("{}", m.summary());
-    }
-    let fmt_us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1} µs"));
-    let gaps = rec.states.checker.missed()
-        + rec.commands.checker.missed()
-        + rec.telemetry.checker.missed();
-    println!(
-        "  ipc ({mode}): {} rows of {} expected; driver missed commands {}, fallback cycles {}; controller missed states {}",
-        rows.traj.n_rows(),
-        cycles + 1,
-        last_state.map_or(0, |s| s.missed_commands),
-        last_state.map_or(0, |s| s.fallback_cycles),
-        last_tel.map_or(0, |t| t.counters.missed_states),
-    );
-    println!(
-        "  state -> command latency: p50 {}, p99 {}, max {} ({} commands)",
-        fmt_us(us(50.0)),
-        fmt_us(us(99.0)),
-        fmt_us(us(100.0)),
-        lat.len()
-    );
-    println!(
-        "  recorder: gaps {gaps} (states {}, commands {}, telemetry {}), telemetry without state {}, states not answered {}",
-        rec.states.checker.missed(),
-        rec.commands.checker.missed(),
-        rec.telemetry.checker.missed(),
-        rec.unmatched_telemetry,
-        rec.unanswered_states
-    );
-    if rows.shadow_failures > 0 {
-        println!(
-            "  warning: the shadow controller failed on {} states (accv and S_kin/S_pot are NaN there)",
-            rows.shadow_failures
-        );
-    }
-    for line in sim
-        .stdout_lines()
-        .iter()
-        .chain(controller.stdout_lines().iter())
-    {
-        if !line.trim().is_empty() && !args.quiet {
-            eprintln!("  | {line}");
+    /// Stops what still runs; a finished run whose controller did not stop
+    /// cleanly becomes a failure.
+    fn stop(&mut self, end: End) -> End {
+        self.sim.terminate(TERMINATE_GRACE);
+        let status = self.controller.terminate(TERMINATE_GRACE);
+        let clean = status.is_some_and(|s| {
+            use std::os::unix::process::ExitStatusExt;
+            s.success() || s.signal() == Some(libc::SIGTERM)
+        });
+        match end {
+            End::Finished if !clean => End::Failed(format!(
+                "hcc-controller (pid {}) did not stop cleanly ({}); its stderr ends with:\n{}",
+                self.controller.pid(),
+                status.map_or("still running".into(), describe_status),
+                self.controller.stderr_tail()
+            )),
+            other => other,
         }
     }
-    if written.is_some() {
-        println!("results in {}", out.display());
+}
+
+/// Records until the run ends (the simulator finished, a child failed, or
+/// Ctrl-C), with a progress line per second unless `quiet`.
+fn record_run(
+    receiver: &Receiver,
+    rec: &mut Recording,
+    rows: &mut RowBuilder,
+    children: &mut Children,
+    started: Instant,
+    quiet: bool,
+) -> anyhow::Result<End> {
+    let mut next_progress = started + Duration::from_secs(1);
+    loop {
+        receiver.pump(rec, Duration::from_millis(1))?;
+        rec.join(rows, false)?;
+        if interrupted() {
+            return Ok(End::Interrupted);
+        }
+        if let Some(end) = children.check(rec, started) {
+            return Ok(end);
+        }
+        if Instant::now() >= next_progress {
+            if !quiet {
+                eprintln!("{}", progress_line(rec, rows));
+            }
+            next_progress += Duration::from_secs(1);
+        }
+    }
+}
+
+/// The figures of the IPC path, for metrics.json and the summary.
+struct IpcFigures {
+    /// State → command latencies, sorted.
+    latencies_ns: Vec<u64>,
+    expected_rows: u64,
+}
+
+impl IpcFigures {
+    fn new(rec: &Recording, scenario: &Scenario) -> IpcFigures {
+        let mut latencies_ns = rec.latencies_ns.clone();
+        latencies_ns.sort_unstable();
+        let s = &scenario.simulation;
+        IpcFigures {
+            latencies_ns,
+            expected_rows: (s.duration_s * s.control_rate_hz).round() as u64 + 1,
+        }
     }
 
+    /// Latency percentile `p` in µs.
+    fn us(&self, p: f64) -> Option<f64> {
+        percentile(&self.latencies_ns, p).map(|v| v as f64 * 1e-3)
+    }
+
+    /// The `ipc` entry of the run's settings.
+    fn json(&self, launch: &Launch, rec: &Recording, rows: &RowBuilder) -> serde_json::Value {
+        let last_state = rec.last_state;
+        let last_tel = rec.last_telemetry;
+        serde_json::json!({
+            "runner": "hcc run (hcc-sim and hcc-controller over iceoryx2)",
+            "mode": launch.mode,
+            "namespace": launch.namespace.as_str(),
+            "expected_rows": self.expected_rows,
+            "rows": rows.traj.n_rows(),
+            "states_received": rec.states.received,
+            "commands_received": rec.commands.received,
+            "telemetry_received": rec.telemetry.received,
+            "recorder_gaps": {
+                "joint_state": rec.states.checker.missed(),
+                "torque_command": rec.commands.checker.missed(),
+                "telemetry": rec.telemetry.checker.missed(),
+            },
+            "telemetry_without_state": rec.unmatched_telemetry,
+            "stale_telemetry": rec.stale_telemetry,
+            "states_not_answered_by_the_controller": rec.unanswered_states,
+            "driver_missed_commands": last_state.map(|s| s.missed_commands),
+            "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
+            "controller_missed_states": last_tel.map(|t| t.counters.missed_states),
+            "controller_stale_events": last_tel.map(|t| t.counters.stale_events),
+            "controller_invalid_states": last_tel.map(|t| t.counters.invalid_states),
+            "controller_saturations": last_tel.map(|t| t.counters.saturations),
+            "controller_max_compute_us": last_tel.map(|t| t.timings.max_compute_ns as f64 * 1e-3),
+            "commands_by_mode": {
+                "normal": rec.modes[0], "safe_hold": rec.modes[1], "singular": rec.modes[2],
+                "stop": rec.modes[3], "unknown": rec.modes[4],
+            },
+            "state_to_command_latency_us": {
+                "p50": self.us(50.0), "p99": self.us(99.0), "max": self.us(100.0),
+                "samples": self.latencies_ns.len(),
+            },
+            "shadow_controller_max_tau_difference": rows.shadow_tau_diff,
+            "shadow_controller_failures": rows.shadow_failures,
+        })
+    }
+
+    /// The lines of the summary after the metrics'.
+    fn print(&self, mode: &str, rec: &Recording, rows: &RowBuilder) {
+        let fmt_us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1} µs"));
+        let (last_state, last_tel) = (rec.last_state, rec.last_telemetry);
+        println!(
+            "  ipc ({mode}): {} rows of {} expected; driver missed commands {}, fallback cycles {}; controller missed states {}",
+            rows.traj.n_rows(),
+            self.expected_rows,
+            last_state.map_or(0, |s| s.missed_commands),
+            last_state.map_or(0, |s| s.fallback_cycles),
+            last_tel.map_or(0, |t| t.counters.missed_states),
+        );
+        println!(
+            "  state -> command latency: p50 {}, p99 {}, max {} ({} commands)",
+            fmt_us(self.us(50.0)),
+            fmt_us(self.us(99.0)),
+            fmt_us(self.us(100.0)),
+            self.latencies_ns.len()
+        );
+        println!(
+            "  recorder: gaps {} (states {}, commands {}, telemetry {}), telemetry without state {}, states not answered {}",
+            rec.gaps(),
+            rec.states.checker.missed(),
+            rec.commands.checker.missed(),
+            rec.telemetry.checker.missed(),
+            rec.unmatched_telemetry,
+            rec.unanswered_states
+        );
+        if rows.shadow_failures > 0 {
+            println!(
+                "  warning: the shadow controller failed on {} states (acc, accv and S_kin/S_pot are NaN there)",
+                rows.shadow_failures
+            );
+        }
+    }
+}
+
+/// Writes trajectory.csv, metrics.json and (unless `no_plots`) the plots;
+/// `None` when no row was recorded.
+fn write_results(
+    out: &Path,
+    traj: &Trajectory,
+    description: &hcc_report::RunDescription,
+    no_plots: bool,
+) -> anyhow::Result<Option<hcc_report::Metrics>> {
+    if traj.n_rows() == 0 {
+        return Ok(None);
+    }
+    if no_plots {
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        traj.write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
+        let m = hcc_report::Metrics::compute(traj, description)?;
+        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
+        return Ok(Some(m));
+    }
+    Ok(Some(hcc_report::write_run(out, traj, description)?.metrics))
+}
+
+/// The exit of `hcc run`: success, or an error that says why and where the
+/// partial results are.
+fn outcome(
+    end: End,
+    rec: &Recording,
+    written: bool,
+    out: &Path,
+    started: Instant,
+) -> anyhow::Result<()> {
     match end {
         End::Finished => {
             if !rec.sim_stopped {
-                eprintln!("hcc run: warning: hcc-sim exited without publishing a Stopped state");
+                warn!("hcc-sim exited without publishing a Stopped state");
             }
-            if written.is_none() {
+            if !written {
                 bail!("the run recorded no controller cycle");
             }
-            let _ = sim_status;
             Ok(())
         }
         End::Interrupted => bail!(
             "interrupted after {:.1} s; both daemons stopped{}",
             started.elapsed().as_secs_f64(),
-            if written.is_some() {
+            if written {
                 format!(", partial results in {}", out.display())
             } else {
                 String::new()
@@ -1005,6 +965,71 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         ),
         End::Failed(msg) => Err(anyhow!(msg)),
     }
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let mut scenario = Scenario::load(&args.config)?;
+    if let Some(d) = args.duration {
+        scenario
+            .set_duration(d)
+            .with_context(|| format!("--duration {d}"))?;
+    }
+    let launch = Launch::new(&args, &scenario)?;
+
+    // Subscribe before the children start, so that no sample is missed.
+    let receiver = Receiver::start(launch.file_prefix.clone(), launch.names.clone())?;
+    let mut rows = RowBuilder::new(&scenario)?;
+    let mut rec = Recording::new();
+    install_signal_handlers()?;
+    if !args.quiet {
+        eprintln!(
+            "hcc run: {} ({}, {} s) in namespace {}",
+            scenario.name, launch.mode, launch.duration, launch.namespace
+        );
+    }
+    let (controller, sim) = launch.spawn()?;
+    let mut children = Children { controller, sim };
+    let started = Instant::now();
+    let end = record_run(
+        &receiver,
+        &mut rec,
+        &mut rows,
+        &mut children,
+        started,
+        args.quiet,
+    )?;
+    if matches!(end, End::Finished) {
+        children.await_last_answer(&receiver, &mut rec)?;
+    }
+    // Stop what still runs, collecting the samples published meanwhile.
+    let end = children.stop(end);
+    receiver.finish(&mut rec)?;
+    rec.join(&mut rows, true)?;
+
+    let figures = IpcFigures::new(&rec, &scenario);
+    let mut description = describe(&scenario);
+    description
+        .settings
+        .insert("ipc".into(), figures.json(&launch, &rec, &rows));
+    let written = write_results(&launch.out, &rows.traj, &description, args.no_plots)?;
+    if let Some(m) = &written {
+        print!("{}", m.summary());
+    }
+    figures.print(launch.mode, &rec, &rows);
+    for line in children
+        .sim
+        .stdout_lines()
+        .iter()
+        .chain(children.controller.stdout_lines().iter())
+    {
+        if !line.trim().is_empty() && !args.quiet {
+            eprintln!("  | {line}");
+        }
+    }
+    if written.is_some() {
+        println!("results in {}", launch.out.display());
+    }
+    outcome(end, &rec, written.is_some(), &launch.out, started)
 }
 
 #[cfg(test)]

@@ -509,6 +509,14 @@ impl Controller {
         &self.out
     }
 
+    /// The task Jacobian J_i (m_i × n) of level `i` (0-based) at the state of the
+    /// last [`Controller::step`]: selection rows of the frame Jacobian for a
+    /// position, its angular rows for an orientation, selection or weights for a
+    /// joint task (eqs. 20, 21).
+    pub fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        &self.levels[i].j
+    }
+
     /// Switches τ_μ (eq. 22) on or off (the ablation).
     pub fn set_coriolis_cancellation(&mut self, on: bool) {
         self.spec.coriolis_cancellation = on;

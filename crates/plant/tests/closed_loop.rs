@@ -52,6 +52,8 @@ struct JointPd {
     mu: DVector<f64>,
     err: [DVector<f64>; 2],
     s: [f64; 2],
+    /// J_1 selects joint 1, J_2 is the identity (joint-space tasks).
+    jac: [DMatrix<f64>; 2],
 }
 
 impl ControlLaw for JointPd {
@@ -91,6 +93,9 @@ impl ControlLaw for JointPd {
     fn p_mu(&self) -> f64 {
         0.0
     }
+    fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        &self.jac[i]
+    }
 }
 
 fn law(s: &Scenario) -> JointPd {
@@ -105,6 +110,10 @@ fn law(s: &Scenario) -> JointPd {
         mu: z.clone(),
         err: [DVector::zeros(1), z],
         s: [0.0; 2],
+        jac: [
+            DMatrix::from_row_slice(1, 4, &[1.0, 0.0, 0.0, 0.0]),
+            DMatrix::identity(4, 4),
+        ],
     }
 }
 

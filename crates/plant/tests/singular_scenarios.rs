@@ -18,7 +18,7 @@ use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_plant::SimError;
 use hcc_plant::closed_loop::{ControlLaw, simulate_with};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 fn load(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -104,6 +104,9 @@ impl ControlLaw for SwitchingLaw {
     }
     fn p_mu(&self) -> f64 {
         self.controller.output().p_mu
+    }
+    fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        self.controller.task_jacobian(i)
     }
 }
 

@@ -13,7 +13,7 @@
 //! A plot whose columns are missing from the trajectory is skipped.
 
 use crate::columns;
-use crate::{Metrics, ReportError, Trajectory};
+use crate::{Metrics, ReportError, RunDescription, Trajectory};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -169,8 +169,193 @@ fn draw_panels(path: &Path, title: &str, t: &[f64], panels: &[Panel]) -> Result<
     Ok(())
 }
 
-fn series(traj: &Trajectory, name: &str, label: String) -> Option<Series> {
-    traj.column(name).map(|values| Series { label, values })
+/// The plot context: the run's table, its time column and description.
+struct Plotter<'a> {
+    dir: &'a Path,
+    traj: &'a Trajectory,
+    t: Vec<f64>,
+    run: &'a RunDescription,
+}
+
+impl Plotter<'_> {
+    fn series(&self, name: &str, label: String) -> Option<Series> {
+        self.traj
+            .column(name)
+            .map(|values| Series { label, values })
+    }
+
+    /// The joint series of column `name(k)` for k = 1..n, labelled `label(k)`.
+    fn joints(&self, name: fn(usize) -> String, label: impl Fn(usize) -> String) -> Vec<Series> {
+        (1..=self.run.n_joints)
+            .filter_map(|k| self.series(&name(k), label(k)))
+            .collect()
+    }
+
+    /// Draws `panels` into `file` unless there are none; the file written.
+    fn draw(
+        &self,
+        file: &str,
+        title: &str,
+        panels: &[Panel],
+    ) -> Result<Option<PathBuf>, ReportError> {
+        if panels.is_empty() {
+            return Ok(None);
+        }
+        let p = self.dir.join(file);
+        draw_panels(
+            &p,
+            &format!("{}: {title}", self.run.scenario),
+            &self.t,
+            panels,
+        )?;
+        Ok(Some(p))
+    }
+
+    /// Task errors per level (Figs. 3/6).
+    fn errors(&self) -> Result<Option<PathBuf>, ReportError> {
+        let panels: Vec<Panel> = self
+            .run
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| Panel {
+                title: format!("Level {}: {}", i + 1, l.name),
+                y_label: format!("error [{}]", l.unit.label()),
+                series: (1..=l.dim)
+                    .filter_map(|k| {
+                        self.series(&columns::error(i + 1, k), format!("e{}_{k}", i + 1))
+                    })
+                    .collect(),
+            })
+            .collect();
+        self.draw("errors.png", "task errors x_i - x_i,d", &panels)
+    }
+
+    /// Torques: applied, per level, τ_μ (Fig. 4).
+    fn torques(&self) -> Result<Option<PathBuf>, ReportError> {
+        let mut panels = vec![Panel {
+            title: "Applied torque (gravity included)".into(),
+            y_label: "tau [Nm]".into(),
+            series: self.joints(columns::torque, |k| format!("joint {k}")),
+        }];
+        for i in 1..=self.run.levels.len() {
+            let s: Vec<Series> = (1..=self.run.n_joints)
+                .filter_map(|k| self.series(&columns::level_torque(i, k), format!("joint {k}")))
+                .collect();
+            if !s.is_empty() {
+                panels.push(Panel {
+                    title: format!("Level {i} torque tau_{i}"),
+                    y_label: format!("tau_{i} [Nm]"),
+                    series: s,
+                });
+            }
+        }
+        let s = self.joints(columns::mu_torque, |k| format!("joint {k}"));
+        if !s.is_empty() {
+            panels.push(Panel {
+                title: "Coriolis cancellation tau_mu".into(),
+                y_label: "tau_mu [Nm]".into(),
+                series: s,
+            });
+        }
+        self.draw("torques.png", "control torques", &panels)
+    }
+
+    /// The series of level `i` caused by the other levels, `column(i, j)`.
+    fn caused_by_other_levels(&self, i: usize, column: fn(usize, usize) -> String) -> Vec<Series> {
+        (1..=self.run.levels.len())
+            .filter(|&j| j != i)
+            .filter_map(|j| self.series(&column(i, j), format!("from level {j}")))
+            .collect()
+    }
+
+    /// Disturbing accelerations ‖J_i M⁻¹ τ_j‖ (Fig. 5).
+    fn disturbing_accelerations(&self) -> Result<Option<PathBuf>, ReportError> {
+        let mut panels = Vec::new();
+        for i in 1..=self.run.levels.len() {
+            let mut s = self.caused_by_other_levels(i, columns::disturbing_acceleration);
+            s.extend(self.series(
+                &columns::mu_acceleration(i),
+                "from tau_mu (cancellation)".into(),
+            ));
+            if !s.is_empty() {
+                let unit = match self.run.levels[i - 1].unit.label() {
+                    "" => String::new(),
+                    u => format!(" [{u}/s^2]"),
+                };
+                panels.push(Panel {
+                    title: format!(
+                        "Level {i}: |J_{i} M^-1 tau_j| (acceleration caused by other levels)"
+                    ),
+                    y_label: format!("accel.{unit}"),
+                    series: s,
+                });
+            }
+        }
+        self.draw(
+            "disturbing_accelerations.png",
+            "disturbing accelerations",
+            &panels,
+        )
+    }
+
+    /// The same in the local null-space velocities v_i (decoupling of Sec. III).
+    fn null_space_accelerations(&self) -> Result<Option<PathBuf>, ReportError> {
+        let mut panels = Vec::new();
+        for i in 1..=self.run.levels.len() {
+            let s = self.caused_by_other_levels(i, columns::null_space_acceleration);
+            if !s.is_empty() {
+                panels.push(Panel {
+                    title: format!(
+                        "Level {i}: |Jbar_{i} M^-1 tau_j| (dv_{i}/dt caused by other levels)"
+                    ),
+                    y_label: "accel.".into(),
+                    series: s,
+                });
+            }
+        }
+        self.draw(
+            "disturbing_accelerations_v.png",
+            "disturbing accelerations in null-space coordinates",
+            &panels,
+        )
+    }
+
+    /// Level energies S_i and their kinetic/potential split (Fig. 7).
+    fn energies(&self) -> Result<Option<PathBuf>, ReportError> {
+        let mut panels = Vec::new();
+        for i in 1..=self.run.levels.len() {
+            let mut s = Vec::new();
+            s.extend(self.series(&columns::energy(i), format!("S_{i} total")));
+            s.extend(self.series(&columns::energy_kinetic(i), "kinetic".into()));
+            s.extend(self.series(&columns::energy_potential(i), "potential".into()));
+            if !s.is_empty() {
+                panels.push(Panel {
+                    title: format!("Level {i}: energy S_{i}"),
+                    y_label: "energy [J]".into(),
+                    series: s,
+                });
+            }
+        }
+        self.draw("energies.png", "level energies", &panels)
+    }
+
+    /// Joint positions and velocities.
+    fn joint_state(&self) -> Result<Option<PathBuf>, ReportError> {
+        let panels = [
+            Panel {
+                title: "Joint positions".into(),
+                y_label: "q [rad]".into(),
+                series: self.joints(columns::position, |k| format!("q{k}")),
+            },
+            Panel {
+                title: "Joint velocities".into(),
+                y_label: "qd [rad/s]".into(),
+                series: self.joints(columns::velocity, |k| format!("qd{k}")),
+            },
+        ];
+        self.draw("joints.png", "joint state", &panels)
+    }
 }
 
 /// Writes every plot that the trajectory's columns allow into `dir`; returns the files written.
@@ -179,193 +364,20 @@ pub fn plot_all(
     traj: &Trajectory,
     metrics: &Metrics,
 ) -> Result<Vec<PathBuf>, ReportError> {
-    let t = traj.require(columns::TIME)?;
-    let run = &metrics.run;
-    let n = run.n_joints;
-    let r = run.levels.len();
-    let scenario = &run.scenario;
+    let plotter = Plotter {
+        dir,
+        traj,
+        t: traj.require(columns::TIME)?,
+        run: &metrics.run,
+    };
     let mut written = Vec::new();
-
-    // Errors per level (Figs. 3/6).
-    let panels: Vec<Panel> = run
-        .levels
-        .iter()
-        .enumerate()
-        .map(|(i, l)| Panel {
-            title: format!("Level {}: {}", i + 1, l.name),
-            y_label: format!("error [{}]", l.unit.label()),
-            series: (1..=l.dim)
-                .filter_map(|k| series(traj, &columns::error(i + 1, k), format!("e{}_{k}", i + 1)))
-                .collect(),
-        })
-        .collect();
-    if r > 0 {
-        let p = dir.join("errors.png");
-        draw_panels(
-            &p,
-            &format!("{scenario}: task errors x_i - x_i,d"),
-            &t,
-            &panels,
-        )?;
-        written.push(p);
+    if !plotter.run.levels.is_empty() {
+        written.extend(plotter.errors()?);
     }
-
-    // Torques: applied, per level, tau_mu (Fig. 4).
-    let mut panels = vec![Panel {
-        title: "Applied torque (gravity included)".into(),
-        y_label: "tau [Nm]".into(),
-        series: (1..=n)
-            .filter_map(|k| series(traj, &columns::torque(k), format!("joint {k}")))
-            .collect(),
-    }];
-    for i in 1..=r {
-        let s: Vec<Series> = (1..=n)
-            .filter_map(|k| series(traj, &columns::level_torque(i, k), format!("joint {k}")))
-            .collect();
-        if !s.is_empty() {
-            panels.push(Panel {
-                title: format!("Level {i} torque tau_{i}"),
-                y_label: format!("tau_{i} [Nm]"),
-                series: s,
-            });
-        }
-    }
-    let s: Vec<Series> = (1..=n)
-        .filter_map(|k| series(traj, &columns::mu_torque(k), format!("joint {k}")))
-        .collect();
-    if !s.is_empty() {
-        panels.push(Panel {
-            title: "Coriolis cancellation tau_mu".into(),
-            y_label: "tau_mu [Nm]".into(),
-            series: s,
-        });
-    }
-    let p = dir.join("torques.png");
-    draw_panels(&p, &format!("{scenario}: control torques"), &t, &panels)?;
-    written.push(p);
-
-    // Disturbing accelerations (Fig. 5).
-    let mut panels = Vec::new();
-    for i in 1..=r {
-        let mut s: Vec<Series> = (1..=r)
-            .filter(|&j| j != i)
-            .filter_map(|j| {
-                series(
-                    traj,
-                    &columns::disturbing_acceleration(i, j),
-                    format!("from level {j}"),
-                )
-            })
-            .collect();
-        s.extend(series(
-            traj,
-            &columns::mu_acceleration(i),
-            "from tau_mu (cancellation)".into(),
-        ));
-        if !s.is_empty() {
-            let unit = match run.levels[i - 1].unit.label() {
-                "" => String::new(),
-                u => format!(" [{u}/s^2]"),
-            };
-            panels.push(Panel {
-                title: format!(
-                    "Level {i}: |J_{i} M^-1 tau_j| (acceleration caused by other levels)"
-                ),
-                y_label: format!("accel.{unit}"),
-                series: s,
-            });
-        }
-    }
-    if !panels.is_empty() {
-        let p = dir.join("disturbing_accelerations.png");
-        draw_panels(
-            &p,
-            &format!("{scenario}: disturbing accelerations"),
-            &t,
-            &panels,
-        )?;
-        written.push(p);
-    }
-
-    // The same in the local null-space velocities v_i (decoupling of Sec. III).
-    let mut panels = Vec::new();
-    for i in 1..=r {
-        let s: Vec<Series> = (1..=r)
-            .filter(|&j| j != i)
-            .filter_map(|j| {
-                series(
-                    traj,
-                    &columns::null_space_acceleration(i, j),
-                    format!("from level {j}"),
-                )
-            })
-            .collect();
-        if !s.is_empty() {
-            panels.push(Panel {
-                title: format!(
-                    "Level {i}: |Jbar_{i} M^-1 tau_j| (dv_{i}/dt caused by other levels)"
-                ),
-                y_label: "accel.".into(),
-                series: s,
-            });
-        }
-    }
-    if !panels.is_empty() {
-        let p = dir.join("disturbing_accelerations_v.png");
-        draw_panels(
-            &p,
-            &format!("{scenario}: disturbing accelerations in null-space coordinates"),
-            &t,
-            &panels,
-        )?;
-        written.push(p);
-    }
-
-    // Energies (Fig. 7).
-    let mut panels = Vec::new();
-    for i in 1..=r {
-        let mut s = Vec::new();
-        s.extend(series(traj, &columns::energy(i), format!("S_{i} total")));
-        s.extend(series(traj, &columns::energy_kinetic(i), "kinetic".into()));
-        s.extend(series(
-            traj,
-            &columns::energy_potential(i),
-            "potential".into(),
-        ));
-        if !s.is_empty() {
-            panels.push(Panel {
-                title: format!("Level {i}: energy S_{i}"),
-                y_label: "energy [J]".into(),
-                series: s,
-            });
-        }
-    }
-    if !panels.is_empty() {
-        let p = dir.join("energies.png");
-        draw_panels(&p, &format!("{scenario}: level energies"), &t, &panels)?;
-        written.push(p);
-    }
-
-    // Joint positions and velocities.
-    let panels = vec![
-        Panel {
-            title: "Joint positions".into(),
-            y_label: "q [rad]".into(),
-            series: (1..=n)
-                .filter_map(|k| series(traj, &columns::position(k), format!("q{k}")))
-                .collect(),
-        },
-        Panel {
-            title: "Joint velocities".into(),
-            y_label: "qd [rad/s]".into(),
-            series: (1..=n)
-                .filter_map(|k| series(traj, &columns::velocity(k), format!("qd{k}")))
-                .collect(),
-        },
-    ];
-    let p = dir.join("joints.png");
-    draw_panels(&p, &format!("{scenario}: joint state"), &t, &panels)?;
-    written.push(p);
-
+    written.extend(plotter.torques()?);
+    written.extend(plotter.disturbing_accelerations()?);
+    written.extend(plotter.null_space_accelerations()?);
+    written.extend(plotter.energies()?);
+    written.extend(plotter.joint_state()?);
     Ok(written)
 }

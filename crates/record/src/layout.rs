@@ -1,0 +1,106 @@
+//! What a recording of a scenario holds besides its rows: the column layout
+//! and the report's description of the run.
+
+use hcc_config::{Scenario, TaskUnit};
+use hcc_report::{ErrorUnit, LevelDescription, RunDescription, columns};
+use std::collections::BTreeMap;
+
+fn unit(u: TaskUnit) -> ErrorUnit {
+    match u {
+        TaskUnit::Length => ErrorUnit::Meter,
+        TaskUnit::Angle => ErrorUnit::Radian,
+    }
+}
+
+/// The report's description of a scenario run.
+pub fn describe(scenario: &Scenario) -> RunDescription {
+    let s = &scenario.simulation;
+    let mut settings = BTreeMap::new();
+    let mut put = |k: &str, v: serde_json::Value| {
+        settings.insert(k.to_string(), v);
+    };
+    put("config", scenario.path.display().to_string().into());
+    put("urdf", scenario.urdf_path.display().to_string().into());
+    put("duration_s", s.duration_s.into());
+    put("control_rate_hz", s.control_rate_hz.into());
+    put("integrator_dt_s", s.integrator_dt_s.into());
+    put("integrator", "RK4".into());
+    put(
+        "coriolis_cancellation",
+        scenario.coriolis_cancellation.into(),
+    );
+    put("gravity_compensation", scenario.gravity_compensation.into());
+    put(
+        "form",
+        match scenario.form {
+            hcc_config::FormName::Extended => "extended",
+            hcc_config::FormName::Projector => "projector",
+        }
+        .into(),
+    );
+    put(
+        "joint_friction",
+        s.joint_friction
+            .iter()
+            .copied()
+            .collect::<Vec<f64>>()
+            .into(),
+    );
+    put("external_wrenches", s.wrenches.len().into());
+    put(
+        "q0",
+        scenario.q0.iter().copied().collect::<Vec<f64>>().into(),
+    );
+    RunDescription {
+        scenario: scenario.name.clone(),
+        n_joints: scenario.model.nq(),
+        levels: scenario
+            .levels
+            .iter()
+            .map(|l| LevelDescription {
+                name: l.name.clone(),
+                dim: l.task.dim(),
+                unit: unit(l.task.unit()),
+            })
+            .collect(),
+        settings,
+    }
+}
+
+/// Column names recorded by [`crate::Recorder`] for `scenario` (`with_v`: the law
+/// provides J̄, so the `accv` columns are recorded).
+pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
+    let n = scenario.model.nq();
+    let r = scenario.levels.len();
+    let dims: Vec<usize> = scenario.levels.iter().map(|l| l.task.dim()).collect();
+    let mut c = columns::required(n, &dims);
+    for i in 1..=r {
+        c.extend((1..=n).map(|k| columns::level_torque(i, k)));
+    }
+    c.extend((1..=n).map(columns::mu_torque));
+    for i in 1..=r {
+        c.extend(
+            (1..=r)
+                .filter(|&j| j != i)
+                .map(|j| columns::disturbing_acceleration(i, j)),
+        );
+        c.push(columns::mu_acceleration(i));
+    }
+    if with_v {
+        for i in 1..=r {
+            c.extend(
+                (1..=r)
+                    .filter(|&j| j != i)
+                    .map(|j| columns::null_space_acceleration(i, j)),
+            );
+            c.push(columns::null_space_mu_acceleration(i));
+        }
+    }
+    for i in 1..=r {
+        c.push(columns::energy_kinetic(i));
+        c.push(columns::energy_potential(i));
+    }
+    c.push(columns::E_KIN.to_string());
+    c.push(columns::E_POT.to_string());
+    c
+}
