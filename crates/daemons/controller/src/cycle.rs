@@ -306,7 +306,10 @@ impl Cycle {
 
     /// Answers the state in `self.state`, received at `wake` (ns).
     fn answer(&mut self, ports: &Ports, wake: u64) -> Outcome {
-        let period = (self.last_state_ns.is_some()).then(|| wake.saturating_sub(self.last_wake_ns));
+        let period = self
+            .last_state_ns
+            .is_some()
+            .then(|| wake.saturating_sub(self.last_wake_ns));
         self.note_state(wake);
         let answer = self.decider.decide(&self.state, wake);
         if let Some(step_ns) = self.decider.step_ns() {

@@ -122,8 +122,8 @@ where
 }
 
 /// Installs the process's `tracing` subscriber (once; later calls keep it):
-/// stderr, `RUST_LOG` or else `info`, the [`Prefixed`] format.
-pub fn init_logging() {
+/// stderr, `RUST_LOG` or else `info`, the `Prefixed` format.
+fn init_logging() {
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)

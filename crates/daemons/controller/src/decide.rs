@@ -60,7 +60,7 @@ use crate::status::LoopCounters;
 pub const RESYNC_RUN: u32 = 3;
 
 /// Slack of [`max_plausible_gap`], in states.
-const GAP_SLACK: u64 = 16;
+pub const GAP_SLACK: u64 = 16;
 
 /// The largest number of states a driver publishing one state per period can
 /// have skipped in `elapsed_ns`: twice the periods elapsed plus
