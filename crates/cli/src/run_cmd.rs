@@ -71,6 +71,7 @@ use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
     wait_until_controller_listens,
 };
+use crate::simulate_cmd::write_results;
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
 pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
@@ -914,27 +915,6 @@ impl IpcFigures {
     }
 }
 
-/// Writes trajectory.csv, metrics.json and (unless `no_plots`) the plots;
-/// `None` when no row was recorded.
-fn write_results(
-    out: &Path,
-    traj: &Trajectory,
-    description: &hcc_report::RunDescription,
-    no_plots: bool,
-) -> anyhow::Result<Option<hcc_report::Metrics>> {
-    if traj.n_rows() == 0 {
-        return Ok(None);
-    }
-    if no_plots {
-        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-        traj.write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
-        let m = hcc_report::Metrics::compute(traj, description)?;
-        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
-        return Ok(Some(m));
-    }
-    Ok(Some(hcc_report::write_run(out, traj, description)?.metrics))
-}
-
 /// The exit of `hcc run`: success, or an error that says why and where the
 /// partial results are.
 fn outcome(
@@ -1011,7 +991,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     description
         .settings
         .insert("ipc".into(), figures.json(&launch, &rec, &rows));
-    let written = write_results(&launch.out, &rows.traj, &description, args.no_plots)?;
+    let written = if rows.traj.n_rows() == 0 {
+        None
+    } else {
+        Some(write_results(
+            &launch.out,
+            &rows.traj,
+            &description,
+            args.no_plots,
+        )?)
+    };
     if let Some(m) = &written {
         print!("{}", m.summary());
     }

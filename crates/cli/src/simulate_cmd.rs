@@ -3,7 +3,8 @@
 //! trajectory.csv, metrics.json and plots in DIR and a short summary on stdout.
 
 use anyhow::Context;
-use std::path::PathBuf;
+use hcc_report::{Metrics, RunDescription, Trajectory};
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
 pub struct SimulateArgs {
@@ -35,17 +36,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     }
     let run = hcc_plant::closed_loop::simulate(&scenario)
         .with_context(|| format!("simulation of {} failed", args.config.display()))?;
-    let metrics = if args.no_plots {
-        std::fs::create_dir_all(&args.out)
-            .with_context(|| format!("cannot create {}", args.out.display()))?;
-        run.trajectory
-            .write_csv(&args.out.join(hcc_report::TRAJECTORY_FILE))?;
-        let m = hcc_report::Metrics::compute(&run.trajectory, &run.description)?;
-        m.write_json(&args.out.join(hcc_report::METRICS_FILE))?;
-        m
-    } else {
-        hcc_report::write_run(&args.out, &run.trajectory, &run.description)?.metrics
-    };
+    let metrics = write_results(&args.out, &run.trajectory, &run.description, args.no_plots)?;
     print!("{}", metrics.summary());
     if let Some(n) = run
         .description
@@ -58,4 +49,22 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     }
     println!("results in {}", args.out.display());
     Ok(())
+}
+
+/// Writes trajectory.csv, metrics.json and (unless `no_plots`) the plots into
+/// `out` (created if missing); the metrics.
+pub fn write_results(
+    out: &Path,
+    traj: &Trajectory,
+    description: &RunDescription,
+    no_plots: bool,
+) -> anyhow::Result<Metrics> {
+    if no_plots {
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        traj.write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
+        let m = Metrics::compute(traj, description)?;
+        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
+        return Ok(m);
+    }
+    Ok(hcc_report::write_run(out, traj, description)?.metrics)
 }
