@@ -22,6 +22,10 @@ fn a_failing_daemon_stops_the_run_with_its_stderr() {
             .env(FILE_PREFIX_ENV, &prefix)
             .arg(&config)
             .args(["--namespace", &namespace])
+            // No controller answers it until hcc run starts one: without a
+            // long fallback timeout it would stop after 100 ms of misses and
+            // free the service before hcc-sim tries to open it.
+            .args(["--fallback-timeout-ms", "600000"])
             .stdout(std::fs::File::create(dir.path().join("driver.stdout")).unwrap())
             .stderr(std::fs::File::create(&driver_err).unwrap()),
     );
