@@ -10,6 +10,7 @@
   (``python -m hcc.mujoco``).
 """
 
+from .driver import Action, Driver, DriverSettings, Offer, Rejection, StopReason
 from .msgs import (
     COMMAND_FLAG_GRAVITY_INCLUDED,
     MAX_JOINTS,
@@ -30,8 +31,11 @@ from .msgs import (
 )
 
 __all__ = [
+    "Action",
     "COMMAND_FLAG_GRAVITY_INCLUDED",
     "CommandMode",
+    "Driver",
+    "DriverSettings",
     "DriverStatus",
     "Header",
     "JointState",
@@ -39,8 +43,11 @@ __all__ = [
     "MAX_LEVELS",
     "MAX_TASK_DIM",
     "MsgError",
+    "Offer",
+    "Rejection",
     "SCHEMA_VERSION",
     "STATE_FLAG_DRIVER_GRAVITY_COMPENSATION",
+    "StopReason",
     "TELEMETRY_FLAG_PEER_LOST",
     "Telemetry",
     "TelemetryCounters",
