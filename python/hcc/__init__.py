@@ -10,6 +10,7 @@
   (``python -m hcc.mujoco``).
 """
 
+from .client import Client
 from .driver import Action, Driver, DriverSettings, Offer, Rejection, StopReason
 from .msgs import (
     COMMAND_FLAG_GRAVITY_INCLUDED,
@@ -32,6 +33,7 @@ from .msgs import (
 
 __all__ = [
     "Action",
+    "Client",
     "COMMAND_FLAG_GRAVITY_INCLUDED",
     "CommandMode",
     "Driver",
