@@ -9,7 +9,7 @@ import pathlib
 import signal
 import subprocess
 import sys
-from typing import Iterator
+from typing import Callable, Iterator
 
 from conftest import ROOT, binary, unique
 
@@ -47,14 +47,17 @@ def run_pair(
     duration: float | None = None,
     extra: list[str] | None = None,
     timeout: float = 600.0,
+    on_started: Callable[[str, str, subprocess.Popen], None] | None = None,
 ) -> dict[str, pathlib.Path]:
     """Runs the MuJoCo driver against hcc-controller on ``scenario`` until the driver ends.
 
     Unique namespace and file prefix; both processes are stopped afterwards.
-    Returns the paths of the driver's records and the logs.
+    ``on_started(namespace, file_prefix, driver_process)`` is called once
+    both run (e.g. to attach a client until the driver ends). Returns the paths of the driver's records and the logs.
     """
     ns = unique("pyt")
-    env = dict(os.environ, HCC_IPC_FILE_PREFIX=unique("hccpy")[:32])
+    prefix = f"{unique('hccpy')}_"[:32]
+    env = dict(os.environ, HCC_IPC_FILE_PREFIX=prefix)
     paths = {
         "record": tmp / "mujoco_states.csv",
         "stats": tmp / "mujoco_stats.json",
@@ -69,12 +72,29 @@ def run_pair(
     driver += ["--record", str(paths["record"]), "--stats", str(paths["stats"])]
     driver += ["--contact-csv", str(paths["contact"]), *(extra or [])]
     controller = [str(binary("hcc-controller")), str(scenario), "--namespace", ns]
-    with started(driver, env, paths["driver_log"]) as d:
-        with started(controller, env, paths["controller_log"]) as c:
-            try:
-                rc = d.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                raise AssertionError(f"the MuJoCo driver did not finish: {paths['driver_log'].read_text()}")
-            assert rc == 0, paths["driver_log"].read_text()
-            assert c.poll() is None, f"controller exited: {paths['controller_log'].read_text()}"
+    try:
+        with started(driver, env, paths["driver_log"]) as d:
+            with started(controller, env, paths["controller_log"]) as c:
+                if on_started is not None:
+                    on_started(ns, prefix, d)
+                try:
+                    rc = d.wait(timeout=timeout)
+                except subprocess.TimeoutExpired:
+                    raise AssertionError(
+                        f"the MuJoCo driver did not finish: {paths['driver_log'].read_text()}"
+                    ) from None
+                assert rc == 0, paths["driver_log"].read_text()
+                assert c.poll() is None, f"controller exited: {paths['controller_log'].read_text()}"
+    finally:
+        remove_ipc_files(prefix)
     return paths
+
+
+def remove_ipc_files(prefix: str) -> None:
+    """Deletes the shared-memory and bookkeeping files of a test's own file prefix."""
+    for root in (pathlib.Path("/dev/shm"), pathlib.Path("/tmp/iceoryx2")):
+        if not root.is_dir():
+            continue
+        for path in root.rglob(f"{prefix}*"):
+            if path.is_file():
+                path.unlink(missing_ok=True)

@@ -128,9 +128,8 @@ class ContactLog:
         wall = p.wall
         fn = float(np.dot(f, wall.normal)) if wall is not None else 0.0
         x = p.tip_position()
-        self.out.write(
-            f"{p.t!r},{f[0]!r},{f[1]!r},{f[2]!r},{fn!r},{x[0]!r},{x[1]!r},{x[2]!r}\n"
-        )
+        values = [p.t, *f, fn, *x]
+        self.out.write(",".join(repr(float(v)) for v in values) + "\n")
 
 
 class StateLog:
