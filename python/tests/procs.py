@@ -47,6 +47,7 @@ def run_pair(
     duration: float | None = None,
     extra: list[str] | None = None,
     timeout: float = 600.0,
+    controller_extra: list[str] | None = None,
     on_started: Callable[[str, str, subprocess.Popen], None] | None = None,
 ) -> dict[str, pathlib.Path]:
     """Runs the MuJoCo driver against hcc-controller on ``scenario`` until the driver ends.
@@ -72,6 +73,7 @@ def run_pair(
     driver += ["--record", str(paths["record"]), "--stats", str(paths["stats"])]
     driver += ["--contact-csv", str(paths["contact"]), *(extra or [])]
     controller = [str(binary("hcc-controller")), str(scenario), "--namespace", ns]
+    controller += controller_extra or []
     try:
         with started(driver, env, paths["driver_log"]) as d:
             with started(controller, env, paths["controller_log"]) as c:

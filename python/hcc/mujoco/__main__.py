@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import pathlib
 import sys
 
@@ -37,9 +38,26 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         help="MuJoCo scene TOML ([mujoco] scene = \"wall\", [mujoco.wall] point, normal)",
     )
     p.add_argument("--contact-csv", type=pathlib.Path, help="write the contact force per period here")
+    p.add_argument(
+        "--sched-priority", type=int,
+        help="SCHED_FIFO priority 1..=99 of the driver (default: normal scheduling)",
+    )
     p.add_argument("--record", type=pathlib.Path, help="write t, q, qd of every state (CSV) here")
     p.add_argument("--stats", type=pathlib.Path, help="write counters and timing figures (JSON) here")
     return p.parse_args(argv)
+
+
+def set_fifo_priority(priority: int) -> None:
+    """Runs this process under SCHED_FIFO at ``priority``; a clear error if not permitted."""
+    if not 1 <= priority <= 99:
+        raise ValueError(f"--sched-priority {priority} must be in 1..=99")
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError as e:
+        raise ValueError(
+            f"--sched-priority {priority}: not permitted ({e.strerror}); it needs CAP_SYS_NICE "
+            "or an rtprio limit"
+        ) from e
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.duration is not None:
             driver.set_duration(args.duration)
         lockstep = args.lockstep or (not args.realtime and scenario.mode == "lockstep")
+        if args.sched_priority is not None:
+            set_fifo_priority(args.sched_priority)
     except (ScenarioError, ValueError, ipc.IpcError) as e:
         print(f"hcc.mujoco: error: {e}", file=sys.stderr)
         return 2

@@ -42,9 +42,9 @@ REPUBLISH_S: float = 0.020
 #: Real time: part of the period after publishing during which the answer is awaited.
 COMMAND_WINDOW_FRACTION: float = 0.8
 #: Real time: the last part of the wait to a tick is spun, s.
-SPIN_LEAD_S: float = 0.000150
+SPIN_LEAD_S: float = 0.000050
 #: Real time: poll interval while waiting for the answer, s.
-POLL_S: float = 0.00002
+POLL_S: float = 0.0001
 
 
 @dataclass
@@ -196,12 +196,13 @@ class Loop:
         c = self.newest
         return c is not None and c.state_seq == self.driver.k and c.state_stamp_ns != 0
 
-    def _take_answer(self) -> bool:
+    def _take_answer(self, drain_events: bool = True) -> bool:
         got = self._receive()
         if got and not self.answered:
             self.answered = True
             self.stats.state_to_command_ns.append(time.monotonic_ns() - self.published_ns)
-        self.command_ready.try_wait()
+        if drain_events:
+            self.command_ready.try_wait()
         return got
 
     def _advance(self) -> None:
@@ -222,7 +223,9 @@ class Loop:
         next_tick = time.monotonic_ns() + period
         while True:
             deadline = min(self.published_ns + window, next_tick)
-            while not self._take_answer() and not _Stop.requested:
+            # Polled (a blocking wait's timeout is too coarse inside a period);
+            # the command_ready notifications are drained at the tick.
+            while not self._take_answer(drain_events=False) and not _Stop.requested:
                 if time.monotonic_ns() >= deadline:
                     break
                 time.sleep(POLL_S)

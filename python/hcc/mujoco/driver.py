@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..msgs import (
-    MAX_JOINTS,
     SCHEMA_VERSION,
     STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
     CommandMode,
@@ -118,13 +117,11 @@ class MujocoDriver:
         msg.flags = self.state_flags
         msg.missed_commands = self.counters.missed_commands
         msg.fallback_cycles = self.counters.fallback_cycles
-        q, qd = self.plant.q, self.plant.qd
-        for j in range(MAX_JOINTS):
-            on = j < n
-            msg.q[j] = float(q[j]) if on else 0.0
-            msg.qd[j] = float(qd[j]) if on else 0.0
-            # The torque applied over the last period (the "motor" torque).
-            msg.tau_measured[j] = float(self.tau[j]) if on else 0.0
+        # The torque applied over the last period is the "motor" torque.
+        for field, values in ((msg.q, self.plant.q), (msg.qd, self.plant.qd), (msg.tau_measured, self.tau)):
+            view = np.ctypeslib.as_array(field)
+            view[:n] = values
+            view[n:] = 0.0
 
     def _applicable(self, command: TorqueCommand) -> CommandMode | None:
         try:

@@ -223,8 +223,7 @@ class Plant:
         m, d = self.model, self.data
         d.qfrc_applied[:] = 0.0
         d.qfrc_applied[self.robot.dof_adr] = tau
-        for _ in range(self.substeps):
-            mujoco.mj_step(m, d)
+        mujoco.mj_step(m, d, nstep=self.substeps)
         bad = int(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
         if bad or not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise FloatingPointError(f"the MuJoCo plant diverged at t = {d.time:.6f} s")
