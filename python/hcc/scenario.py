@@ -72,13 +72,17 @@ class Scenario:
     def load(path: str | pathlib.Path) -> "Scenario":
         """Reads and checks ``path``."""
         path = pathlib.Path(path)
-        try:
-            doc = tomllib.loads(path.read_text())
-        except OSError as e:
-            raise ScenarioError(f"{path}: cannot read it: {e.strerror}") from e
-        except tomllib.TOMLDecodeError as e:
-            raise ScenarioError(f"{path}: not valid TOML: {e}") from e
-        return _parse(path, doc)
+        return _parse(path, load_toml(path))
+
+
+def load_toml(path: pathlib.Path) -> dict[str, Any]:
+    """Reads a TOML file; a clear error naming the file if it cannot be read or parsed."""
+    try:
+        return tomllib.loads(path.read_text())
+    except OSError as e:
+        raise ScenarioError(f"{path}: cannot read it: {e.strerror}") from e
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: not valid TOML: {e}") from e
 
 
 def _number(path: pathlib.Path, name: str, v: Any, positive: bool = False) -> float:

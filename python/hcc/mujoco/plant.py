@@ -18,14 +18,13 @@ from __future__ import annotations
 
 import math
 import pathlib
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from ..scenario import Scenario, ScenarioError
+from ..scenario import Scenario, ScenarioError, load_toml
 from .model import RobotModel, build_spec, compile_robot
 
 
@@ -69,12 +68,7 @@ class SceneFile:
     def load(path: str | pathlib.Path) -> "SceneFile":
         """Reads and checks ``path``."""
         path = pathlib.Path(path)
-        try:
-            doc = tomllib.loads(path.read_text())
-        except OSError as e:
-            raise ScenarioError(f"{path}: cannot read it: {e.strerror}") from e
-        except tomllib.TOMLDecodeError as e:
-            raise ScenarioError(f"{path}: not valid TOML: {e}") from e
+        doc = load_toml(path)
         unknown = set(doc) - {"mujoco"}
         if unknown:
             raise ScenarioError(f"{path}: unknown sections {sorted(unknown)} (only [mujoco])")
