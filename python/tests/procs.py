@@ -11,7 +11,12 @@ import subprocess
 import sys
 from typing import Callable, Iterator
 
+import iceoryx2 as iox2
+
 from conftest import ROOT, binary, unique
+
+#: Directory of POSIX shared memory on Linux.
+SHM_DIR = "/dev/shm"
 
 
 def read_csv(path: pathlib.Path) -> tuple[list[str], list[list[float]]]:
@@ -94,7 +99,8 @@ def run_pair(
 
 def remove_ipc_files(prefix: str) -> None:
     """Deletes the shared-memory and bookkeeping files of a test's own file prefix."""
-    for root in (pathlib.Path("/dev/shm"), pathlib.Path("/tmp/iceoryx2")):
+    iceoryx2_root = iox2.config.default().global_cfg.root_path.to_string()
+    for root in (pathlib.Path(SHM_DIR), pathlib.Path(iceoryx2_root)):
         if not root.is_dir():
             continue
         for path in root.rglob(f"{prefix}*"):
