@@ -1,0 +1,123 @@
+//! Prints the memory layout of every contract type as JSON: size, alignment
+//! and the offset of each field, plus the schema version, the iceoryx2 type
+//! names, the service names and settings, and the flag bits. Bindings in other languages compare their
+//! mirrors of the types with this output so that the two never drift apart.
+//!
+//! Run with `cargo run -q -p hcc-msgs --example layout`.
+
+use std::mem::{align_of, offset_of, size_of};
+
+use hcc_msgs::{
+    COMMAND_FLAG_GRAVITY_INCLUDED, EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, Header,
+    JointState, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_TASK_DIM, SCHEMA_VERSION,
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, ServiceNames, TELEMETRY_FLAG_PEER_LOST, Telemetry,
+    TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// One struct's layout as a JSON object.
+fn layout<T: ZeroCopySend>(fields: &[(&str, usize)]) -> String {
+    // SAFETY: type_name only returns the name given by the derive.
+    let name = unsafe { <T as ZeroCopySend>::type_name() };
+    let fields: Vec<String> = fields
+        .iter()
+        .map(|(f, o)| format!("{{\"name\": \"{f}\", \"offset\": {o}}}"))
+        .collect();
+    format!(
+        "{{\"type_name\": \"{name}\", \"size\": {}, \"align\": {}, \"fields\": [{}]}}",
+        size_of::<T>(),
+        align_of::<T>(),
+        fields.join(", ")
+    )
+}
+
+macro_rules! fields {
+    ($t:ty: $($f:ident),+) => {
+        layout::<$t>(&[$((stringify!($f), offset_of!($t, $f))),+])
+    };
+}
+
+fn main() {
+    let structs = [
+        (
+            "Header",
+            fields!(Header: schema_version, n_joints, seq, stamp_ns),
+        ),
+        (
+            "JointState",
+            fields!(JointState: header, status, flags, missed_commands, fallback_cycles, q, qd, tau_measured),
+        ),
+        (
+            "TorqueCommand",
+            fields!(TorqueCommand: header, state_seq, state_stamp_ns, mode, flags, tau),
+        ),
+        (
+            "TelemetryCounters",
+            fields!(TelemetryCounters: cycles, invalid_states, saturations, singular_cycles,
+                stale_events, peer_lost_events, missed_states, sequence_errors, send_failures),
+        ),
+        (
+            "TelemetryTimings",
+            fields!(TelemetryTimings: wakeup_latency_ns, compute_ns, period_ns, max_compute_ns),
+        ),
+        (
+            "Telemetry",
+            fields!(Telemetry: header, state_seq, command_seq, mode, n_levels, task_dims,
+                singular_levels, flags, tau, tau_level, tau_mu, tau_gravity, task_error,
+                storage, min_singular_value, p_mu, counters, timings),
+        ),
+    ];
+    let body: Vec<String> = structs
+        .iter()
+        .map(|(name, json)| format!("    \"{name}\": {json}"))
+        .collect();
+    let names = ServiceNames::new("NS").expect("a valid namespace");
+    let services: Vec<String> = [
+        ("joint_state", names.joint_state()),
+        ("torque_command", names.torque_command()),
+        ("telemetry", names.telemetry()),
+        ("state_ready", names.state_ready()),
+        ("command_ready", names.command_ready()),
+    ]
+    .iter()
+    .map(|(k, v)| format!("\"{k}\": \"{v}\""))
+    .collect();
+    let settings: Vec<String> = [
+        ("max_state_subscribers", ipc::MAX_STATE_SUBSCRIBERS),
+        ("max_command_subscribers", ipc::MAX_COMMAND_SUBSCRIBERS),
+        ("max_telemetry_subscribers", ipc::MAX_TELEMETRY_SUBSCRIBERS),
+        ("max_subscriber_buffer", ipc::MAX_SUBSCRIBER_BUFFER),
+        ("latest_buffer", ipc::LATEST_BUFFER),
+        ("max_borrowed_samples", ipc::MAX_BORROWED_SAMPLES),
+        ("max_loaned_samples", ipc::MAX_LOANED_SAMPLES),
+        ("max_nodes", ipc::MAX_NODES),
+        ("max_notifiers", ipc::MAX_NOTIFIERS),
+        ("max_listeners", ipc::MAX_LISTENERS),
+        ("event_id_max", ipc::EVENT_ID_MAX),
+        ("event_state_published", EVENT_STATE_PUBLISHED),
+        ("event_command_published", EVENT_COMMAND_PUBLISHED),
+        ("max_namespace_len", MAX_NAMESPACE_LEN),
+    ]
+    .iter()
+    .map(|(k, v)| format!("\"{k}\": {v}"))
+    .collect();
+    let flags: Vec<String> = [
+        (
+            "state_driver_gravity_compensation",
+            STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+        ),
+        ("command_gravity_included", COMMAND_FLAG_GRAVITY_INCLUDED),
+        ("telemetry_peer_lost", TELEMETRY_FLAG_PEER_LOST),
+    ]
+    .iter()
+    .map(|(k, v)| format!("\"{k}\": {v}"))
+    .collect();
+    println!(
+        "{{\n  \"schema_version\": {SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{}}},\n  \"flags\": {{{}}},\n  \"structs\": {{\n{}\n  }}\n}}",
+        ipc::FILE_PREFIX_ENV,
+        services.join(", "),
+        settings.join(", "),
+        flags.join(", "),
+        body.join(",\n")
+    );
+}

@@ -1,0 +1,58 @@
+"""Python side of the hcc controller's message contract.
+
+* :mod:`hcc.msgs`: ctypes mirrors of the wire types (same layout and
+  iceoryx2 type names as the Rust crate ``hcc-msgs``).
+* :mod:`hcc.ipc`: the services and their settings.
+* :class:`hcc.Driver`: the driver side of the contract (which command may be
+  applied; hold, fallback, stop) for drivers written in Python.
+* :class:`hcc.Client`: reads the controller's telemetry and the joint states.
+* :mod:`hcc.mujoco`: a plant driver on the MuJoCo physics engine
+  (``python -m hcc.mujoco``).
+"""
+
+from .client import Client
+from .driver import Action, Driver, DriverSettings, Offer, Rejection, StopReason
+from .msgs import (
+    COMMAND_FLAG_GRAVITY_INCLUDED,
+    MAX_JOINTS,
+    MAX_LEVELS,
+    MAX_TASK_DIM,
+    SCHEMA_VERSION,
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+    TELEMETRY_FLAG_PEER_LOST,
+    CommandMode,
+    DriverStatus,
+    Header,
+    JointState,
+    MsgError,
+    Telemetry,
+    TelemetryCounters,
+    TelemetryTimings,
+    TorqueCommand,
+)
+
+__all__ = [
+    "Action",
+    "Client",
+    "COMMAND_FLAG_GRAVITY_INCLUDED",
+    "CommandMode",
+    "Driver",
+    "DriverSettings",
+    "DriverStatus",
+    "Header",
+    "JointState",
+    "MAX_JOINTS",
+    "MAX_LEVELS",
+    "MAX_TASK_DIM",
+    "MsgError",
+    "Offer",
+    "Rejection",
+    "SCHEMA_VERSION",
+    "STATE_FLAG_DRIVER_GRAVITY_COMPENSATION",
+    "StopReason",
+    "TELEMETRY_FLAG_PEER_LOST",
+    "Telemetry",
+    "TelemetryCounters",
+    "TelemetryTimings",
+    "TorqueCommand",
+]

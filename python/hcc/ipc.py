@@ -1,0 +1,257 @@
+"""Opening the contract's iceoryx2 services exactly as the Rust peers do.
+
+The creator of an iceoryx2 service fixes its capacities and an opener's
+values are minimum requirements, so every peer of one robot opens the
+services with the same settings (mirror of ``hcc_msgs::ipc``):
+
+================  ===============  ==========  ===========================  ======
+service           payload          publishers  subscribers                  buffer
+================  ===============  ==========  ===========================  ======
+joint_state       JointState       1           MAX_STATE_SUBSCRIBERS        128
+torque_command    TorqueCommand    1           MAX_COMMAND_SUBSCRIBERS      128
+telemetry         Telemetry        1           MAX_TELEMETRY_SUBSCRIBERS    128
+state_ready       event            2 notifiers 4 listeners
+command_ready     event            2 notifiers 4 listeners
+================  ===============  ==========  ===========================  ======
+
+History 0, safe overflow (the newest sample wins), publishers discard data
+instead of blocking.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import iceoryx2 as iox2
+
+from .msgs import JointState, Telemetry, TorqueCommand
+
+#: Prefix of all hcc service names.
+SERVICE_PREFIX: str = "hcc"
+#: Maximum namespace length.
+MAX_NAMESPACE_LEN: int = 64
+#: Subscribers of joint_state: controller, recorder, two spare.
+MAX_STATE_SUBSCRIBERS: int = 4
+#: Subscribers of torque_command: driver, recorder, two spare.
+MAX_COMMAND_SUBSCRIBERS: int = 4
+#: Subscribers of telemetry.
+MAX_TELEMETRY_SUBSCRIBERS: int = 4
+#: Largest subscriber queue a service supports.
+MAX_SUBSCRIBER_BUFFER: int = 128
+#: Queue of a control-loop subscriber (drains every cycle, keeps the newest).
+LATEST_BUFFER: int = 2
+#: Samples a subscriber may hold at once.
+MAX_BORROWED_SAMPLES: int = 2
+#: Samples a publisher may have loaned at once.
+MAX_LOANED_SAMPLES: int = 2
+#: Nodes that may open one service.
+MAX_NODES: int = 16
+#: Notifiers per event service.
+MAX_NOTIFIERS: int = 2
+#: Listeners per event service.
+MAX_LISTENERS: int = 4
+#: Largest event id of the event services.
+EVENT_ID_MAX: int = 4
+#: Event id the driver notifies on state_ready after publishing a state.
+EVENT_STATE_PUBLISHED: int = 1
+#: Event id the controller notifies on command_ready after publishing a command.
+EVENT_COMMAND_PUBLISHED: int = 2
+#: Environment variable carrying the shared-memory file prefix to peers.
+FILE_PREFIX_ENV: str = "HCC_IPC_FILE_PREFIX"
+
+_NAMESPACE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]{0,63}$")
+
+
+class IpcError(RuntimeError):
+    """A service or port could not be opened (the text names it and why)."""
+
+
+def validate_namespace(namespace: str) -> None:
+    """Checks a namespace: 1-64 characters of ``[A-Za-z0-9_-]``, no leading '-'."""
+    if not _NAMESPACE.match(namespace):
+        raise ValueError(
+            f"namespace {namespace!r} is invalid: use 1 to {MAX_NAMESPACE_LEN} "
+            "characters of [A-Za-z0-9_-], not starting with '-'"
+        )
+
+
+@dataclass(frozen=True)
+class ServiceNames:
+    """The names of all services of one namespace."""
+
+    namespace: str
+
+    def __post_init__(self) -> None:
+        validate_namespace(self.namespace)
+
+    def _name(self, leaf: str) -> str:
+        return f"{SERVICE_PREFIX}/{self.namespace}/{leaf}"
+
+    @property
+    def joint_state(self) -> str:
+        """Publish-subscribe service of JointState (driver → controller)."""
+        return self._name("joint_state")
+
+    @property
+    def torque_command(self) -> str:
+        """Publish-subscribe service of TorqueCommand (controller → driver)."""
+        return self._name("torque_command")
+
+    @property
+    def telemetry(self) -> str:
+        """Publish-subscribe service of Telemetry (controller → loggers)."""
+        return self._name("telemetry")
+
+    @property
+    def state_ready(self) -> str:
+        """Event service the driver notifies with EVENT_STATE_PUBLISHED."""
+        return self._name("state_ready")
+
+    @property
+    def command_ready(self) -> str:
+        """Event service the controller notifies with EVENT_COMMAND_PUBLISHED."""
+        return self._name("command_ready")
+
+
+def create_node(name: str, file_prefix: str | None = None) -> Any:
+    """Creates an iceoryx2 node; ``file_prefix`` defaults to $HCC_IPC_FILE_PREFIX.
+
+    Signal handling is disabled (the process handles SIGINT/SIGTERM itself).
+    """
+    prefix = file_prefix if file_prefix is not None else os.environ.get(FILE_PREFIX_ENV) or None
+    config = iox2.config.default()
+    if prefix is not None:
+        if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", prefix):
+            raise IpcError(
+                f"ipc file prefix {prefix!r} is invalid: use 1 to 32 characters of [A-Za-z0-9_-]"
+            )
+        config.global_cfg.prefix = iox2.FileName.new(prefix)
+    try:
+        return (
+            iox2.NodeBuilder.new()
+            .name(iox2.NodeName.new(name))
+            .config(config)
+            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+            .create(iox2.ServiceType.Ipc)
+        )
+    except Exception as e:  # iceoryx2 raises its own exception types
+        raise IpcError(f"ipc node {name!r}: {e!r}") from e
+
+
+def _pubsub(node: Any, name: str, payload: type, max_subscribers: int) -> Any:
+    try:
+        return (
+            node.service_builder(iox2.ServiceName.new(name))
+            .publish_subscribe(payload)
+            .max_publishers(1)
+            .max_subscribers(max_subscribers)
+            .max_nodes(MAX_NODES)
+            .history_size(0)
+            .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED_SAMPLES)
+            .enable_safe_overflow(True)
+            .open_or_create()
+        )
+    except Exception as e:
+        raise IpcError(f"service {name!r}: {e!r}") from e
+
+
+def _event(node: Any, name: str) -> Any:
+    try:
+        return (
+            node.service_builder(iox2.ServiceName.new(name))
+            .event()
+            .max_notifiers(MAX_NOTIFIERS)
+            .max_listeners(MAX_LISTENERS)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(EVENT_ID_MAX)
+            .open_or_create()
+        )
+    except Exception as e:
+        raise IpcError(f"service {name!r}: {e!r}") from e
+
+
+class Services:
+    """The five services of one namespace, opened with the contract's settings."""
+
+    def __init__(self, node: Any, names: ServiceNames) -> None:
+        self.names = names
+        self.joint_state = _pubsub(node, names.joint_state, JointState, MAX_STATE_SUBSCRIBERS)
+        self.torque_command = _pubsub(
+            node, names.torque_command, TorqueCommand, MAX_COMMAND_SUBSCRIBERS
+        )
+        self.telemetry = _pubsub(node, names.telemetry, Telemetry, MAX_TELEMETRY_SUBSCRIBERS)
+        self.state_ready = _event(node, names.state_ready)
+        self.command_ready = _event(node, names.command_ready)
+
+    @staticmethod
+    def _port(what: str, service: str, build: Any) -> Any:
+        try:
+            return build()
+        except Exception as e:
+            raise IpcError(f"service {service!r}: cannot create a {what}: {e!r}") from e
+
+    def publisher(self, which: str) -> Any:
+        """The single publisher of ``which`` (joint_state, torque_command or telemetry)."""
+        factory = getattr(self, which)
+        return self._port(
+            "publisher (is another peer publishing in this namespace?)",
+            getattr(self.names, which),
+            lambda: factory.publisher_builder()
+            .max_loaned_samples(MAX_LOANED_SAMPLES)
+            .backpressure_strategy(iox2.BackpressureStrategy.DiscardData)
+            .create(),
+        )
+
+    def subscriber(self, which: str, buffer: int) -> Any:
+        """A subscriber of ``which`` with a queue of ``buffer`` samples (clamped)."""
+        factory = getattr(self, which)
+        size = max(1, min(buffer, MAX_SUBSCRIBER_BUFFER))
+        return self._port(
+            "subscriber",
+            getattr(self.names, which),
+            lambda: factory.subscriber_builder().buffer_size(size).create(),
+        )
+
+    def notifier(self, which: str, event_id: int) -> Any:
+        """A notifier of ``which`` (state_ready or command_ready)."""
+        factory = getattr(self, which)
+        return self._port(
+            "notifier",
+            getattr(self.names, which),
+            lambda: factory.notifier_builder()
+            .default_event_id(iox2.EventId.new(event_id))
+            .create(),
+        )
+
+    def listener(self, which: str) -> Any:
+        """A listener of ``which`` (state_ready or command_ready)."""
+        factory = getattr(self, which)
+        return self._port(
+            "listener", getattr(self.names, which), lambda: factory.listener_builder().create()
+        )
+
+
+def receive_latest(subscriber: Any, payload: type) -> Any | None:
+    """Drains ``subscriber`` and returns a copy of its newest sample (or None)."""
+    newest = None
+    while True:
+        sample = subscriber.receive()
+        if sample is None:
+            return newest
+        newest = payload.from_buffer_copy(sample.payload().contents)
+        sample.delete()
+
+
+def receive_all(subscriber: Any, payload: type) -> list[Any]:
+    """Drains ``subscriber``, returning copies of all queued samples, oldest first."""
+    out = []
+    while True:
+        sample = subscriber.receive()
+        if sample is None:
+            return out
+        out.append(payload.from_buffer_copy(sample.payload().contents))
+        sample.delete()

@@ -1,0 +1,30 @@
+#!/bin/sh
+# Runs the Python tests: creates the virtual environment (python/.venv, or
+# $HCC_PYTHON_VENV), installs the pinned packages of requirements.txt and
+# the hcc package itself, then runs pytest on python/tests. Arguments are
+# passed to pytest. The process tests need the Rust binaries built first
+# (cargo build --workspace --bins).
+set -eu
+here=$(cd "$(dirname "$0")" && pwd)
+venv=${HCC_PYTHON_VENV:-$here/.venv}
+python=${PYTHON:-python3}
+
+if [ ! -x "$venv/bin/python" ]; then
+    "$python" -m venv "$venv"
+fi
+pip="$venv/bin/python -m pip --disable-pip-version-check -q"
+$pip install -r "$here/requirements.txt"
+$pip install --no-deps --no-build-isolation --force-reinstall "$here"
+# The installed package is tested, not the source tree.
+rm -rf "$here/build" "$here"/*.egg-info
+
+cd "$here/tests"
+set +e
+"$venv/bin/python" -m pytest -p no:cacheprovider "$@"
+rc=$?
+set -e
+if [ "$rc" -eq 5 ]; then
+    echo "python/test.sh: pytest collected no tests" >&2
+    exit 1
+fi
+exit "$rc"

@@ -1,0 +1,117 @@
+"""The MuJoCo driver's command handling without IPC: hcc-sim's rules, period by period."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+
+from hcc import COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, DriverStatus, JointState, TorqueCommand
+from hcc.mujoco import Applied, MujocoDriver, Plant, SceneFile
+from hcc.scenario import Scenario, ScenarioError
+
+from conftest import ROOT
+
+SIM1 = ROOT / "config" / "paper-sim1.toml"
+
+
+def command(driver: MujocoDriver, tau: list[float], mode: CommandMode = CommandMode.NORMAL,
+            gravity: bool = True) -> TorqueCommand:
+    c = TorqueCommand.zeroed()
+    c.header.n_joints = driver.n
+    c.header.seq = driver.k
+    c.state_seq = driver.k
+    c.state_stamp_ns = 1
+    c.mode = int(mode)
+    c.flags = COMMAND_FLAG_GRAVITY_INCLUDED if gravity else 0
+    for j, t in enumerate(tau):
+        c.tau[j] = t
+    return c
+
+
+def test_waiting_apply_hold_fallback_stop() -> None:
+    s = Scenario.load(SIM1)
+    s.hold_cycles = 2
+    d = MujocoDriver(s)
+    g0 = d.plant.gravity()
+    assert d.advance(None) == Applied.WAITING_FOR_CONTROLLER
+    assert np.allclose(d.tau, g0)  # the arm is held, misses are not counted yet
+    assert d.counters.missed_commands == 0 and d.status == DriverStatus.FALLBACK_ACTIVE
+    tau = [1.0, 2.0, 3.0, 4.0]
+    assert d.advance(command(d, tau)) == Applied.COMMAND
+    assert d.status == DriverStatus.OK and list(d.tau) == tau
+    stale = command(d, tau)
+    stale.state_seq = d.k - 1
+    assert d.advance(stale) == Applied.HELD
+    assert d.advance(None) == Applied.HELD and list(d.tau) == tau
+    expected = d.plant.gravity() - 2.0 * d.plant.qd  # g(q_k) − D q̇_k, default D = 2
+    assert d.advance(None) == Applied.FALLBACK
+    assert np.allclose(d.tau, expected)
+    assert d.counters.missed_commands == 3 and d.in_fallback()
+    msg = JointState.zeroed()
+    d.write_state(msg, 5)
+    msg.validate(4)
+    assert msg.status == DriverStatus.FALLBACK_ACTIVE and msg.missed_commands == 3
+    assert msg.header.seq == d.k == 5
+    # Invalid or gravity-conflicting commands are misses, counted as rejected.
+    bad = command(d, [float("nan"), 0.0, 0.0, 0.0])
+    assert d.advance(bad) == Applied.FALLBACK
+    assert d.advance(command(d, tau, gravity=False)) == Applied.FALLBACK
+    assert d.counters.rejected_commands == 2
+    assert d.advance(command(d, tau, CommandMode.SINGULAR)) == Applied.COMMAND
+    assert d.advance(command(d, tau, CommandMode.STOP)) == Applied.STOPPED
+    assert d.status == DriverStatus.STOPPED
+    assert d.advance(command(d, tau)) == Applied.STOPPED  # no resume within the session
+
+
+def test_driver_adds_gravity_when_the_controller_does_not(tmp_path: pathlib.Path) -> None:
+    s = Scenario.load(SIM1)
+    s.gravity_compensation = False
+    d = MujocoDriver(s)
+    msg = JointState.zeroed()
+    d.write_state(msg, 1)
+    assert msg.driver_compensates_gravity()
+    g = d.plant.gravity()
+    assert d.advance(command(d, [1.0, 0.0, 0.0, 0.0], gravity=False)) == Applied.COMMAND
+    assert np.allclose(d.tau, g + np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_bad_input_gets_clear_errors(tmp_path: pathlib.Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SIM1.read_text().replace("integrator_dt_s = 1e-4", "integrator_dt_s = 3e-4"))
+    with pytest.raises(ScenarioError, match="must divide the control period"):
+        Scenario.load(bad)
+    text = SIM1.read_text().replace('urdf = "', f'urdf = "{(ROOT / "config").as_posix()}/', 1)
+    bad.write_text(text.replace('tip_link = "tcp"', 'tip_link = "nowhere"'))
+    with pytest.raises(ScenarioError, match="tip link 'nowhere'"):
+        Plant(Scenario.load(bad))
+    bad.write_text("[mujoco]\nscene = \"table\"\n")
+    with pytest.raises(ScenarioError, match="mujoco.scene"):
+        SceneFile.load(bad)
+    bad.write_text("[mujoco]\nscene = \"wall\"\n[mujoco.wall]\npoint = [0, 0]\nnormal = [1, 0, 0]\n")
+    with pytest.raises(ScenarioError, match="point/normal"):
+        SceneFile.load(bad)
+    with pytest.raises(ScenarioError, match="cannot read"):
+        Scenario.load(tmp_path / "missing.toml")
+    d = MujocoDriver(Scenario.load(SIM1))
+    with pytest.raises(ValueError, match="--duration"):
+        d.set_duration(0.0)
+
+
+def test_command_line_errors_exit_2(tmp_path: pathlib.Path) -> None:
+    import subprocess
+    import sys
+
+    for args, text in [
+        ([str(tmp_path / "missing.toml")], "cannot read"),
+        ([str(SIM1), "--namespace", "a/b"], "namespace 'a/b' is invalid"),
+        ([str(SIM1), "--duration", "-1"], "--duration"),
+        ([str(SIM1), "--sched-priority", "0"], "--sched-priority 0"),
+    ]:
+        done = subprocess.run(
+            [sys.executable, "-m", "hcc.mujoco", *args], capture_output=True, text=True, timeout=60
+        )
+        assert done.returncode == 2, (args, done.stderr)
+        assert "hcc.mujoco: error:" in done.stderr and text in done.stderr, done.stderr
+        assert "Traceback" not in done.stderr
