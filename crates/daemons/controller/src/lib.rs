@@ -6,9 +6,8 @@
 //!
 //! * [`cycle`]: one control cycle, allocation-free — wait, validate, compute
 //!   τ = Σ τ_i + τ_μ + g (paper Eq. (19)), saturate, publish command and telemetry.
-//! * [`rt`]: real-time thread set-up (core pinning, SCHED_FIFO, mlockall,
-//!   pre-faulting, timer slack), absolute sleeps and the stop signal, shared
-//!   with the plant-simulator daemon.
+//! * [`rt`]: the real-time runtime `hcc-rt` (thread set-up, absolute sleeps,
+//!   the precise event wait, the stop signal), re-exported under its old path.
 //! * [`daemon`]: the `hcc-controller` command line, start-up and shutdown.
 //!
 //! The binary installs `hcc_rtalloc::RtAllocator` as its global allocator:
@@ -17,6 +16,6 @@
 
 pub mod cycle;
 pub mod daemon;
-pub mod rt;
+pub use hcc_rt as rt;
 
 pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports, Status};

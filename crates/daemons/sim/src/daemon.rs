@@ -31,11 +31,11 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::{Scenario, SimMode};
-use hcc_controller::rt::{self, RtSettings};
 use hcc_msgs::ipc::{
     self, CommandSubscriber, EventListener, EventNotifier, LATEST_BUFFER, Services, StatePublisher,
 };
 use hcc_msgs::{JointState, ServiceNames, TorqueCommand, monotonic_now_ns};
+use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
 use crate::driver::{Applied, SimDriver};
@@ -95,31 +95,13 @@ pub struct Args {
     /// (clock_nanosleep) and block on `command_ready` for the answer;
     /// `hybrid`: sleep until shortly before the tick and spin to it, poll for
     /// the answer for a while before blocking.
-    #[arg(long, value_enum, default_value_t = SimWait::Event)]
-    pub wait: SimWait,
+    #[arg(long, value_enum, default_value_t = WaitStrategy::Event)]
+    pub wait: WaitStrategy,
     /// When stopping, write the loop's timing report (tick lateness and
     /// state → command latency histograms, counters, real-time set-up
     /// obtained) as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-}
-
-/// How the real-time loop waits (`--wait`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum SimWait {
-    /// Sleep to each tick; block on the command event.
-    Event,
-    /// Sleep, then spin to each tick; poll for the command, then block.
-    Hybrid,
-}
-
-impl SimWait {
-    fn name(self) -> &'static str {
-        match self {
-            SimWait::Event => "event",
-            SimWait::Hybrid => "hybrid",
-        }
-    }
 }
 
 /// Parses `args` (program name first) and runs the daemon; 0 after a clean
@@ -199,7 +181,7 @@ pub struct SimLoop<'a> {
     newest: Option<TorqueCommand>,
     state: JointState,
     shared: &'a Shared,
-    wait: SimWait,
+    wait: WaitStrategy,
     /// Real time: lateness of each tick, ns.
     lateness: LatencyHistogram,
     /// Publication of state k → its answer received here, ns.
@@ -216,7 +198,12 @@ pub struct SimLoop<'a> {
 
 impl<'a> SimLoop<'a> {
     /// The loop around `driver` on `ports`, reporting to `shared`.
-    pub fn new(driver: SimDriver, ports: &'a Ports, shared: &'a Shared, wait: SimWait) -> Self {
+    pub fn new(
+        driver: SimDriver,
+        ports: &'a Ports,
+        shared: &'a Shared,
+        wait: WaitStrategy,
+    ) -> Self {
         SimLoop {
             driver,
             ports,
@@ -265,7 +252,7 @@ impl<'a> SimLoop<'a> {
 
     /// Real time: waits for the answer to state k until `deadline_ns`.
     pub fn wait_for_answer(&mut self, deadline_ns: u64) {
-        if self.wait == SimWait::Hybrid {
+        if self.wait == WaitStrategy::Hybrid {
             let poll_until = deadline_ns.min(self.published_ns + HYBRID_POLL_NS);
             while monotonic_now_ns() < poll_until {
                 if self.take_answer() || rt::stop_requested() {
@@ -364,10 +351,7 @@ impl<'a> SimLoop<'a> {
         let mut next = monotonic_now_ns() + period_ns;
         loop {
             self.wait_for_answer((self.published_ns + window_ns).min(next));
-            match self.wait {
-                SimWait::Event => rt::sleep_until_ns(next),
-                SimWait::Hybrid => rt::sleep_until_hybrid_ns(next, rt::HYBRID_LEAD_NS),
-            }
+            self.wait.sleep_until(next);
             let now = monotonic_now_ns();
             self.lateness.record(now.saturating_sub(next));
             if rt::stop_requested() {
