@@ -31,9 +31,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::{Scenario, SimMode};
-use hcc_msgs::ipc::{
-    self, CommandSubscriber, EventListener, EventNotifier, LATEST_BUFFER, Services, StatePublisher,
-};
+use hcc_msgs::ipc::{self, Services};
 use hcc_msgs::{JointState, ServiceNames, TorqueCommand, monotonic_now_ns};
 use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
@@ -111,6 +109,7 @@ where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
+    rt::init_logging();
     let args = match Args::try_parse_from(args) {
         Ok(a) => a,
         Err(e) => {
@@ -125,7 +124,7 @@ where
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("hcc-sim: error: {e:#}");
+            tracing::error!("hcc-sim: error: {e:#}");
             ExitCode::from(2)
         }
     }
@@ -142,25 +141,8 @@ pub struct Shared {
     rejected: AtomicU64,
 }
 
-/// The simulator's ports (the driver side of the contract).
-pub struct Ports {
-    states: StatePublisher,
-    state_ready: EventNotifier,
-    commands: CommandSubscriber,
-    command_ready: EventListener,
-}
-
-impl Ports {
-    /// Creates the driver's ports on the opened services.
-    pub fn open(services: &Services) -> Result<Ports> {
-        Ok(Ports {
-            states: services.joint_state_publisher()?,
-            state_ready: services.state_ready_notifier()?,
-            commands: services.torque_command_subscriber(LATEST_BUFFER)?,
-            command_ready: services.command_ready_listener()?,
-        })
-    }
-}
+/// The simulator's ports: the driver side of the contract.
+pub use hcc_msgs::ipc::DriverPorts as Ports;
 
 /// Counts of the periods by how their torque was chosen.
 #[derive(Debug, Default, Clone, Copy)]
@@ -413,6 +395,8 @@ impl<'a> SimLoop<'a> {
     }
 }
 
+/// The logging thread: reports the loop's transitions and counters, read
+/// from `shared` every 100 ms, until `done`.
 fn log_loop(shared: &Shared, done: &AtomicBool) {
     let (mut missed, mut fallback, mut overruns, mut rejected) = (0, false, 0, 0);
     let mut connected = false;
@@ -420,35 +404,62 @@ fn log_loop(shared: &Shared, done: &AtomicBool) {
         std::thread::sleep(Duration::from_millis(100));
         if !connected && shared.has_command.load(Ordering::Relaxed) {
             connected = true;
-            eprintln!("hcc-sim: receiving torque commands");
+            tracing::info!("hcc-sim: receiving torque commands");
         }
         let f = shared.in_fallback.load(Ordering::Relaxed);
         if f != fallback {
             fallback = f;
             if f {
-                eprintln!(
+                tracing::warn!(
                     "hcc-sim: no applicable torque command: fallback active (gravity held, joint damping)"
                 );
             } else {
-                eprintln!("hcc-sim: torque commands are back; fallback ended");
+                tracing::info!("hcc-sim: torque commands are back; fallback ended");
             }
         }
         let m = shared.missed.load(Ordering::Relaxed);
         if m != missed {
-            eprintln!("hcc-sim: missed commands: {m} (+{})", m - missed);
+            tracing::warn!("hcc-sim: missed commands: {m} (+{})", m - missed);
             missed = m;
         }
         let o = shared.overruns.load(Ordering::Relaxed);
         if o != overruns {
-            eprintln!("hcc-sim: clock overruns (re-anchored): {o}");
+            tracing::warn!("hcc-sim: clock overruns (re-anchored): {o}");
             overruns = o;
         }
         let r = shared.rejected.load(Ordering::Relaxed);
         if r != rejected {
-            eprintln!("hcc-sim: rejected commands (invalid or gravity conflict): {r}");
+            tracing::warn!("hcc-sim: rejected commands (invalid or gravity conflict): {r}");
             rejected = r;
         }
     }
+}
+
+/// The pacing: `--lockstep` / `--realtime` over `[sim_daemon].mode`.
+fn mode(args: &Args, scenario: &Scenario) -> SimMode {
+    if args.lockstep {
+        SimMode::Lockstep
+    } else if args.realtime {
+        SimMode::Realtime
+    } else {
+        scenario.sim_daemon.mode
+    }
+}
+
+/// Refuses out-of-range options.
+fn check_args(args: &Args) -> Result<()> {
+    if !(args.lockstep_timeout_ms.is_finite() && args.lockstep_timeout_ms > 0.0) {
+        anyhow::bail!(
+            "--lockstep-timeout-ms {} must be positive",
+            args.lockstep_timeout_ms
+        );
+    }
+    if let Some(p) = args.sched_priority
+        && !(1..=99).contains(&p)
+    {
+        anyhow::bail!("--sched-priority {p} must be in 1..=99");
+    }
+    Ok(())
 }
 
 /// Runs the daemon.
@@ -461,24 +472,8 @@ pub fn run(args: Args) -> Result<()> {
         .unwrap_or_else(|| scenario.ipc.namespace.clone());
     let names = ServiceNames::new(&namespace).context("--namespace")?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
-    let mode = if args.lockstep {
-        SimMode::Lockstep
-    } else if args.realtime {
-        SimMode::Realtime
-    } else {
-        scenario.sim_daemon.mode
-    };
-    if !(args.lockstep_timeout_ms.is_finite() && args.lockstep_timeout_ms > 0.0) {
-        anyhow::bail!(
-            "--lockstep-timeout-ms {} must be positive",
-            args.lockstep_timeout_ms
-        );
-    }
-    if let Some(p) = args.sched_priority
-        && !(1..=99).contains(&p)
-    {
-        anyhow::bail!("--sched-priority {p} must be in 1..=99");
-    }
+    let mode = mode(&args, &scenario);
+    check_args(&args)?;
     let mut driver = SimDriver::new(&scenario)
         .map_err(|e| anyhow::anyhow!("{}: {e}", scenario.path.display()))?;
     if let Some(d) = args.duration {
@@ -488,7 +483,7 @@ pub fn run(args: Args) -> Result<()> {
     set_log_level_from_env_or(LogLevel::Warn);
 
     if let Some(line) = rt::cleanup_stale_resources(file_prefix.as_deref()) {
-        eprintln!("hcc-sim: {line}");
+        tracing::info!("hcc-sim: {line}");
     }
     let node = ipc::create_node(
         "hcc-sim",
@@ -506,14 +501,14 @@ pub fn run(args: Args) -> Result<()> {
     };
     let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
-        eprintln!("hcc-sim: warning: {w}");
+        tracing::warn!("hcc-sim: {w}");
     }
-    eprintln!(
+    tracing::info!(
         "hcc-sim: {} ({} joints), {:?} mode, wait {}, namespace {:?}, {}; publishing on {:?}",
         scenario.name,
         driver.model().nq(),
         mode,
-        args.wait.name(),
+        args.wait,
         names.namespace().as_str(),
         match args.duration {
             Some(d) => format!("{d} s of simulated time"),
@@ -547,73 +542,95 @@ pub fn run(args: Args) -> Result<()> {
     lp.publish();
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
-    let c = lp.driver.counters();
-    eprintln!(
-        "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed, {} fallback cycles, {} rejected, {} overruns",
-        lp.driver.t(),
-        lp.driver.k(),
-        c.applied_commands,
-        c.missed_commands,
-        c.fallback_cycles,
-        c.rejected_commands,
-        lp.overruns
-    );
-    if mode == SimMode::Realtime {
-        eprintln!(
-            "hcc-sim: tick lateness: {}",
-            lp.lateness.summary().line_us()
-        );
-        eprintln!(
-            "hcc-sim: state published → command received: {} ({} late)",
-            lp.state_to_command.summary().line_us(),
-            lp.counts.late
-        );
-    }
-    eprintln!(
-        "hcc-sim: state → command (controller stamp − state stamp): {}",
-        lp.answer_stamp.summary().line_us()
-    );
+    lp.log_summary(mode);
     if let Some(path) = &args.stats {
-        let period_ns = lp.driver.period_s() * 1e9;
-        let mut stats = hcc_timing::DaemonTimings {
-            daemon: "hcc-sim".into(),
-            wait: args.wait.name().into(),
-            rt: report.obtained(&rt_settings),
-            run_s: started.elapsed().as_secs_f64(),
-            ..Default::default()
-        };
-        for (name, h) in [
-            ("tick_lateness", &lp.lateness),
-            ("state_to_command", &lp.state_to_command),
-            ("answer_stamp_latency", &lp.answer_stamp),
-        ] {
-            stats.figures.insert(name.into(), h.into());
-        }
-        for (name, value) in [
-            ("periods", lp.counts.periods),
-            ("waiting_for_controller", lp.counts.waiting),
-            ("stopped_periods", lp.counts.stopped),
-            ("applied_commands", c.applied_commands),
-            ("missed_commands", c.missed_commands),
-            ("fallback_cycles", c.fallback_cycles),
-            ("rejected_commands", c.rejected_commands),
-            ("late_commands", lp.counts.late),
-            (
-                "ticks_late",
-                lp.lateness
-                    .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
-            ),
-            ("overruns", lp.overruns),
-        ] {
-            stats.counters.insert(name.into(), value);
-        }
-        stats
-            .write_json(path)
-            .context("--stats: writing the timing report")?;
+        lp.timings(
+            args.wait,
+            report.obtained(&rt_settings),
+            started.elapsed().as_secs_f64(),
+        )
+        .write_json(path)
+        .context("--stats: writing the timing report")?;
     }
     drop(lp);
     drop(ports);
     drop(services);
     drop(node);
     result
+}
+
+impl SimLoop<'_> {
+    /// Logs the end of the run: counters and the latency summaries.
+    fn log_summary(&self, mode: SimMode) {
+        let c = self.driver.counters();
+        tracing::info!(
+            "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed, {} fallback cycles, {} rejected, {} overruns",
+            self.driver.t(),
+            self.driver.k(),
+            c.applied_commands,
+            c.missed_commands,
+            c.fallback_cycles,
+            c.rejected_commands,
+            self.overruns
+        );
+        if mode == SimMode::Realtime {
+            tracing::info!(
+                "hcc-sim: tick lateness: {}",
+                self.lateness.summary().line_us()
+            );
+            tracing::info!(
+                "hcc-sim: state published → command received: {} ({} late)",
+                self.state_to_command.summary().line_us(),
+                self.counts.late
+            );
+        }
+        tracing::info!(
+            "hcc-sim: state → command (controller stamp − state stamp): {}",
+            self.answer_stamp.summary().line_us()
+        );
+    }
+
+    /// The timing report of the run (`--stats`).
+    fn timings(
+        &self,
+        wait: WaitStrategy,
+        rt: hcc_timing::RtObtained,
+        run_s: f64,
+    ) -> hcc_timing::DaemonTimings {
+        let c = self.driver.counters();
+        let period_ns = self.driver.period_s() * 1e9;
+        let mut stats = hcc_timing::DaemonTimings {
+            daemon: "hcc-sim".into(),
+            wait: wait.name().into(),
+            rt,
+            run_s,
+            ..Default::default()
+        };
+        for (name, h) in [
+            ("tick_lateness", &self.lateness),
+            ("state_to_command", &self.state_to_command),
+            ("answer_stamp_latency", &self.answer_stamp),
+        ] {
+            stats.figures.insert(name.into(), h.into());
+        }
+        for (name, value) in [
+            ("periods", self.counts.periods),
+            ("waiting_for_controller", self.counts.waiting),
+            ("stopped_periods", self.counts.stopped),
+            ("applied_commands", c.applied_commands),
+            ("missed_commands", c.missed_commands),
+            ("fallback_cycles", c.fallback_cycles),
+            ("rejected_commands", c.rejected_commands),
+            ("late_commands", self.counts.late),
+            (
+                "ticks_late",
+                self.lateness
+                    .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
+            ),
+            ("overruns", self.overruns),
+        ] {
+            stats.counters.insert(name.into(), value);
+        }
+        stats
+    }
 }
