@@ -20,6 +20,12 @@
 //!
 //! With `--duration S` the state at t = S is published with status `Stopped`
 //! and the process exits 0; SIGINT/SIGTERM do the same at the current state.
+//!
+//! The waits, sleeps, thread set-up and stop signal are those of `hcc-rt`
+//! (`--wait event|hybrid` is [`WaitStrategy`]). Logging goes through
+//! `tracing` to stderr (`RUST_LOG`, default `info`): the real-time thread only
+//! stores counters into atomics ([`Shared`]); a logging thread reports their
+//! changes every 100 ms, and the summary is logged after the loop.
 
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -466,13 +472,11 @@ fn check_args(args: &Args) -> Result<()> {
 pub fn run(args: Args) -> Result<()> {
     let scenario = Scenario::load(&args.config)?;
     scenario.check_cpu_core("sim_daemon", &rt::available_cores())?;
-    let namespace = args
-        .namespace
-        .clone()
-        .unwrap_or_else(|| scenario.ipc.namespace.clone());
-    let names = ServiceNames::new(&namespace).context("--namespace")?;
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    let namespace = args.namespace.as_deref();
+    let names =
+        ServiceNames::new(namespace.unwrap_or(&scenario.ipc.namespace)).context("--namespace")?;
     let mode = mode(&args, &scenario);
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     check_args(&args)?;
     let mut driver = SimDriver::new(&scenario)
         .map_err(|e| anyhow::anyhow!("{}: {e}", scenario.path.display()))?;
