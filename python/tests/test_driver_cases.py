@@ -1,7 +1,7 @@
 """hcc.Driver against the shared cases of the driver contract.
 
 The same file (tests/data/driver_cases.json) runs against the Rust
-DriverLogic (crates/drivers/example/tests/shared_cases.rs), so both
+hcc_msgs::driver::DriverLogic (crates/msgs/tests/driver_cases.rs), so both
 implementations agree on every branch.
 """
 

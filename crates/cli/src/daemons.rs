@@ -22,16 +22,16 @@ pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// Time a child gets to exit after SIGTERM before it is killed.
 pub const TERMINATE_GRACE: Duration = Duration::from_secs(5);
 
-/// SIGINT and SIGTERM set the stop flag of `hcc_controller::rt` (the one the
+/// SIGINT and SIGTERM set the stop flag of `hcc_rt` (the one the
 /// daemons use); the launcher's loops then stop the children.
 pub fn install_signal_handlers() -> anyhow::Result<()> {
-    hcc_controller::rt::install_stop_handler()
+    hcc_rt::install_stop_handler()
         .map_err(|e| anyhow!("cannot install the SIGINT/SIGTERM handlers: {e}"))
 }
 
 /// Whether SIGINT or SIGTERM was received.
 pub fn interrupted() -> bool {
-    hcc_controller::rt::stop_requested()
+    hcc_rt::stop_requested()
 }
 
 type Tail = Arc<Mutex<VecDeque<String>>>;

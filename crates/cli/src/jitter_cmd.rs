@@ -32,10 +32,10 @@
 
 use anyhow::{Context, bail};
 use hcc_config::Scenario;
-use hcc_controller::rt::{self, RtSettings};
 use hcc_msgs::ipc;
 use hcc_msgs::{Namespace, ServiceNames, monotonic_now_ns};
 use hcc_report::{PercentileCurve, plot_percentiles};
+use hcc_rt::{self as rt, RtSettings};
 use hcc_timing::machine::{CpuDmaLatency, CpuTimes, MachineInfo};
 use hcc_timing::{DaemonTimings, Figure, LatencyHistogram, LatencySummary, RtObtained};
 use iceoryx2::prelude::SignalHandlingMode;
@@ -60,22 +60,7 @@ const LATE_FRACTION: f64 = 0.8;
 const DEFAULT_FLOOR_S: f64 = 10.0;
 
 /// Wait strategy of both daemons and of the floor threads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Wait {
-    /// Sleep to the deadline / block on the IPC event.
-    Event,
-    /// Sleep until shortly before the deadline, then poll.
-    Hybrid,
-}
-
-impl Wait {
-    fn name(self) -> &'static str {
-        match self {
-            Wait::Event => "event",
-            Wait::Hybrid => "hybrid",
-        }
-    }
-}
+type Wait = hcc_rt::WaitStrategy;
 
 #[derive(clap::Args, Debug)]
 pub struct JitterArgs {
@@ -161,10 +146,7 @@ fn measure_floor(
                     rt::sleep_until_ns(start_ns);
                     for k in 1..=cycles {
                         let deadline = start_ns + k * period_ns;
-                        match wait {
-                            Wait::Event => rt::sleep_until_ns(deadline),
-                            Wait::Hybrid => rt::sleep_until_hybrid_ns(deadline, rt::HYBRID_LEAD_NS),
-                        }
+                        wait.sleep_until(deadline);
                         let late = monotonic_now_ns().saturating_sub(deadline);
                         lateness.record(late);
                         late_cycles += u64::from(late > late_ns);

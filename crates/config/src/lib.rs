@@ -37,6 +37,9 @@ pub mod error;
 pub mod schema;
 
 pub use error::ConfigError;
+/// How a daemon loop waits (`[controller_daemon] wait_strategy`): the one
+/// type of the runtime, re-exported.
+pub use hcc_rt::WaitStrategy;
 pub use schema::*;
 
 use error::{from_toml, invalid};

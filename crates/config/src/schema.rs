@@ -2,6 +2,7 @@
 //! unknown fields. Values are checked and resolved against the robot model in
 //! [`crate::Scenario::load`].
 
+use hcc_rt::WaitStrategy;
 use serde::Deserialize;
 
 /// Root of a scenario file.
@@ -267,17 +268,6 @@ impl Default for IpcSection {
     }
 }
 
-/// How the controller daemon waits for a new joint state.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum WaitStrategy {
-    /// Block on an IPC event.
-    Event,
-    /// Sleep until shortly before the expected sample, then spin.
-    #[default]
-    Hybrid,
-}
-
 /// `[controller_daemon]`
 #[derive(Clone, Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -290,6 +280,8 @@ pub struct ControllerDaemonSection {
     /// Lock memory (mlockall).
     #[serde(default)]
     pub mlock: bool,
+    /// How the control loop waits for a new joint state (`event` or
+    /// `hybrid`, the default).
     #[serde(default)]
     pub wait_strategy: WaitStrategy,
     /// Torque limits, Nm (scalar or per joint; default: the URDF effort limits).

@@ -88,6 +88,14 @@
 //! Exactly one side adds g; a driver rejects commands that disagree
 //! ([`check_gravity_agreement`]).
 //!
+//! ## The driver side
+//!
+//! [`driver::DriverLogic`] implements the driver's half of this contract once
+//! (sequence numbers, freshness, gravity agreement, hold → fallback → stop),
+//! transport-free and allocation-free; the simulated robot of `hcc-sim` and
+//! the example real-robot driver both run it, with their policies as
+//! [`driver::DriverSettings`].
+//!
 //! ## Versions
 //!
 //! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
@@ -106,6 +114,7 @@
 //! are meant for the control loop. Entries beyond `n_joints` are kept zero by
 //! writers and ignored by readers.
 
+pub mod driver;
 mod error;
 pub mod ipc;
 mod sequence;
@@ -155,14 +164,12 @@ pub const fn check_schema(msg: &'static str, found: u32) -> Result<(), MsgError>
     }
 }
 
-/// Checks that exactly one side adds gravity: the command includes g(q) iff
-/// the driver does not compensate gravity itself.
-pub fn check_gravity_agreement(
-    state: &JointState,
-    command: &TorqueCommand,
-) -> Result<(), MsgError> {
-    let command_includes = command.gravity_included();
-    let driver_compensates = state.driver_compensates_gravity();
+/// Checks that exactly one side adds gravity: the command includes g(q)
+/// (`command_includes`, [`COMMAND_FLAG_GRAVITY_INCLUDED`]) iff the driver does
+/// not compensate gravity itself (`driver_compensates`,
+/// [`STATE_FLAG_DRIVER_GRAVITY_COMPENSATION`]). Callable by either side from
+/// its own settings, without a message at hand.
+pub fn gravity_agreement(driver_compensates: bool, command_includes: bool) -> Result<(), MsgError> {
     if command_includes != driver_compensates {
         Ok(())
     } else {
@@ -171,6 +178,17 @@ pub fn check_gravity_agreement(
             driver_compensates,
         })
     }
+}
+
+/// [`gravity_agreement`] of the flags of a received state and command.
+pub fn check_gravity_agreement(
+    state: &JointState,
+    command: &TorqueCommand,
+) -> Result<(), MsgError> {
+    gravity_agreement(
+        state.driver_compensates_gravity(),
+        command.gravity_included(),
+    )
 }
 
 /// Current `CLOCK_MONOTONIC` time in ns (0 if the clock cannot be read,

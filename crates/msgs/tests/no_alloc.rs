@@ -55,3 +55,73 @@ fn hot_path_helpers_do_not_allocate() {
     assert_eq!(errors, 0);
     assert_eq!(after - before, 0, "allocations in the hot path");
 }
+
+/// The driver side of the contract (`hcc_msgs::driver`), through every
+/// branch — apply, hold, fallback, rejections, stop — allocates nothing.
+#[test]
+fn driver_logic_does_not_allocate() {
+    use hcc_msgs::driver::{Action, DriverLogic, DriverSettings, Gravity, Offer, StopMode};
+    use hcc_msgs::{CommandMode, DriverStatus, MAX_JOINTS};
+    const N: usize = 7;
+    let settings = |gravity, stop_mode, wait| DriverSettings {
+        n: N,
+        late_tolerance: 1,
+        check_sequence: true,
+        hold_cycles: 3,
+        fallback_timeout_cycles: Some(50),
+        wait_for_first_command: wait,
+        fallback_damping: [2.0; MAX_JOINTS],
+        gravity,
+        stop_mode,
+    };
+    let mut errors = 0usize;
+    let (q, g) = ([0.3; N], [1.5; N]);
+    let mut tau = [0.0; N];
+    let mut state = JointState::zeroed();
+    let mut command = TorqueCommand::zeroed();
+    let before = hcc_rtalloc::thread_stats().allocs;
+    for (gravity, stop_mode, wait) in [
+        (Gravity::ControllerSends, StopMode::SafeStop, false),
+        (Gravity::RobotAdds, StopMode::SafeStop, false),
+        (Gravity::DriverAdds, StopMode::Brake, true),
+    ] {
+        let mut logic = DriverLogic::new(settings(gravity, stop_mode, wait));
+        for k in 0..200u64 {
+            let seq = logic
+                .fill_state(&mut state, &q, &q, &q, monotonic_now_ns())
+                .unwrap_or_else(|_| {
+                    errors += 1;
+                    0
+                });
+            command.set_n_joints(N).unwrap_or_else(|_| errors += 1);
+            command.header.seq = k;
+            command.answer(&state);
+            command.mode = CommandMode::Normal.code();
+            command.flags = if state.driver_compensates_gravity() {
+                0
+            } else {
+                hcc_msgs::COMMAND_FLAG_GRAVITY_INCLUDED
+            };
+            command.set_tau(&q).unwrap_or_else(|_| errors += 1);
+            // Every third period the command is missing, every seventh invalid.
+            if k % 7 == 0 {
+                command.tau[0] = f64::NAN;
+            }
+            let offered = (k % 3 != 0).then(|| logic.offer(&command, seq));
+            let applicable = matches!(offered, Some(Offer::Applicable { .. }));
+            let c = applicable.then_some(&command);
+            let _ = logic.decide(c, &q, |out| out.copy_from_slice(&g), &mut tau);
+            let _ = logic.offer(&command, seq);
+        }
+        if logic.request_stop() == (Action::Stop { first: true }) {
+            logic.stop_completed();
+        }
+        if logic.status() != DriverStatus::Stopped {
+            errors += 1;
+        }
+        let _ = logic.decide(None, &q, |out| out.copy_from_slice(&g), &mut tau);
+    }
+    let after = hcc_rtalloc::thread_stats().allocs;
+    assert_eq!(errors, 0);
+    assert_eq!(after - before, 0, "allocations in the driver logic");
+}

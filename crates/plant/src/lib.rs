@@ -9,7 +9,7 @@ pub mod plant;
 pub mod zoh;
 
 pub use plant::{ExternalWrench, Plant, PlantEnergy};
-pub use zoh::{LoopTiming, run_zoh};
+pub use zoh::{LoopTiming, PeriodStep, run_zoh};
 
 /// Errors of the simulator, naming the offending quantity.
 #[derive(Debug, thiserror::Error)]

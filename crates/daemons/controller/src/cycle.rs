@@ -29,8 +29,8 @@ use hcc_msgs::ipc::{
 use hcc_msgs::{CommandMode, JointState, TelemetryCounters, TelemetryTimings, monotonic_now_ns};
 
 use crate::decide::{Answer, Decider};
-use crate::rt;
 use crate::status::Status;
+use hcc_rt as rt;
 use hcc_timing::LatencyHistogram;
 
 /// Longest single blocking wait, so that a stop request is seen promptly.

@@ -3,7 +3,7 @@
 //!
 //! Start-up builds the robot model, the controller and every buffer from the
 //! scenario TOML, opens the iceoryx2 services ([`hcc_msgs::ipc`]), prepares
-//! the thread ([`crate::rt`]) and waits for the first joint state. The loop
+//! the thread ([`hcc_rt`]) and waits for the first joint state. The loop
 //! then runs [`Cycle::run_once`] inside an [`hcc_rtalloc::RtSection`] until
 //! SIGINT/SIGTERM. A second, non-real-time thread logs the loop's counters
 //! every 100 ms when they change.
@@ -22,7 +22,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use clap::{Parser, ValueEnum};
+use clap::Parser;
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
 use hcc_msgs::ServiceNames;
@@ -35,8 +35,8 @@ use tracing_subscriber::fmt::{FmtContext, FormatEvent, FormatFields};
 use tracing_subscriber::registry::LookupSpan;
 
 use crate::cycle::{Cycle, CycleSettings, Outcome, Ports};
-use crate::rt::{self, RtReport, RtSettings};
 use crate::status::{LoopCounters, Status};
+use hcc_rt::{self as rt, RtReport, RtSettings};
 
 /// Cycles after which the allocator counters are taken as the baseline.
 const WARM_UP_CYCLES: u64 = 1_000;
@@ -47,15 +47,6 @@ const PREFAULT_STACK_BYTES: usize = 512 * 1024;
 /// Counters the log of changes leaves out: `cycles` changes every cycle,
 /// `stale_events` every timeout while the peer is lost (logged as a loss).
 const NOT_LOGGED: [&str; 2] = ["cycles", "stale_events"];
-
-/// Wait strategy on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum WaitArg {
-    /// Block on the state_ready event.
-    Event,
-    /// Sleep until shortly before the expected state, then poll.
-    Hybrid,
-}
 
 /// Command line of `hcc-controller`.
 #[derive(Debug, Parser)]
@@ -76,7 +67,7 @@ pub struct Args {
     pub file_prefix: Option<String>,
     /// Wait strategy (overrides [controller_daemon].wait_strategy).
     #[arg(long, value_enum)]
-    pub wait: Option<WaitArg>,
+    pub wait: Option<WaitStrategy>,
     /// CPU core of the control thread (overrides [controller_daemon].cpu_core).
     #[arg(long)]
     pub cpu_core: Option<usize>,
@@ -179,10 +170,7 @@ fn load(args: &Args) -> Result<Setup> {
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     let mut settings = CycleSettings::from_scenario(&scenario);
     if let Some(w) = args.wait {
-        settings.wait = match w {
-            WaitArg::Event => WaitStrategy::Event,
-            WaitArg::Hybrid => WaitStrategy::Hybrid,
-        };
+        settings.wait = w;
     }
     Ok(Setup {
         scenario,
@@ -346,7 +334,7 @@ fn write_stats(
     let t = cycle.timings();
     let mut stats = hcc_timing::DaemonTimings {
         daemon: "hcc-controller".into(),
-        wait: wait_name(wait).into(),
+        wait: wait.name().into(),
         rt,
         run_s: run.as_secs_f64(),
         ..Default::default()
@@ -364,14 +352,6 @@ fn write_stats(
     stats
         .write_json(path)
         .context("--stats: writing the timing report")
-}
-
-/// The wait strategy's name on the command line.
-pub fn wait_name(w: WaitStrategy) -> &'static str {
-    match w {
-        WaitStrategy::Event => "event",
-        WaitStrategy::Hybrid => "hybrid",
-    }
 }
 
 /// What the logging thread has reported so far.

@@ -11,9 +11,8 @@
 //!   newest state, decide, send the command, publish telemetry ([`Cycle`]).
 //! * [`status`]: the counters (defined once: [`LoopCounters`]) and flags the
 //!   loop shares with the logging thread ([`Status`]).
-//! * [`rt`]: real-time thread set-up (core pinning, SCHED_FIFO, mlockall,
-//!   pre-faulting, timer slack), absolute sleeps and the stop signal, shared
-//!   with the plant-simulator daemon.
+//! * The real-time machinery (thread set-up, absolute and hybrid sleeps, the
+//!   precise event wait, the stop signal) is the runtime crate `hcc-rt`.
 //! * [`daemon`]: the `hcc-controller` command line, start-up, logging and shutdown.
 //!
 //! The binary installs `hcc_rtalloc::RtAllocator` as its global allocator:
@@ -23,7 +22,6 @@
 pub mod cycle;
 pub mod daemon;
 pub mod decide;
-pub mod rt;
 pub mod status;
 
 pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports};

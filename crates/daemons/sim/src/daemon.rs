@@ -20,6 +20,12 @@
 //!
 //! With `--duration S` the state at t = S is published with status `Stopped`
 //! and the process exits 0; SIGINT/SIGTERM do the same at the current state.
+//!
+//! The waits, sleeps, thread set-up and stop signal are those of `hcc-rt`
+//! (`--wait event|hybrid` is [`WaitStrategy`]). Logging goes through
+//! `tracing` to stderr (`RUST_LOG`, default `info`): the real-time thread only
+//! stores counters into atomics ([`Shared`]); a logging thread reports their
+//! changes every 100 ms, and the summary is logged after the loop.
 
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -31,11 +37,9 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::{Scenario, SimMode};
-use hcc_controller::rt::{self, RtSettings};
-use hcc_msgs::ipc::{
-    self, CommandSubscriber, EventListener, EventNotifier, LATEST_BUFFER, Services, StatePublisher,
-};
+use hcc_msgs::ipc::{self, Services};
 use hcc_msgs::{JointState, ServiceNames, TorqueCommand, monotonic_now_ns};
+use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
 use crate::driver::{Applied, SimDriver};
@@ -95,31 +99,13 @@ pub struct Args {
     /// (clock_nanosleep) and block on `command_ready` for the answer;
     /// `hybrid`: sleep until shortly before the tick and spin to it, poll for
     /// the answer for a while before blocking.
-    #[arg(long, value_enum, default_value_t = SimWait::Event)]
-    pub wait: SimWait,
+    #[arg(long, value_enum, default_value_t = WaitStrategy::Event)]
+    pub wait: WaitStrategy,
     /// When stopping, write the loop's timing report (tick lateness and
     /// state → command latency histograms, counters, real-time set-up
     /// obtained) as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-}
-
-/// How the real-time loop waits (`--wait`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum SimWait {
-    /// Sleep to each tick; block on the command event.
-    Event,
-    /// Sleep, then spin to each tick; poll for the command, then block.
-    Hybrid,
-}
-
-impl SimWait {
-    fn name(self) -> &'static str {
-        match self {
-            SimWait::Event => "event",
-            SimWait::Hybrid => "hybrid",
-        }
-    }
 }
 
 /// Parses `args` (program name first) and runs the daemon; 0 after a clean
@@ -129,6 +115,7 @@ where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
+    rt::init_logging();
     let args = match Args::try_parse_from(args) {
         Ok(a) => a,
         Err(e) => {
@@ -143,7 +130,7 @@ where
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("hcc-sim: error: {e:#}");
+            tracing::error!("hcc-sim: error: {e:#}");
             ExitCode::from(2)
         }
     }
@@ -160,25 +147,8 @@ pub struct Shared {
     rejected: AtomicU64,
 }
 
-/// The simulator's ports (the driver side of the contract).
-pub struct Ports {
-    states: StatePublisher,
-    state_ready: EventNotifier,
-    commands: CommandSubscriber,
-    command_ready: EventListener,
-}
-
-impl Ports {
-    /// Creates the driver's ports on the opened services.
-    pub fn open(services: &Services) -> Result<Ports> {
-        Ok(Ports {
-            states: services.joint_state_publisher()?,
-            state_ready: services.state_ready_notifier()?,
-            commands: services.torque_command_subscriber(LATEST_BUFFER)?,
-            command_ready: services.command_ready_listener()?,
-        })
-    }
-}
+/// The simulator's ports: the driver side of the contract.
+pub use hcc_msgs::ipc::DriverPorts as Ports;
 
 /// Counts of the periods by how their torque was chosen.
 #[derive(Debug, Default, Clone, Copy)]
@@ -199,7 +169,7 @@ pub struct SimLoop<'a> {
     newest: Option<TorqueCommand>,
     state: JointState,
     shared: &'a Shared,
-    wait: SimWait,
+    wait: WaitStrategy,
     /// Real time: lateness of each tick, ns.
     lateness: LatencyHistogram,
     /// Publication of state k → its answer received here, ns.
@@ -216,7 +186,12 @@ pub struct SimLoop<'a> {
 
 impl<'a> SimLoop<'a> {
     /// The loop around `driver` on `ports`, reporting to `shared`.
-    pub fn new(driver: SimDriver, ports: &'a Ports, shared: &'a Shared, wait: SimWait) -> Self {
+    pub fn new(
+        driver: SimDriver,
+        ports: &'a Ports,
+        shared: &'a Shared,
+        wait: WaitStrategy,
+    ) -> Self {
         SimLoop {
             driver,
             ports,
@@ -265,7 +240,7 @@ impl<'a> SimLoop<'a> {
 
     /// Real time: waits for the answer to state k until `deadline_ns`.
     pub fn wait_for_answer(&mut self, deadline_ns: u64) {
-        if self.wait == SimWait::Hybrid {
+        if self.wait == WaitStrategy::Hybrid {
             let poll_until = deadline_ns.min(self.published_ns + HYBRID_POLL_NS);
             while monotonic_now_ns() < poll_until {
                 if self.take_answer() || rt::stop_requested() {
@@ -364,10 +339,7 @@ impl<'a> SimLoop<'a> {
         let mut next = monotonic_now_ns() + period_ns;
         loop {
             self.wait_for_answer((self.published_ns + window_ns).min(next));
-            match self.wait {
-                SimWait::Event => rt::sleep_until_ns(next),
-                SimWait::Hybrid => rt::sleep_until_hybrid_ns(next, rt::HYBRID_LEAD_NS),
-            }
+            self.wait.sleep_until(next);
             let now = monotonic_now_ns();
             self.lateness.record(now.saturating_sub(next));
             if rt::stop_requested() {
@@ -429,6 +401,8 @@ impl<'a> SimLoop<'a> {
     }
 }
 
+/// The logging thread: reports the loop's transitions and counters, read
+/// from `shared` every 100 ms, until `done`.
 fn log_loop(shared: &Shared, done: &AtomicBool) {
     let (mut missed, mut fallback, mut overruns, mut rejected) = (0, false, 0, 0);
     let mut connected = false;
@@ -436,54 +410,50 @@ fn log_loop(shared: &Shared, done: &AtomicBool) {
         std::thread::sleep(Duration::from_millis(100));
         if !connected && shared.has_command.load(Ordering::Relaxed) {
             connected = true;
-            eprintln!("hcc-sim: receiving torque commands");
+            tracing::info!("hcc-sim: receiving torque commands");
         }
         let f = shared.in_fallback.load(Ordering::Relaxed);
         if f != fallback {
             fallback = f;
             if f {
-                eprintln!(
+                tracing::warn!(
                     "hcc-sim: no applicable torque command: fallback active (gravity held, joint damping)"
                 );
             } else {
-                eprintln!("hcc-sim: torque commands are back; fallback ended");
+                tracing::info!("hcc-sim: torque commands are back; fallback ended");
             }
         }
         let m = shared.missed.load(Ordering::Relaxed);
         if m != missed {
-            eprintln!("hcc-sim: missed commands: {m} (+{})", m - missed);
+            tracing::warn!("hcc-sim: missed commands: {m} (+{})", m - missed);
             missed = m;
         }
         let o = shared.overruns.load(Ordering::Relaxed);
         if o != overruns {
-            eprintln!("hcc-sim: clock overruns (re-anchored): {o}");
+            tracing::warn!("hcc-sim: clock overruns (re-anchored): {o}");
             overruns = o;
         }
         let r = shared.rejected.load(Ordering::Relaxed);
         if r != rejected {
-            eprintln!("hcc-sim: rejected commands (invalid or gravity conflict): {r}");
+            tracing::warn!("hcc-sim: rejected commands (invalid or gravity conflict): {r}");
             rejected = r;
         }
     }
 }
 
-/// Runs the daemon.
-pub fn run(args: Args) -> Result<()> {
-    let scenario = Scenario::load(&args.config)?;
-    scenario.check_cpu_core("sim_daemon", &rt::available_cores())?;
-    let namespace = args
-        .namespace
-        .clone()
-        .unwrap_or_else(|| scenario.ipc.namespace.clone());
-    let names = ServiceNames::new(&namespace).context("--namespace")?;
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
-    let mode = if args.lockstep {
+/// The pacing: `--lockstep` / `--realtime` over `[sim_daemon].mode`.
+fn mode(args: &Args, scenario: &Scenario) -> SimMode {
+    if args.lockstep {
         SimMode::Lockstep
     } else if args.realtime {
         SimMode::Realtime
     } else {
         scenario.sim_daemon.mode
-    };
+    }
+}
+
+/// Refuses out-of-range options.
+fn check_args(args: &Args) -> Result<()> {
     if !(args.lockstep_timeout_ms.is_finite() && args.lockstep_timeout_ms > 0.0) {
         anyhow::bail!(
             "--lockstep-timeout-ms {} must be positive",
@@ -495,6 +465,19 @@ pub fn run(args: Args) -> Result<()> {
     {
         anyhow::bail!("--sched-priority {p} must be in 1..=99");
     }
+    Ok(())
+}
+
+/// Runs the daemon.
+pub fn run(args: Args) -> Result<()> {
+    let scenario = Scenario::load(&args.config)?;
+    scenario.check_cpu_core("sim_daemon", &rt::available_cores())?;
+    let namespace = args.namespace.as_deref();
+    let names =
+        ServiceNames::new(namespace.unwrap_or(&scenario.ipc.namespace)).context("--namespace")?;
+    let mode = mode(&args, &scenario);
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    check_args(&args)?;
     let mut driver = SimDriver::new(&scenario)
         .map_err(|e| anyhow::anyhow!("{}: {e}", scenario.path.display()))?;
     if let Some(d) = args.duration {
@@ -504,7 +487,7 @@ pub fn run(args: Args) -> Result<()> {
     set_log_level_from_env_or(LogLevel::Warn);
 
     if let Some(line) = rt::cleanup_stale_resources(file_prefix.as_deref()) {
-        eprintln!("hcc-sim: {line}");
+        tracing::info!("hcc-sim: {line}");
     }
     let node = ipc::create_node(
         "hcc-sim",
@@ -522,14 +505,14 @@ pub fn run(args: Args) -> Result<()> {
     };
     let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
-        eprintln!("hcc-sim: warning: {w}");
+        tracing::warn!("hcc-sim: {w}");
     }
-    eprintln!(
+    tracing::info!(
         "hcc-sim: {} ({} joints), {:?} mode, wait {}, namespace {:?}, {}; publishing on {:?}",
         scenario.name,
         driver.model().nq(),
         mode,
-        args.wait.name(),
+        args.wait,
         names.namespace().as_str(),
         match args.duration {
             Some(d) => format!("{d} s of simulated time"),
@@ -563,73 +546,95 @@ pub fn run(args: Args) -> Result<()> {
     lp.publish();
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
-    let c = lp.driver.counters();
-    eprintln!(
-        "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed, {} fallback cycles, {} rejected, {} overruns",
-        lp.driver.t(),
-        lp.driver.k(),
-        c.applied_commands,
-        c.missed_commands,
-        c.fallback_cycles,
-        c.rejected_commands,
-        lp.overruns
-    );
-    if mode == SimMode::Realtime {
-        eprintln!(
-            "hcc-sim: tick lateness: {}",
-            lp.lateness.summary().line_us()
-        );
-        eprintln!(
-            "hcc-sim: state published → command received: {} ({} late)",
-            lp.state_to_command.summary().line_us(),
-            lp.counts.late
-        );
-    }
-    eprintln!(
-        "hcc-sim: state → command (controller stamp − state stamp): {}",
-        lp.answer_stamp.summary().line_us()
-    );
+    lp.log_summary(mode);
     if let Some(path) = &args.stats {
-        let period_ns = lp.driver.period_s() * 1e9;
-        let mut stats = hcc_timing::DaemonTimings {
-            daemon: "hcc-sim".into(),
-            wait: args.wait.name().into(),
-            rt: report.obtained(&rt_settings),
-            run_s: started.elapsed().as_secs_f64(),
-            ..Default::default()
-        };
-        for (name, h) in [
-            ("tick_lateness", &lp.lateness),
-            ("state_to_command", &lp.state_to_command),
-            ("answer_stamp_latency", &lp.answer_stamp),
-        ] {
-            stats.figures.insert(name.into(), h.into());
-        }
-        for (name, value) in [
-            ("periods", lp.counts.periods),
-            ("waiting_for_controller", lp.counts.waiting),
-            ("stopped_periods", lp.counts.stopped),
-            ("applied_commands", c.applied_commands),
-            ("missed_commands", c.missed_commands),
-            ("fallback_cycles", c.fallback_cycles),
-            ("rejected_commands", c.rejected_commands),
-            ("late_commands", lp.counts.late),
-            (
-                "ticks_late",
-                lp.lateness
-                    .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
-            ),
-            ("overruns", lp.overruns),
-        ] {
-            stats.counters.insert(name.into(), value);
-        }
-        stats
-            .write_json(path)
-            .context("--stats: writing the timing report")?;
+        lp.timings(
+            args.wait,
+            report.obtained(&rt_settings),
+            started.elapsed().as_secs_f64(),
+        )
+        .write_json(path)
+        .context("--stats: writing the timing report")?;
     }
     drop(lp);
     drop(ports);
     drop(services);
     drop(node);
     result
+}
+
+impl SimLoop<'_> {
+    /// Logs the end of the run: counters and the latency summaries.
+    fn log_summary(&self, mode: SimMode) {
+        let c = self.driver.counters();
+        tracing::info!(
+            "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed, {} fallback cycles, {} rejected, {} overruns",
+            self.driver.t(),
+            self.driver.k(),
+            c.applied_commands,
+            c.missed_commands,
+            c.fallback_cycles,
+            c.rejected_commands,
+            self.overruns
+        );
+        if mode == SimMode::Realtime {
+            tracing::info!(
+                "hcc-sim: tick lateness: {}",
+                self.lateness.summary().line_us()
+            );
+            tracing::info!(
+                "hcc-sim: state published → command received: {} ({} late)",
+                self.state_to_command.summary().line_us(),
+                self.counts.late
+            );
+        }
+        tracing::info!(
+            "hcc-sim: state → command (controller stamp − state stamp): {}",
+            self.answer_stamp.summary().line_us()
+        );
+    }
+
+    /// The timing report of the run (`--stats`).
+    fn timings(
+        &self,
+        wait: WaitStrategy,
+        rt: hcc_timing::RtObtained,
+        run_s: f64,
+    ) -> hcc_timing::DaemonTimings {
+        let c = self.driver.counters();
+        let period_ns = self.driver.period_s() * 1e9;
+        let mut stats = hcc_timing::DaemonTimings {
+            daemon: "hcc-sim".into(),
+            wait: wait.name().into(),
+            rt,
+            run_s,
+            ..Default::default()
+        };
+        for (name, h) in [
+            ("tick_lateness", &self.lateness),
+            ("state_to_command", &self.state_to_command),
+            ("answer_stamp_latency", &self.answer_stamp),
+        ] {
+            stats.figures.insert(name.into(), h.into());
+        }
+        for (name, value) in [
+            ("periods", self.counts.periods),
+            ("waiting_for_controller", self.counts.waiting),
+            ("stopped_periods", self.counts.stopped),
+            ("applied_commands", c.applied_commands),
+            ("missed_commands", c.missed_commands),
+            ("fallback_cycles", c.fallback_cycles),
+            ("rejected_commands", c.rejected_commands),
+            ("late_commands", self.counts.late),
+            (
+                "ticks_late",
+                self.lateness
+                    .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
+            ),
+            ("overruns", self.overruns),
+        ] {
+            stats.counters.insert(name.into(), value);
+        }
+        stats
+    }
 }

@@ -1,43 +1,44 @@
-//! The simulated robot driver: the plant of `hcc-sim` (RK4, the robot
+//! The simulated robot driver: the plant of `hcc-plant` (RK4, the robot
 //! dynamics of paper Eq. (1), viscous friction, external wrenches through the
-//! link Jacobian) behind the driver side of the hcc-msgs timing contract.
+//! link Jacobian) behind the driver side of the hcc-msgs contract
+//! ([`hcc_msgs::driver::DriverLogic`], the same logic a real driver runs).
 //!
 //! Per control period k the driver publishes the state (q_k, q̇_k) exactly as
 //! the plant holds it, then applies a torque over [t_k, t_{k+1}] with a
-//! zero-order hold and integrates with the same RK4 sub-steps and time
-//! re-anchoring as `hcc simulate` ([`hcc_plant::run_zoh`]), so a lockstep run over
-//! IPC reproduces the in-process closed loop bit for bit.
+//! zero-order hold ([`hcc_plant::PeriodStep`], the step `hcc simulate` takes
+//! in [`hcc_plant::run_zoh`]), so a lockstep run over IPC reproduces the
+//! in-process closed loop bit for bit.
 //!
-//! Which torque ([`SimDriver::advance`]):
+//! Which torque ([`SimDriver::advance`]), with the simulator's
+//! [`DriverSettings`] ([`SimDriver::settings`]):
 //! * the newest command, if it passes [`TorqueCommand::validate`], agrees on
-//!   gravity ([`hcc_msgs::check_gravity_agreement`]), answers state k
-//!   ([`hcc_msgs::command_freshness`] = `Current`) and its mode applies torque;
+//!   gravity, answers state k (`Current`; no late tolerance, no sequence
+//!   check: the newest command is offered again each period) and its mode
+//!   applies torque;
 //! * otherwise a **miss**, detected in the period whose command is missing:
 //!   status `FallbackActive` from that period on (counted in `missed_commands`
 //!   and `fallback_cycles`); the last applied command is held for
 //!   `hold_cycles` periods, then τ = g(q_k) − D q̇_k (gravity held, strong
 //!   joint damping: a braking robot) until fresh commands arrive again (e.g.
-//!   from a restarted controller, which is accepted at its first command);
+//!   from a restarted controller, which is accepted at its first command) —
+//!   no timeout;
 //! * before the first command ever (controller not up yet) the fallback is
 //!   applied without counting misses, so the arm does not fall;
-//! * a `Stop` command ends control for the session: status `Stopped`,
-//!   fallback braking from then on.
+//! * a `Stop` command ends control for the session: status `Stopped` at once,
+//!   fallback braking from then on ([`StopMode::Brake`]).
 //!
 //! When the controller does not include gravity (the scenario's
 //! `gravity_compensation = false`), the simulated driver compensates gravity
-//! itself like many commercial arms: it sets
-//! [`STATE_FLAG_DRIVER_GRAVITY_COMPENSATION`] and adds g(q_k) to every command.
+//! itself like many commercial arms ([`Gravity::DriverAdds`]): it sets
+//! `STATE_FLAG_DRIVER_GRAVITY_COMPENSATION` and adds g(q_k) to every command.
 //!
 //! [`SimDriver::advance`] allocates nothing.
 
 use hcc_config::Scenario;
 use hcc_model::{Data, Model};
-use hcc_msgs::{
-    CommandFreshness, CommandMode, DriverStatus, JointState,
-    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, TorqueCommand, check_gravity_agreement,
-    command_freshness,
-};
-use hcc_plant::{Plant, SimError};
+use hcc_msgs::driver::{Action, DriverLogic, DriverSettings, Gravity, Offer, StopMode};
+use hcc_msgs::{DriverStatus, JointState, MAX_JOINTS, TorqueCommand};
+use hcc_plant::{PeriodStep, Plant, SimError};
 use nalgebra::DVector;
 
 /// How the torque of one period was chosen.
@@ -53,6 +54,18 @@ pub enum Applied {
     WaitingForController,
     /// The fallback after a `Stop` command.
     Stopped,
+}
+
+impl From<Action> for Applied {
+    fn from(action: Action) -> Applied {
+        match action {
+            Action::Apply => Applied::Command,
+            Action::Hold => Applied::Held,
+            Action::Fallback => Applied::Fallback,
+            Action::Waiting => Applied::WaitingForController,
+            Action::Stop { .. } => Applied::Stopped,
+        }
+    }
 }
 
 /// Counters of the driver.
@@ -73,21 +86,12 @@ pub struct SimDriver {
     plant: Plant,
     data: Data,
     n: usize,
-    substeps: usize,
+    step: PeriodStep,
     period_s: f64,
-    h: f64,
     cycles_total: Option<u64>,
     k: u64,
-    hold_cycles: u32,
-    fallback_damping: DVector<f64>,
-    driver_gravity: bool,
+    logic: DriverLogic,
     tau: DVector<f64>,
-    last_command_tau: DVector<f64>,
-    have_command: bool,
-    consecutive_misses: u32,
-    status: DriverStatus,
-    counters: DriverCounters,
-    state_flags: u32,
 }
 
 impl SimDriver {
@@ -99,32 +103,43 @@ impl SimDriver {
         let n = plant.model().nq();
         // The same arithmetic as hcc_plant::closed_loop::simulate_with / run_zoh.
         let period_s = 1.0 / s.control_rate_hz;
-        let h = period_s / s.substeps as f64;
-        let driver_gravity = !scenario.gravity_compensation;
         Ok(SimDriver {
             data: Data::new(plant.model()),
             n,
-            substeps: s.substeps,
+            step: PeriodStep::new(period_s, s.substeps)?,
             period_s,
-            h,
             cycles_total: None,
             k: 0,
-            hold_cycles: scenario.sim_daemon.hold_cycles,
-            fallback_damping: scenario.sim_daemon.fallback_damping.clone(),
-            driver_gravity,
+            logic: DriverLogic::new(Self::settings(scenario, n)),
             tau: DVector::zeros(n),
-            last_command_tau: DVector::zeros(n),
-            have_command: false,
-            consecutive_misses: 0,
-            status: DriverStatus::FallbackActive,
-            counters: DriverCounters::default(),
-            state_flags: if driver_gravity {
-                STATE_FLAG_DRIVER_GRAVITY_COMPENSATION
-            } else {
-                0
-            },
             plant,
         })
+    }
+
+    /// The contract settings of the simulated robot for `scenario` (n joints).
+    pub fn settings(scenario: &Scenario, n: usize) -> DriverSettings {
+        let mut fallback_damping = [0.0; MAX_JOINTS];
+        for (to, d) in fallback_damping
+            .iter_mut()
+            .zip(&scenario.sim_daemon.fallback_damping)
+        {
+            *to = *d;
+        }
+        DriverSettings {
+            n,
+            late_tolerance: 0,
+            check_sequence: false,
+            hold_cycles: u64::from(scenario.sim_daemon.hold_cycles),
+            fallback_timeout_cycles: None,
+            wait_for_first_command: true,
+            fallback_damping,
+            gravity: if scenario.gravity_compensation {
+                Gravity::ControllerSends
+            } else {
+                Gravity::DriverAdds
+            },
+            stop_mode: StopMode::Brake,
+        }
     }
 
     /// Stop after `duration_s` of simulated time (rounded to whole periods):
@@ -168,28 +183,34 @@ impl SimDriver {
 
     /// Whether a command was ever applied.
     pub fn has_command(&self) -> bool {
-        self.have_command
+        self.logic.has_command()
     }
 
     /// Whether the driver is in the fallback (after misses, not while waiting
     /// for the first command).
     pub fn in_fallback(&self) -> bool {
-        self.have_command && self.status == DriverStatus::FallbackActive
+        self.logic.in_fallback()
     }
 
     /// Counters.
     pub fn counters(&self) -> DriverCounters {
-        self.counters
+        let r = self.logic.rejections();
+        DriverCounters {
+            missed_commands: self.logic.missed_commands(),
+            fallback_cycles: self.logic.fallback_cycles(),
+            applied_commands: self.logic.applied(),
+            rejected_commands: r.invalid + r.gravity_conflict,
+        }
     }
 
     /// Status to publish.
     pub fn status(&self) -> DriverStatus {
-        self.status
+        self.logic.status()
     }
 
     /// Marks the driver stopped (shutdown or end of the run).
     pub fn set_stopped(&mut self) {
-        self.status = DriverStatus::Stopped;
+        self.logic.request_stop();
     }
 
     /// The plant.
@@ -205,10 +226,7 @@ impl SimDriver {
         msg.header.n_joints = n as u32;
         msg.header.seq = self.k;
         msg.header.stamp_ns = stamp_ns;
-        msg.status = self.status.code();
-        msg.flags = self.state_flags;
-        msg.missed_commands = self.counters.missed_commands;
-        msg.fallback_cycles = self.counters.fallback_cycles;
+        self.logic.write_status(msg);
         msg.q = [0.0; hcc_msgs::MAX_JOINTS];
         msg.qd = [0.0; hcc_msgs::MAX_JOINTS];
         msg.tau_measured = [0.0; hcc_msgs::MAX_JOINTS];
@@ -218,90 +236,26 @@ impl SimDriver {
         msg.tau_measured[..n].copy_from_slice(self.tau.as_slice());
     }
 
-    /// Whether `command` may be applied to state k.
-    fn applicable(&mut self, command: &TorqueCommand) -> Option<CommandMode> {
-        let mut probe = JointState::zeroed();
-        probe.flags = self.state_flags;
-        if command.validate(self.n).is_err() || check_gravity_agreement(&probe, command).is_err() {
-            self.counters.rejected_commands += 1;
-            return None;
-        }
-        if command_freshness(command.state_seq, self.k) != CommandFreshness::Current {
-            return None;
-        }
-        command.mode().ok()
-    }
-
-    /// g(q_k) into `data.g`.
-    fn gravity(&mut self) {
-        hcc_model::gravity(self.plant.model(), &mut self.data, self.plant.q());
-    }
-
-    /// τ = g(q_k) − D q̇_k.
-    fn fallback_torque(&mut self) {
-        self.gravity();
-        for j in 0..self.n {
-            self.tau[j] = self.data.g[j] - self.fallback_damping[j] * self.plant.qd()[j];
-        }
-    }
-
     /// Chooses the torque for [t_k, t_{k+1}] from the newest received command
     /// (see the module docs), integrates the period and advances k.
     pub fn advance(&mut self, newest: Option<&TorqueCommand>) -> Result<Applied, SimError> {
-        let mode = newest.and_then(|c| self.applicable(c).map(|m| (c, m)));
-        let applied = if self.status == DriverStatus::Stopped {
-            Applied::Stopped
-        } else {
-            match mode {
-                Some((_, CommandMode::Stop)) => {
-                    self.status = DriverStatus::Stopped;
-                    Applied::Stopped
-                }
-                Some((command, _)) => {
-                    self.tau
-                        .as_mut_slice()
-                        .copy_from_slice(&command.tau[..self.n]);
-                    if self.driver_gravity {
-                        self.gravity();
-                        self.tau += &self.data.g;
-                    }
-                    self.last_command_tau.copy_from(&self.tau);
-                    self.have_command = true;
-                    self.consecutive_misses = 0;
-                    self.status = DriverStatus::Ok;
-                    self.counters.applied_commands += 1;
-                    Applied::Command
-                }
-                None if !self.have_command => Applied::WaitingForController,
-                None => {
-                    self.counters.missed_commands += 1;
-                    self.consecutive_misses = self.consecutive_misses.saturating_add(1);
-                    // The fallback starts with the first miss: hold, then brake.
-                    self.status = DriverStatus::FallbackActive;
-                    self.counters.fallback_cycles += 1;
-                    if self.consecutive_misses <= self.hold_cycles {
-                        self.tau.copy_from(&self.last_command_tau);
-                        Applied::Held
-                    } else {
-                        Applied::Fallback
-                    }
-                }
-            }
+        let command =
+            newest.filter(|c| self.logic.offer(c, self.k) == Offer::Applicable { current: true });
+        let (model, data, q) = (self.plant.model(), &mut self.data, self.plant.q());
+        let gravity = |g: &mut [f64]| {
+            hcc_model::gravity(model, data, q);
+            g.copy_from_slice(data.g.as_slice());
         };
-        match applied {
-            Applied::Command | Applied::Held => {}
-            Applied::Fallback => self.fallback_torque(),
-            Applied::WaitingForController | Applied::Stopped => {
-                self.fallback_torque();
-                self.counters.fallback_cycles += 1;
-            }
-        }
-        for _ in 0..self.substeps {
-            self.plant.step(&self.tau, self.h)?;
-        }
+        let action = self.logic.decide(
+            command,
+            self.plant.qd().as_slice(),
+            gravity,
+            self.tau.as_mut_slice(),
+        );
+        // Re-anchored to the exact sample time t_{k+1}, as run_zoh does.
+        let t_next = (self.k + 1) as f64 * self.period_s;
+        self.step.advance(&mut self.plant, &self.tau, t_next)?;
         self.k += 1;
-        // Re-anchor the clock to the exact sample time, as run_zoh does.
-        self.plant.set_time(self.k as f64 * self.period_s);
-        Ok(applied)
+        Ok(action.into())
     }
 }

@@ -1,13 +1,15 @@
-//! The hcc plant-simulator daemon `hcc-sim`: the simulated robot of `hcc-sim`
+//! The hcc plant-simulator daemon `hcc-sim`: the simulated robot of `hcc-plant`
 //! (RK4 integration of the rigid-body dynamics, paper Eq. (1), with the torque
 //! held over each control period) acting as a robot driver on the hcc-msgs
 //! services, so that the controller daemon can be run and tested against it
 //! exactly as against a real robot.
 //!
-//! * [`driver`]: the plant behind the driver's timing contract (command
-//!   freshness, hold, fallback, status), allocation-free per period.
+//! * [`driver`]: the plant behind the driver side of the contract
+//!   (`hcc_msgs::driver`: command freshness, hold, fallback, status),
+//!   allocation-free per period.
 //! * [`daemon`]: the process — real-time (absolute 1 kHz clock) or lockstep
-//!   pacing, start-up, logging and shutdown.
+//!   pacing on the runtime of `hcc-rt`, start-up, logging (`tracing`, from a
+//!   logging thread that reads the loop's atomics) and shutdown.
 
 pub mod daemon;
 pub mod driver;

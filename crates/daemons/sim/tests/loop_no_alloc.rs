@@ -19,9 +19,10 @@ use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, MAX_JOINTS, Namespace, ServiceNames, TorqueCommand,
     monotonic_now_ns,
 };
+use hcc_rt::WaitStrategy;
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{Ports, Shared, SimLoop, SimWait};
+use hcc_sim::daemon::{Ports, Shared, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -58,7 +59,7 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
         let shared = Shared::default();
         let mut driver = SimDriver::new(&scenario).unwrap();
         driver.set_duration(1e6).unwrap();
-        let mut lp = SimLoop::new(driver, &ports, &shared, SimWait::Hybrid);
+        let mut lp = SimLoop::new(driver, &ports, &shared, WaitStrategy::Hybrid);
 
         let mut seq = 0u64;
         // The controller answers the newest state; then the loop's period.

@@ -1,19 +1,12 @@
-//! Real-time set-up of a daemon thread and the few OS calls its loop makes,
-//! shared by the controller daemon and the plant-simulator daemon.
+//! Real-time set-up of the calling thread, the usual Linux recipe: pin it to
+//! one core, switch it to `SCHED_FIFO`, lock memory (`mlockall`), pre-fault
+//! the stack and the allocator pool, shrink the timer slack to 1 ns
+//! (`PR_SET_TIMERSLACK`, so that absolute sleeps wake on time). Each step
+//! that needs a privilege the process does not have is reported as a warning
+//! and skipped: the process still runs, only with worse latency.
 //!
-//! The usual Linux recipe: pin the thread to one core, switch it to
-//! `SCHED_FIFO`, lock memory (`mlockall`), pre-fault the stack and the
-//! allocator pool, shrink the timer slack to 1 ns (`PR_SET_TIMERSLACK`), and
-//! sleep with `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)` to absolute
-//! deadlines. Each step that needs a privilege the process does not have is
-//! reported as a warning and skipped: the daemon still runs, only with worse
-//! latency.
-//!
-//! SIGINT and SIGTERM set a flag ([`install_stop_handler`], [`stop_requested`])
-//! that the loop polls once per cycle: an async-signal-safe store into an
-//! atomic, no allocation.
-
-use std::sync::atomic::{AtomicBool, Ordering};
+//! Also the start-up clean-up of the shared-memory resources that crashed
+//! processes left behind ([`cleanup_stale_resources`]).
 
 /// What [`prepare_rt_thread`] should do.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -152,83 +145,4 @@ pub fn set_fifo(priority: i32) -> std::io::Result<()> {
         return Err(std::io::Error::last_os_error());
     }
     Ok(())
-}
-
-/// Sleeps until the `CLOCK_MONOTONIC` time `deadline_ns` (absolute), retrying
-/// after signals. Returns at once when the deadline has passed.
-/// Allocation-free.
-pub fn sleep_until_ns(deadline_ns: u64) {
-    let ts = libc::timespec {
-        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
-        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
-    };
-    loop {
-        // SAFETY: `ts` is a valid timespec; the remaining-time pointer may be
-        // null with TIMER_ABSTIME.
-        let rc = unsafe {
-            libc::clock_nanosleep(
-                libc::CLOCK_MONOTONIC,
-                libc::TIMER_ABSTIME,
-                &ts,
-                std::ptr::null_mut(),
-            )
-        };
-        if rc != libc::EINTR || stop_requested() {
-            return;
-        }
-    }
-}
-
-/// How long before a deadline a hybrid wait stops sleeping and starts to
-/// poll, ns. A sleeping thread here wakes 50–100 µs late (idle virtual CPU,
-/// host), rarely more; 150 µs covers that at the cost of polling for about
-/// 15 % of a 1 ms period.
-pub const HYBRID_LEAD_NS: u64 = 150_000;
-
-/// Hybrid wait for the `CLOCK_MONOTONIC` time `deadline_ns`: sleeps until
-/// `lead_ns` before it ([`sleep_until_ns`]), then spins on the clock until the
-/// deadline. Returns at once when the deadline has passed or a stop was
-/// requested. Allocation-free; the spin makes only vDSO clock reads.
-pub fn sleep_until_hybrid_ns(deadline_ns: u64, lead_ns: u64) {
-    let wake = deadline_ns.saturating_sub(lead_ns);
-    if hcc_msgs::monotonic_now_ns() < wake {
-        sleep_until_ns(wake);
-    }
-    while hcc_msgs::monotonic_now_ns() < deadline_ns && !stop_requested() {
-        std::hint::spin_loop();
-    }
-}
-
-static STOP: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_stop_signal(_signal: libc::c_int) {
-    STOP.store(true, Ordering::SeqCst);
-}
-
-/// Installs handlers for SIGINT and SIGTERM that request a clean stop.
-pub fn install_stop_handler() -> std::io::Result<()> {
-    for signal in [libc::SIGINT, libc::SIGTERM] {
-        // SAFETY: the handler only stores into an atomic (async-signal-safe);
-        // `action` is fully initialised before use.
-        unsafe {
-            let mut action: libc::sigaction = std::mem::zeroed();
-            action.sa_sigaction = on_stop_signal as *const () as libc::sighandler_t;
-            libc::sigemptyset(&mut action.sa_mask);
-            action.sa_flags = 0;
-            if libc::sigaction(signal, &action, std::ptr::null_mut()) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Whether SIGINT/SIGTERM was received (or [`request_stop`] called).
-pub fn stop_requested() -> bool {
-    STOP.load(Ordering::Relaxed)
-}
-
-/// Requests a clean stop, as a signal would.
-pub fn request_stop() {
-    STOP.store(true, Ordering::SeqCst);
 }

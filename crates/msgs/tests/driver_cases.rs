@@ -2,8 +2,8 @@
 //! implementation (`tests/data/driver_cases.json`, also run by
 //! `python/tests/test_driver_cases.py`): both languages agree on every branch.
 
-use hcc_driver_example::contract::{
-    Action, DriverLogic, DriverSettings, Offer, Rejection, StopReason,
+use hcc_msgs::driver::{
+    Action, DriverLogic, DriverSettings, Gravity, Offer, Rejection, StopMode, StopReason,
 };
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, DriverStatus, JointState, MAX_JOINTS, TorqueCommand,
@@ -39,10 +39,20 @@ fn settings(s: &Value) -> DriverSettings {
     DriverSettings {
         n,
         late_tolerance: int(&s["late_tolerance"]),
+        // The cases describe a robot driver (the example driver's and
+        // hcc.Driver's policy): sequence checks, a fallback timeout, misses
+        // counted from the start, the robot's own safe stop.
+        check_sequence: true,
         hold_cycles: int(&s["hold_cycles"]),
-        fallback_timeout_cycles: int(&s["fallback_timeout_cycles"]),
+        fallback_timeout_cycles: Some(int(&s["fallback_timeout_cycles"])),
+        wait_for_first_command: false,
         fallback_damping: damping,
-        compensates_gravity: s["compensates_gravity"].as_bool().expect("a bool"),
+        gravity: if s["compensates_gravity"].as_bool().expect("a bool") {
+            Gravity::RobotAdds
+        } else {
+            Gravity::ControllerSends
+        },
+        stop_mode: StopMode::SafeStop,
     }
 }
 
@@ -182,7 +192,7 @@ fn run_case(case: &Value) {
             "publish" => publish(&mut logic, step, &mut latest, &at),
             "offer" => {
                 let c = build_command(step, &latest);
-                let got = offer_result(logic.offer(&c, &latest));
+                let got = offer_result(logic.offer(&c, latest.header.seq));
                 assert_eq!(got, expect.as_str().unwrap(), "{at}");
                 last = Some(c);
             }
@@ -194,7 +204,7 @@ fn run_case(case: &Value) {
                 };
                 let (qd, g) = (nums(&step["qd"]), nums(&step["gravity"]));
                 let mut tau = vec![f64::NAN; n];
-                let got = logic.decide(command, &qd, &g, &mut tau);
+                let got = logic.decide(command, &qd, |out| out.copy_from_slice(&g), &mut tau);
                 assert_eq!(got, action(expect["action"].as_str().unwrap()), "{at}");
                 assert_eq!(tau, nums(&expect["tau"]), "{at}: tau");
                 check(&logic, expect, &at);
@@ -214,7 +224,7 @@ fn run_case(case: &Value) {
 fn shared_driver_cases() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../../tests/data/driver_cases.json"
+        "/../../tests/data/driver_cases.json"
     );
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
     let doc: Value = serde_json::from_str(&text).expect("valid JSON");
