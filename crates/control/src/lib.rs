@@ -59,10 +59,11 @@ pub mod controller;
 pub mod dense;
 pub mod saturation;
 pub mod spec;
+pub mod task;
 
 pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
 pub use saturation::saturate;
-pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec};
+pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 
 /// Errors of construction and of a cycle.
 #[derive(Debug, thiserror::Error)]
