@@ -48,7 +48,8 @@
 //! order) and receive SIGTERM if the launcher dies.
 
 use anyhow::{Context, anyhow, bail};
-use hcc_config::{Scenario, Task};
+use hcc_config::Scenario;
+use hcc_model::Model;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{
     CommandMode, DriverStatus, JointState, Namespace, SeqEvent, SequenceChecker, ServiceNames,
@@ -111,57 +112,30 @@ pub struct RunArgs {
 // ---------------------------------------------------------------------------
 // Rows
 
-/// Task Jacobians J_i of the scenario's levels from the model (the analytic
-/// task Jacobian: selection rows of the frame Jacobian for a position,
-/// angular rows for an orientation, selection/weights for joint tasks).
+/// Task Jacobians J_i of the scenario's levels, evaluated from the model.
 struct TaskJacobians {
-    frame_jac: DMatrix<f64>,
+    work: hcc_control::task::FrameWork,
     jac: Vec<DMatrix<f64>>,
 }
 
 impl TaskJacobians {
-    fn new(scenario: &Scenario) -> TaskJacobians {
-        let n = scenario.model.nq();
+    fn new(model: &Model, scenario: &Scenario) -> TaskJacobians {
+        let n = model.nq();
         TaskJacobians {
-            frame_jac: DMatrix::zeros(6, n),
+            work: hcc_control::task::FrameWork::new(n),
             jac: scenario
-                .levels
-                .iter()
-                .map(|l| DMatrix::zeros(l.task.dim(), n))
+                .task_dims()
+                .into_iter()
+                .map(|m| DMatrix::zeros(m, n))
                 .collect(),
         }
     }
 
     /// Needs forward kinematics at q in `data`.
-    fn update(&mut self, scenario: &Scenario, data: &hcc_model::Data) {
-        let model = &scenario.model;
-        for (l, jac) in scenario.levels.iter().zip(self.jac.iter_mut()) {
-            jac.fill(0.0);
-            match &l.task {
-                Task::Position { frame_id, axes, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for (r, &a) in axes.iter().enumerate() {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(a));
-                    }
-                }
-                Task::Orientation { frame_id, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for r in 0..3 {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(3 + r));
-                    }
-                }
-                Task::PlanarOrientation { frame_id, axis, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    jac.row_mut(0).copy_from(&self.frame_jac.row(3 + axis));
-                }
-                Task::Joint { joints } => {
-                    for (r, &j) in joints.iter().enumerate() {
-                        jac[(r, j)] = 1.0;
-                    }
-                }
-                Task::Posture { .. } => jac.fill_with_identity(),
-                Task::JointCombination { weights } => jac.copy_from(weights),
-            }
+    fn update(&mut self, model: &Model, data: &hcc_model::Data, scenario: &Scenario) {
+        self.work.invalidate();
+        for (l, jac) in scenario.levels().iter().zip(self.jac.iter_mut()) {
+            hcc_control::task::jacobian(model, data, &l.tasks, &mut self.work, jac, None);
         }
     }
 }
@@ -199,7 +173,7 @@ struct RowBuilder<'a> {
 impl<'a> RowBuilder<'a> {
     fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
         let n = scenario.model.nq();
-        let r = scenario.levels.len();
+        let r = scenario.levels().len();
         let s = &scenario.simulation;
         let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
         let names = column_names(scenario, true);
@@ -209,20 +183,20 @@ impl<'a> RowBuilder<'a> {
             scenario,
             n,
             r,
-            dims: scenario.levels.iter().map(|l| l.task.dim()).collect(),
+            dims: scenario.task_dims(),
             period: 1.0 / s.control_rate_hz,
             traj,
             shadow: HierarchicalLaw::new(scenario)?,
             shadow_failures: 0,
             shadow_tau_diff: 0.0,
             data: hcc_model::Data::new(&scenario.model),
-            jacs: TaskJacobians::new(scenario),
+            jacs: TaskJacobians::new(&scenario.model, scenario),
             m_chol: DMatrix::zeros(n, n),
             minv_tau: (0..=r).map(|_| DVector::zeros(n)).collect(),
             acc: scenario
-                .levels
-                .iter()
-                .map(|l| DVector::zeros(l.task.dim()))
+                .task_dims()
+                .into_iter()
+                .map(DVector::zeros)
                 .collect(),
             energy_plant: plant_for(scenario)?,
             q: DVector::zeros(n),
@@ -273,7 +247,8 @@ impl<'a> RowBuilder<'a> {
 
         let model = &self.scenario.model;
         hcc_model::crba(model, &mut self.data, &self.q);
-        self.jacs.update(self.scenario, &self.data);
+        self.jacs
+            .update(&self.scenario.model, &self.data, self.scenario);
         self.m_chol.copy_from(&self.data.m);
         hcc_model::linalg::cholesky_in_place(&mut self.m_chol)
             .map_err(|e| anyhow!("M(q) at t = {t} s: {e}"))?;

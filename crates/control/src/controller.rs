@@ -183,7 +183,15 @@ impl Projection {
 impl Level {
     /// Buffers of level `i` (0-based) of `r` for `n` joints: m = m_i, `k` = Σ_{j<i} m_j,
     /// `ktop` the rows of the levels above the lowest.
-    fn new(spec: &LevelSpec, i: usize, r: usize, m: usize, n: usize, k: usize, ktop: usize) -> Level {
+    fn new(
+        spec: &LevelSpec,
+        i: usize,
+        r: usize,
+        m: usize,
+        n: usize,
+        k: usize,
+        ktop: usize,
+    ) -> Level {
         let d = if i > 0 && i == r - 1 { n - k } else { m };
         let middle = i > 0 && i < r - 1;
         let proj = if middle {
@@ -741,8 +749,7 @@ impl Controller {
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
-            let c =
-                damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+            let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
             // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
             gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
             (c, p.g_cond)
@@ -915,7 +922,14 @@ impl Controller {
         let l = &mut self.levels[i];
         let tasks = &self.spec.levels[i].tasks;
         let (model, data) = (&self.model, &self.data);
-        crate::task::jacobian(model, data, tasks, &mut self.frames, &mut l.j, Some(&mut l.jdot));
+        crate::task::jacobian(
+            model,
+            data,
+            tasks,
+            &mut self.frames,
+            &mut l.j,
+            Some(&mut l.jdot),
+        );
         l.potential = crate::task::potential(
             model,
             data,

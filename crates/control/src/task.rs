@@ -172,8 +172,9 @@ pub(crate) fn potential(
     let n = model.nq();
     let mut o = 0;
     for (t, task) in tasks.iter().enumerate() {
-        let placement: Option<Isometry3<f64>> =
-            task.frame().map(|f| hcc_model::frame_placement(model, data, f));
+        let placement: Option<Isometry3<f64>> = task
+            .frame()
+            .map(|f| hcc_model::frame_placement(model, data, f));
         match task {
             TaskSpec::Position { axes, .. } => {
                 let p = placement.expect("frame task").translation.vector;

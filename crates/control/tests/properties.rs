@@ -289,7 +289,10 @@ fn pose_task_gradient_and_jdot_by_finite_differences() {
             let predicted = -tau.dot(&DVector::from_vec(u.clone()));
             let e = (dv - predicted).abs() / predicted.abs().max(1.0);
             worst_grad = worst_grad.max(e);
-            assert!(e <= 1e-6, "coupled {coupled}: dV/dt {dv} vs −τᵀu {predicted}");
+            assert!(
+                e <= 1e-6,
+                "coupled {coupled}: dV/dt {dv} vs −τᵀu {predicted}"
+            );
             // J̇ at (q, u) against (J(q + h u) − J(q − h u)) / 2h.
             c.step(&q, &u).expect("step");
             let jdot = c.diagnostics().jbar_dot;

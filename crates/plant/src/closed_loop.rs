@@ -25,7 +25,7 @@
 
 use crate::zoh::{LoopTiming, run_zoh};
 use crate::{ExternalWrench, Plant, SimError};
-use hcc_config::{Scenario, Task, TaskUnit};
+use hcc_config::{Scenario, TaskUnit};
 use hcc_control::Controller;
 use hcc_model::Model;
 use hcc_report::{ErrorUnit, LevelDescription, RunDescription, Trajectory, columns};
@@ -70,7 +70,7 @@ pub struct Run {
 
 /// Task Jacobians J_i of the scenario's levels, evaluated from the model.
 struct TaskJacobians {
-    frame_jac: DMatrix<f64>,
+    work: hcc_control::task::FrameWork,
     jac: Vec<DMatrix<f64>>,
 }
 
@@ -78,52 +78,29 @@ impl TaskJacobians {
     fn new(model: &Model, scenario: &Scenario) -> TaskJacobians {
         let n = model.nq();
         TaskJacobians {
-            frame_jac: DMatrix::zeros(6, n),
+            work: hcc_control::task::FrameWork::new(n),
             jac: scenario
-                .levels
-                .iter()
-                .map(|l| DMatrix::zeros(l.task.dim(), n))
+                .task_dims()
+                .into_iter()
+                .map(|m| DMatrix::zeros(m, n))
                 .collect(),
         }
     }
 
     /// Needs forward kinematics at q in `data`.
     fn update(&mut self, model: &Model, data: &hcc_model::Data, scenario: &Scenario) {
-        for (l, jac) in scenario.levels.iter().zip(self.jac.iter_mut()) {
-            jac.fill(0.0);
-            match &l.task {
-                Task::Position { frame_id, axes, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for (r, &a) in axes.iter().enumerate() {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(a));
-                    }
-                }
-                Task::Orientation { frame_id, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    for r in 0..3 {
-                        jac.row_mut(r).copy_from(&self.frame_jac.row(3 + r));
-                    }
-                }
-                Task::PlanarOrientation { frame_id, axis, .. } => {
-                    hcc_model::frame_jacobian(model, data, *frame_id, &mut self.frame_jac);
-                    jac.row_mut(0).copy_from(&self.frame_jac.row(3 + axis));
-                }
-                Task::Joint { joints } => {
-                    for (r, &j) in joints.iter().enumerate() {
-                        jac[(r, j)] = 1.0;
-                    }
-                }
-                Task::Posture { .. } => jac.fill_with_identity(),
-                Task::JointCombination { weights } => jac.copy_from(weights),
-            }
+        self.work.invalidate();
+        for (l, jac) in scenario.levels().iter().zip(self.jac.iter_mut()) {
+            hcc_control::task::jacobian(model, data, &l.tasks, &mut self.work, jac, None);
         }
     }
 }
 
-fn unit(u: TaskUnit) -> ErrorUnit {
+fn unit(u: Option<TaskUnit>) -> ErrorUnit {
     match u {
-        TaskUnit::Length => ErrorUnit::Meter,
-        TaskUnit::Angle => ErrorUnit::Radian,
+        Some(TaskUnit::Length) => ErrorUnit::Meter,
+        Some(TaskUnit::Angle) => ErrorUnit::Radian,
+        None => ErrorUnit::Mixed,
     }
 }
 
@@ -142,17 +119,13 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
     put("integrator", "RK4".into());
     put(
         "coriolis_cancellation",
-        scenario.coriolis_cancellation.into(),
+        scenario.spec.coriolis_cancellation.into(),
     );
-    put("gravity_compensation", scenario.gravity_compensation.into());
     put(
-        "form",
-        match scenario.form {
-            hcc_config::FormName::Extended => "extended",
-            hcc_config::FormName::Projector => "projector",
-        }
-        .into(),
+        "gravity_compensation",
+        scenario.spec.gravity_compensation.into(),
     );
+    put("form", scenario.spec.form.name().into());
     put(
         "joint_friction",
         s.joint_friction
@@ -170,12 +143,12 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
         scenario: scenario.name.clone(),
         n_joints: scenario.model.nq(),
         levels: scenario
-            .levels
+            .levels()
             .iter()
             .map(|l| LevelDescription {
                 name: l.name.clone(),
-                dim: l.task.dim(),
-                unit: unit(l.task.unit()),
+                dim: l.dim(scenario.model.nq()),
+                unit: unit(l.unit(scenario.model.nq())),
             })
             .collect(),
         settings,
@@ -186,8 +159,8 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
 /// provides J̄, so the `accv` columns are recorded).
 pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     let n = scenario.model.nq();
-    let r = scenario.levels.len();
-    let dims: Vec<usize> = scenario.levels.iter().map(|l| l.task.dim()).collect();
+    let r = scenario.levels().len();
+    let dims: Vec<usize> = scenario.task_dims();
     let mut c = columns::required(n, &dims);
     for i in 1..=r {
         c.extend((1..=n).map(|k| columns::level_torque(i, k)));
@@ -249,7 +222,7 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
     let s = &scenario.simulation;
     let model = &scenario.model;
     let n = model.nq();
-    let r = scenario.levels.len();
+    let r = scenario.levels().len();
     let period = 1.0 / s.control_rate_hz;
     let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
     let timing = LoopTiming {
@@ -270,9 +243,9 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
     // M⁻¹ τ_j for every level j, then for τ_μ.
     let mut minv_tau: Vec<DVector<f64>> = (0..=r).map(|_| DVector::zeros(n)).collect();
     let mut acc: Vec<DVector<f64>> = scenario
-        .levels
-        .iter()
-        .map(|l| DVector::zeros(l.task.dim()))
+        .task_dims()
+        .into_iter()
+        .map(DVector::zeros)
         .collect();
     let mut row: Vec<f64> = Vec::with_capacity(traj.columns().len());
     let mut recorder_plant = plant.clone();
@@ -393,7 +366,7 @@ impl HierarchicalLaw {
         Ok(HierarchicalLaw {
             controller,
             limits: scenario.controller_daemon.torque_limits.clone(),
-            gravity_compensation: scenario.gravity_compensation,
+            gravity_compensation: scenario.spec.gravity_compensation,
             tau: DVector::zeros(n),
             saturated_cycles: 0,
         })

@@ -177,7 +177,7 @@ pub fn run(args: Args) -> Result<()> {
         "hcc-controller: {} ({} joints, {} levels), namespace {:?}, wait {:?}, pinned {}, SCHED_FIFO {}, mlock {}; waiting for the first joint state on {:?}",
         scenario.name,
         scenario.model.nq(),
-        scenario.levels.len(),
+        scenario.levels().len(),
         setup.names.namespace().as_str(),
         setup.settings.wait,
         report.pinned,

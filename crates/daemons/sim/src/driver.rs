@@ -100,7 +100,7 @@ impl SimDriver {
         // The same arithmetic as hcc_plant::closed_loop::simulate_with / run_zoh.
         let period_s = 1.0 / s.control_rate_hz;
         let h = period_s / s.substeps as f64;
-        let driver_gravity = !scenario.gravity_compensation;
+        let driver_gravity = !scenario.spec.gravity_compensation;
         Ok(SimDriver {
             data: Data::new(plant.model()),
             n,
