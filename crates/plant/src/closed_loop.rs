@@ -145,10 +145,22 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
         levels: scenario
             .levels()
             .iter()
-            .map(|l| LevelDescription {
-                name: l.name.clone(),
-                dim: l.dim(scenario.model.nq()),
-                unit: unit(l.unit(scenario.model.nq())),
+            .map(|l| {
+                let n = scenario.model.nq();
+                let unit = unit(l.unit(n));
+                LevelDescription {
+                    name: l.name.clone(),
+                    dim: l.dim(n),
+                    unit,
+                    row_units: match unit {
+                        ErrorUnit::Mixed => l
+                            .units(n)
+                            .into_iter()
+                            .map(|u| self::unit(Some(u)))
+                            .collect(),
+                        _ => Vec::new(),
+                    },
+                }
             })
             .collect(),
         settings,
