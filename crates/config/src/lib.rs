@@ -32,6 +32,12 @@
 //! [initial]
 //! q0 = [0.4, -0.5, -1.6, 0.4]
 //! ```
+//!
+//! A level may stack several tasks: `task = "pose"` (position and orientation of a
+//! frame, goal x, y, z, roll, pitch, yaw), or `[[level.task]]` tables (each with
+//! `kind` and the task keys) with per-task gains and goals (K_i, D_i block-diagonal)
+//! or one gain and goal for the whole level. The resolved hierarchy is
+//! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
 pub mod error;
 pub mod schema;

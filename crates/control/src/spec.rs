@@ -269,11 +269,11 @@ impl ControllerSpec {
                 level: format!("{} ({})", i + 1, l.name),
                 why,
             };
-            if m == 0 {
-                return Err(bad("the task has dimension 0".into()));
-            }
             if l.tasks.is_empty() {
                 return Err(bad("the level has no task".into()));
+            }
+            if m == 0 {
+                return Err(bad("the task has dimension 0".into()));
             }
             for t in &l.tasks {
                 t.check(model).map_err(bad)?;

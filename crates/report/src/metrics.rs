@@ -62,6 +62,24 @@ pub struct LevelDescription {
     pub row_units: Vec<ErrorUnit>,
 }
 
+impl LevelDescription {
+    /// Unit label for plots: that of `unit`, or the distinct row units of a mixed
+    /// level ("m, rad").
+    pub fn unit_label(&self) -> String {
+        let mut labels: Vec<&str> = Vec::new();
+        for u in &self.row_units {
+            if !labels.contains(&u.label()) {
+                labels.push(u.label());
+            }
+        }
+        if self.unit == ErrorUnit::Mixed && !labels.is_empty() {
+            labels.join(", ")
+        } else {
+            self.unit.label().to_string()
+        }
+    }
+}
+
 /// Convergence figures of the error rows of one unit within a mixed level.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UnitGroupMetrics {

@@ -193,7 +193,7 @@ pub fn plot_all(
         .enumerate()
         .map(|(i, l)| Panel {
             title: format!("Level {}: {}", i + 1, l.name),
-            y_label: format!("error [{}]", l.unit.label()),
+            y_label: format!("error [{}]", l.unit_label()),
             series: (1..=l.dim)
                 .filter_map(|k| series(traj, &columns::error(i + 1, k), format!("e{}_{k}", i + 1)))
                 .collect(),
@@ -263,7 +263,7 @@ pub fn plot_all(
             "from tau_mu (cancellation)".into(),
         ));
         if !s.is_empty() {
-            let unit = match run.levels[i - 1].unit.label() {
+            let unit = match run.levels[i - 1].unit_label().as_str() {
                 "" => String::new(),
                 u => format!(" [{u}/s^2]"),
             };
