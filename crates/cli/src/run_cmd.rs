@@ -176,7 +176,7 @@ impl<'a> RowBuilder<'a> {
         Ok(RowBuilder {
             scenario,
             n,
-            dims: scenario.levels.iter().map(|l| l.task.dim()).collect(),
+            dims: scenario.task_dims(),
             period: 1.0 / s.control_rate_hz,
             traj: recorder.trajectory(cycles + 1)?,
             recorder,

@@ -32,6 +32,12 @@
 //! [initial]
 //! q0 = [0.4, -0.5, -1.6, 0.4]
 //! ```
+//!
+//! A level may stack several tasks: `task = "pose"` (position and orientation of a
+//! frame, goal x, y, z, roll, pitch, yaw), or `[[level.task]]` tables (each with
+//! `kind` and the task keys) with per-task gains and goals (K_i, D_i block-diagonal)
+//! or one gain and goal for the whole level. The resolved hierarchy is
+//! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
 pub mod error;
 pub mod schema;
@@ -42,102 +48,12 @@ pub use error::ConfigError;
 pub use hcc_rt::WaitStrategy;
 pub use schema::*;
 
+pub use hcc_control::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
+
 use error::{from_toml, invalid};
-use hcc_control::{ControllerSpec, Form, LevelSpec, TaskSpec};
 use hcc_model::{FrameId, Model};
 use nalgebra::{DMatrix, DVector, Vector3};
 use std::path::{Path, PathBuf};
-
-/// Unit of a level's task coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TaskUnit {
-    /// Metres.
-    Length,
-    /// Radians.
-    Angle,
-}
-
-/// A resolved task (frames and joints looked up in the model).
-#[derive(Clone, Debug, PartialEq)]
-pub enum Task {
-    /// Position of a frame origin along the listed world axes (0 = x, 1 = y, 2 = z).
-    Position {
-        frame: String,
-        frame_id: FrameId,
-        axes: Vec<usize>,
-    },
-    /// Full 3-D orientation of a frame; goal given as roll-pitch-yaw.
-    Orientation { frame: String, frame_id: FrameId },
-    /// Rotation angle of a frame about one world axis (planar arms).
-    PlanarOrientation {
-        frame: String,
-        frame_id: FrameId,
-        axis: usize,
-    },
-    /// Positions of the listed joints (0-based indices).
-    Joint { joints: Vec<usize> },
-    /// The whole joint vector (a `joint` task without a `joints` list).
-    Posture { n: usize },
-    /// x = W q.
-    JointCombination { weights: DMatrix<f64> },
-}
-
-impl Task {
-    /// Task dimension m_i.
-    pub fn dim(&self) -> usize {
-        match self {
-            Task::Position { axes, .. } => axes.len(),
-            Task::Orientation { .. } => 3,
-            Task::PlanarOrientation { .. } => 1,
-            Task::Joint { joints } => joints.len(),
-            Task::Posture { n } => *n,
-            Task::JointCombination { weights } => weights.nrows(),
-        }
-    }
-
-    /// Unit of the task coordinates.
-    pub fn unit(&self) -> TaskUnit {
-        match self {
-            Task::Position { .. } => TaskUnit::Length,
-            _ => TaskUnit::Angle,
-        }
-    }
-
-    /// The control crate's task description.
-    pub fn to_spec(&self) -> TaskSpec {
-        match self {
-            Task::Position { frame_id, axes, .. } => TaskSpec::Position {
-                frame: *frame_id,
-                axes: axes.clone(),
-            },
-            Task::Orientation { frame_id, .. } => TaskSpec::Orientation { frame: *frame_id },
-            Task::PlanarOrientation { frame_id, axis, .. } => TaskSpec::PlanarOrientation {
-                frame: *frame_id,
-                axis: *axis,
-            },
-            Task::Joint { joints } => TaskSpec::Joints {
-                indices: joints.clone(),
-            },
-            Task::Posture { .. } => TaskSpec::Posture,
-            Task::JointCombination { weights } => TaskSpec::JointCombination {
-                weights: weights.clone(),
-            },
-        }
-    }
-}
-
-/// One resolved level of the hierarchy.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Level {
-    pub name: String,
-    pub task: Task,
-    /// K_i (m_i × m_i, symmetric positive definite).
-    pub stiffness: DMatrix<f64>,
-    /// D_i (m_i × m_i, symmetric positive definite).
-    pub damping: DMatrix<f64>,
-    /// x_{i,d} (m_i; roll-pitch-yaw for a 3-D orientation).
-    pub goal: DVector<f64>,
-}
 
 /// An external wrench of the simulation, resolved to a frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -184,28 +100,23 @@ pub struct SimDaemon {
     pub fallback_damping: DVector<f64>,
 }
 
-/// A loaded and checked scenario.
+/// A loaded and checked scenario. Every setting lives in one place: the hierarchy
+/// and the controller options (gravity compensation, τ_μ, form, singular ratio) in
+/// [`Scenario::spec`].
 #[derive(Clone, Debug)]
 pub struct Scenario {
     /// The scenario file.
     pub path: PathBuf,
     /// Name (from the file or its stem).
     pub name: String,
-    /// The file as written.
-    pub file: ScenarioFile,
     /// Resolved URDF path.
     pub urdf_path: PathBuf,
     /// The robot model (chain root → tip, with the configured gravity).
     pub model: Model,
-    /// Levels in priority order.
-    pub levels: Vec<Level>,
-    /// The controller description built from the levels and `[controller]`
-    /// (checked by `hcc_control::Controller::new` at load).
+    /// The controller: the levels in priority order (`spec.levels`, each stacking its
+    /// tasks) and `[controller]`, `[robot] gravity_compensation` (checked by
+    /// `hcc_control::Controller::new` at load).
     pub spec: ControllerSpec,
-    pub gravity_compensation: bool,
-    pub coriolis_cancellation: bool,
-    pub form: FormName,
-    pub singularity: SingularitySection,
     pub q0: DVector<f64>,
     pub qd0: DVector<f64>,
     pub simulation: Simulation,
@@ -215,9 +126,12 @@ pub struct Scenario {
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
+#[derive(Clone, Copy)]
 struct Ctx<'a> {
     file: &'a Path,
     text: &'a str,
+    /// Resolving a level of `[[level.task]]` tables (errors name the table).
+    stacked: bool,
 }
 
 impl Ctx<'_> {
@@ -356,41 +270,12 @@ impl Scenario {
     /// the base for the relative URDF path.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Scenario, ConfigError> {
         let file: ScenarioFile = toml::from_str(text).map_err(|e| from_toml(path, text, &e))?;
-        let cx = Ctx { file: path, text };
-
-        // [robot]
-        let gravity = match &file.robot.gravity {
-            Some(g) => {
-                let v = cx.vector("robot.gravity", g, 3, "x, y, z")?;
-                Some(Vector3::new(v[0], v[1], v[2]))
-            }
-            None => None,
+        let cx = Ctx {
+            file: path,
+            text,
+            stacked: false,
         };
-        let base = path.parent().unwrap_or(Path::new("."));
-        let urdf_path = base.join(&file.robot.urdf);
-        let model = Model::from_urdf_file(
-            &urdf_path,
-            file.robot.root_link.as_deref(),
-            &file.robot.tip_link,
-            gravity,
-        )
-        .map_err(|error| {
-            let field = match &error {
-                hcc_model::ModelError::UnknownLink { what, .. } if what == "root" => {
-                    "robot.root_link"
-                }
-                hcc_model::ModelError::UnknownLink { what, .. } if what == "tip" => {
-                    "robot.tip_link"
-                }
-                hcc_model::ModelError::TipNotBelowRoot { .. } => "robot.tip_link",
-                _ => "robot.urdf",
-            };
-            ConfigError::Model {
-                file: path.to_path_buf(),
-                line: error::locate_path(text, field),
-                error,
-            }
-        })?;
+        let (model, urdf_path) = load_model(&cx, &file.robot)?;
         let n = model.nq();
 
         // [[level]]
@@ -412,72 +297,18 @@ impl Scenario {
             ));
         }
 
-        // [initial]
-        let q0 = cx.vector("initial.q0", &file.initial.q0, n, "one per joint")?;
-        let qd0 = match &file.initial.qd0 {
-            Some(v) => cx.vector("initial.qd0", v, n, "one per joint")?,
-            None => DVector::zeros(n),
-        };
-        for (k, j) in model.joints.iter().enumerate() {
-            if q0[k] < j.lower - 1e-9 || q0[k] > j.upper + 1e-9 {
-                return Err(cx.err(
-                    &format!("initial.q0[{k}]"),
-                    format!(
-                        "{} is outside the limits [{}, {}] of joint '{}'",
-                        q0[k], j.lower, j.upper, j.name
-                    ),
-                ));
-            }
-        }
-
+        let (q0, qd0) = resolve_initial(&cx, &model, &file.initial)?;
         let simulation = resolve_simulation(&cx, &model, &file.simulation)?;
-
-        // [ipc]
-        let ns = &file.ipc.namespace;
-        if ns.is_empty()
-            || !ns
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-        {
-            return Err(cx.err(
-                "ipc.namespace",
-                format!("{ns:?} must be non-empty and use only letters, digits, '_' and '-'"),
-            ));
-        }
+        check_namespace(&cx, &file.ipc.namespace)?;
 
         let spec = ControllerSpec {
-            levels: levels
-                .iter()
-                .map(|l| LevelSpec {
-                    name: l.name.clone(),
-                    task: l.task.to_spec(),
-                    stiffness: l.stiffness.clone(),
-                    damping: l.damping.clone(),
-                    goal: l.goal.clone(),
-                })
-                .collect(),
+            levels,
             gravity_compensation: file.robot.gravity_compensation,
             coriolis_cancellation: file.controller.coriolis_cancellation,
-            form: match file.controller.form {
-                FormName::Extended => Form::Extended,
-                FormName::Projector => Form::ClassicalProjector,
-            },
+            form: file.controller.form,
             singular_ratio: ratio,
         };
-        // Let the controller check the hierarchy as it will run it.
-        if let Err(e) = hcc_control::Controller::new(&model, spec.clone(), &q0) {
-            let field = match &e {
-                hcc_control::ControlError::Level { level, .. } => level
-                    .split_whitespace()
-                    .next()
-                    .and_then(|k| k.parse::<usize>().ok())
-                    .map(|k| format!("level[{}]", k.saturating_sub(1)))
-                    .unwrap_or_else(|| "level".to_string()),
-                hcc_control::ControlError::Spec(_) => "level".to_string(),
-                _ => "initial.q0".to_string(),
-            };
-            return Err(cx.err(&field, format!("rejected by the controller: {e}")));
-        }
+        check_with_controller(&cx, &model, &spec, &q0)?;
 
         let controller_daemon = resolve_controller_daemon(
             &cx,
@@ -496,22 +327,116 @@ impl Scenario {
             path: path.to_path_buf(),
             name,
             urdf_path,
-            levels,
+            model,
             spec,
-            gravity_compensation: file.robot.gravity_compensation,
-            coriolis_cancellation: file.controller.coriolis_cancellation,
-            form: file.controller.form,
-            singularity: file.controller.singularity.clone(),
             q0,
             qd0,
             simulation,
-            ipc: file.ipc.clone(),
+            ipc: file.ipc,
             controller_daemon,
             sim_daemon,
-            model,
-            file,
         })
     }
+}
+
+/// `[robot]`: the model from the URDF (path relative to the scenario file).
+fn load_model(cx: &Ctx, robot: &RobotSection) -> Result<(Model, PathBuf), ConfigError> {
+    let gravity = match &robot.gravity {
+        Some(g) => {
+            let v = cx.vector("robot.gravity", g, 3, "x, y, z")?;
+            Some(Vector3::new(v[0], v[1], v[2]))
+        }
+        None => None,
+    };
+    let base = cx.file.parent().unwrap_or(Path::new("."));
+    let urdf_path = base.join(&robot.urdf);
+    let model = Model::from_urdf_file(
+        &urdf_path,
+        robot.root_link.as_deref(),
+        &robot.tip_link,
+        gravity,
+    )
+    .map_err(|error| {
+        let field = match &error {
+            hcc_model::ModelError::UnknownLink { what, .. } if what == "root" => "robot.root_link",
+            hcc_model::ModelError::UnknownLink { what, .. } if what == "tip" => "robot.tip_link",
+            hcc_model::ModelError::TipNotBelowRoot { .. } => "robot.tip_link",
+            _ => "robot.urdf",
+        };
+        ConfigError::Model {
+            file: cx.file.to_path_buf(),
+            line: error::locate_path(cx.text, field),
+            error,
+        }
+    })?;
+    Ok((model, urdf_path))
+}
+
+/// `[initial]`: q0 (within the joint limits) and q̇0.
+fn resolve_initial(
+    cx: &Ctx,
+    model: &Model,
+    initial: &InitialSection,
+) -> Result<(DVector<f64>, DVector<f64>), ConfigError> {
+    let n = model.nq();
+    let q0 = cx.vector("initial.q0", &initial.q0, n, "one per joint")?;
+    let qd0 = match &initial.qd0 {
+        Some(v) => cx.vector("initial.qd0", v, n, "one per joint")?,
+        None => DVector::zeros(n),
+    };
+    for (k, j) in model.joints.iter().enumerate() {
+        if q0[k] < j.lower - 1e-9 || q0[k] > j.upper + 1e-9 {
+            return Err(cx.err(
+                &format!("initial.q0[{k}]"),
+                format!(
+                    "{} is outside the limits [{}, {}] of joint '{}'",
+                    q0[k], j.lower, j.upper, j.name
+                ),
+            ));
+        }
+    }
+    Ok((q0, qd0))
+}
+
+/// `[ipc] namespace`: non-empty, letters, digits, '_' and '-'.
+fn check_namespace(cx: &Ctx, ns: &str) -> Result<(), ConfigError> {
+    if ns.is_empty()
+        || !ns
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Err(cx.err(
+            "ipc.namespace",
+            format!("{ns:?} must be non-empty and use only letters, digits, '_' and '-'"),
+        ));
+    }
+    Ok(())
+}
+
+/// Lets the controller check the hierarchy as it will run it (ranks at q0).
+fn check_with_controller(
+    cx: &Ctx,
+    model: &Model,
+    spec: &ControllerSpec,
+    q0: &DVector<f64>,
+) -> Result<(), ConfigError> {
+    if let Err(e) = hcc_control::Controller::new(model, spec.clone(), q0) {
+        let field = match &e {
+            hcc_control::ControlError::Level { level, .. } => level
+                .split_whitespace()
+                .next()
+                .and_then(|k| k.parse::<usize>().ok())
+                .map(|k| format!("level[{}]", k.saturating_sub(1)))
+                .unwrap_or_else(|| "level".to_string()),
+            hcc_control::ControlError::Spec(_) if spec.form == Form::KinematicProjector => {
+                "controller.form".to_string()
+            }
+            hcc_control::ControlError::Spec(_) => "level".to_string(),
+            _ => "initial.q0".to_string(),
+        };
+        return Err(cx.err(&field, format!("rejected by the controller: {e}")));
+    }
+    Ok(())
 }
 
 impl Scenario {
@@ -576,10 +501,29 @@ impl Scenario {
 
     /// Switches the Coriolis cancellation τ_μ (eq. 22) on or off (e.g. for the ablation).
     pub fn set_coriolis_cancellation(&mut self, on: bool) -> Result<(), ConfigError> {
-        self.coriolis_cancellation = on;
         self.spec.coriolis_cancellation = on;
         Ok(())
     }
+
+    /// The levels in priority order (those of [`Scenario::spec`]).
+    pub fn levels(&self) -> &[LevelSpec] {
+        &self.spec.levels
+    }
+
+    /// Task dimension m_i of every level.
+    pub fn task_dims(&self) -> Vec<usize> {
+        self.spec.task_dims(self.model.nq())
+    }
+}
+
+/// The keys that select what one task measures: those of a single-task `[[level]]`
+/// or of one `[[level.task]]` table.
+struct TaskKeys<'a> {
+    kind: TaskKind,
+    frame: Option<&'a String>,
+    axes: Option<&'a Vec<AxisName>>,
+    joints: Option<&'a Vec<String>>,
+    weights: Option<&'a Vec<Vec<f64>>>,
 }
 
 fn frame_of(
@@ -587,10 +531,10 @@ fn frame_of(
     model: &Model,
     path: &str,
     name: Option<&String>,
-) -> Result<(String, FrameId), ConfigError> {
+) -> Result<FrameId, ConfigError> {
     let name = name.cloned().unwrap_or_else(|| model.tip_link.clone());
     match model.frame_id(&name) {
-        Some(id) => Ok((name, id)),
+        Some(id) => Ok(id),
         None => Err(cx.err(
             path,
             format!("unknown link '{name}' (not on the chain of the robot model)"),
@@ -598,169 +542,335 @@ fn frame_of(
     }
 }
 
-fn resolve_level(
-    cx: &Ctx,
-    model: &Model,
-    i: usize,
-    l: &LevelSection,
-) -> Result<Level, ConfigError> {
-    let p = |f: &str| format!("level[{i}].{f}");
+/// One task from its keys; `p` is the dotted path of the table holding them.
+fn resolve_task(cx: &Ctx, model: &Model, p: &str, t: &TaskKeys) -> Result<TaskSpec, ConfigError> {
+    let f = |field: &str| format!("{p}.{field}");
     let unused = |field: &str, present: bool| -> Result<(), ConfigError> {
         if present {
             Err(cx.err(
-                &p(field),
-                format!("is not used by a task of kind {:?}", l.task),
+                &f(field),
+                format!("is not used by a task of kind {:?}", t.kind),
             ))
         } else {
             Ok(())
         }
     };
-    let task = match l.task {
+    if matches!(t.kind, TaskKind::Joint | TaskKind::JointCombination) {
+        unused("frame", t.frame.is_some())?;
+        unused("axes", t.axes.is_some())?;
+    }
+    if t.kind != TaskKind::Joint {
+        unused("joints", t.joints.is_some())?;
+    }
+    if t.kind != TaskKind::JointCombination {
+        unused("weights", t.weights.is_some())?;
+    }
+    Ok(match t.kind {
         TaskKind::Position => {
-            unused("joints", l.joints.is_some())?;
-            unused("weights", l.weights.is_some())?;
-            let (frame, frame_id) = frame_of(cx, model, &p("frame"), l.frame.as_ref())?;
-            let axes: Vec<usize> = match &l.axes {
+            let frame = frame_of(cx, model, &f("frame"), t.frame)?;
+            let axes: Vec<usize> = match t.axes {
                 None => vec![0, 1, 2],
                 Some(a) => a.iter().map(|a| a.index()).collect(),
             };
             if axes.is_empty() {
-                return Err(cx.err(&p("axes"), "must list at least one axis"));
+                return Err(cx.err(&f("axes"), "must list at least one axis"));
             }
             for (k, a) in axes.iter().enumerate() {
                 if axes[..k].contains(a) {
-                    return Err(cx.err(&p("axes"), "lists an axis twice"));
+                    return Err(cx.err(&f("axes"), "lists an axis twice"));
                 }
             }
-            Task::Position {
-                frame,
-                frame_id,
-                axes,
+            TaskSpec::Position { frame, axes }
+        }
+        TaskKind::Pose => {
+            unused("axes", t.axes.is_some())?;
+            TaskSpec::Pose {
+                frame: frame_of(cx, model, &f("frame"), t.frame)?,
             }
         }
         TaskKind::Orientation => {
-            unused("joints", l.joints.is_some())?;
-            unused("weights", l.weights.is_some())?;
-            let (frame, frame_id) = frame_of(cx, model, &p("frame"), l.frame.as_ref())?;
-            match &l.axes {
-                None => Task::Orientation { frame, frame_id },
-                Some(a) if a.len() == 1 => Task::PlanarOrientation {
+            let frame = frame_of(cx, model, &f("frame"), t.frame)?;
+            match t.axes {
+                None => TaskSpec::Orientation { frame },
+                Some(a) if a.len() == 1 => TaskSpec::PlanarOrientation {
                     frame,
-                    frame_id,
                     axis: a[0].index(),
                 },
                 Some(_) => {
                     return Err(cx.err(
-                        &p("axes"),
+                        &f("axes"),
                         "an orientation task takes either no axes (3-D) or exactly one (planar)",
                     ));
                 }
             }
         }
         TaskKind::JointCombination => {
-            unused("frame", l.frame.is_some())?;
-            unused("axes", l.axes.is_some())?;
-            unused("joints", l.joints.is_some())?;
             let n = model.nq();
-            let rows = l
+            let rows = t
                 .weights
-                .as_ref()
-                .ok_or_else(|| cx.err(&p("weights"), "is required for a joint_combination task"))?;
+                .ok_or_else(|| cx.err(&f("weights"), "is required for a joint_combination task"))?;
             if rows.is_empty() {
-                return Err(cx.err(&p("weights"), "must have at least one row"));
+                return Err(cx.err(&f("weights"), "must have at least one row"));
             }
             for (k, row) in rows.iter().enumerate() {
+                let rp = format!("{p}.weights[{k}]");
                 if row.len() != n {
                     return Err(cx.err(
-                        &format!("level[{i}].weights[{k}]"),
+                        &rp,
                         format!("has {} elements, expected {n} (one per joint)", row.len()),
                     ));
                 }
-                cx.finite(&format!("level[{i}].weights[{k}]"), row)?;
+                cx.finite(&rp, row)?;
             }
-            Task::JointCombination {
+            TaskSpec::JointCombination {
                 weights: DMatrix::from_fn(rows.len(), n, |a, b| rows[a][b]),
             }
         }
-        TaskKind::Joint => {
-            unused("frame", l.frame.is_some())?;
-            unused("axes", l.axes.is_some())?;
-            unused("weights", l.weights.is_some())?;
-            match &l.joints {
-                None => Task::Posture { n: model.nq() },
-                Some(names) => {
-                    let mut idx = Vec::with_capacity(names.len());
-                    for (k, name) in names.iter().enumerate() {
-                        match model.joints.iter().position(|j| &j.name == name) {
-                            Some(j) if !idx.contains(&j) => idx.push(j),
-                            Some(_) => {
-                                return Err(cx.err(
-                                    &format!("level[{i}].joints[{k}]"),
-                                    format!("joint '{name}' is listed twice"),
-                                ));
-                            }
-                            None => {
-                                return Err(cx.err(
-                                    &format!("level[{i}].joints[{k}]"),
-                                    format!(
-                                        "unknown joint '{name}' (not a movable joint of the chain)"
-                                    ),
-                                ));
-                            }
-                        }
-                    }
-                    if idx.is_empty() {
-                        return Err(cx.err(&p("joints"), "must list at least one joint"));
-                    }
-                    Task::Joint { joints: idx }
-                }
+        TaskKind::Joint => match t.joints {
+            None => TaskSpec::Posture,
+            Some(names) => TaskSpec::Joints {
+                indices: joint_indices(cx, model, p, names)?,
+            },
+        },
+    })
+}
+
+fn joint_indices(
+    cx: &Ctx,
+    model: &Model,
+    p: &str,
+    names: &[String],
+) -> Result<Vec<usize>, ConfigError> {
+    let mut idx = Vec::with_capacity(names.len());
+    for (k, name) in names.iter().enumerate() {
+        let jp = format!("{p}.joints[{k}]");
+        match model.joints.iter().position(|j| &j.name == name) {
+            Some(j) if !idx.contains(&j) => idx.push(j),
+            Some(_) => return Err(cx.err(&jp, format!("joint '{name}' is listed twice"))),
+            None => {
+                return Err(cx.err(
+                    &jp,
+                    format!("unknown joint '{name}' (not a movable joint of the chain)"),
+                ));
             }
         }
+    }
+    if idx.is_empty() {
+        return Err(cx.err(&format!("{p}.joints"), "must list at least one joint"));
+    }
+    Ok(idx)
+}
+
+/// A level's gain (`what` = "stiffness" or "damping") over its stacked coordinates:
+/// the level's own value, or block-diagonal from the value of every task table.
+fn level_gain(
+    cx: &Ctx,
+    p: &str,
+    what: &str,
+    level: Option<&GainValue>,
+    tasks: &[(Option<&GainValue>, usize)],
+) -> Result<DMatrix<f64>, ConfigError> {
+    let m: usize = tasks.iter().map(|t| t.1).sum();
+    if let Some(g) = level {
+        if let Some(k) = tasks.iter().position(|t| t.0.is_some()) {
+            return Err(cx.err(
+                &format!("{p}.task[{k}].{what}"),
+                format!("is also given for the whole level: give the {what} once"),
+            ));
+        }
+        return cx.gain(&format!("{p}.{what}"), g, m);
+    }
+    let mut out = DMatrix::zeros(m, m);
+    let mut o = 0;
+    for (k, (g, d)) in tasks.iter().enumerate() {
+        let path = if tasks.len() == 1 && !cx.stacked {
+            format!("{p}.{what}")
+        } else {
+            format!("{p}.task[{k}].{what}")
+        };
+        let g =
+            g.ok_or_else(|| cx.err(&path, format!("is required (or a {what} for the level)")))?;
+        out.view_mut((o, o), (*d, *d))
+            .copy_from(&cx.gain(&path, g, *d)?);
+        o += d;
+    }
+    Ok(out)
+}
+
+/// A level's goal: the level's own value or the tasks' goals stacked.
+fn level_goal(
+    cx: &Ctx,
+    p: &str,
+    level: Option<&Vec<f64>>,
+    tasks: &[(Option<&Vec<f64>>, usize)],
+) -> Result<DVector<f64>, ConfigError> {
+    let m: usize = tasks.iter().map(|t| t.1).sum();
+    if let Some(g) = level {
+        if let Some(k) = tasks.iter().position(|t| t.0.is_some()) {
+            return Err(cx.err(
+                &format!("{p}.task[{k}].goal"),
+                "is also given for the whole level: give the goal once",
+            ));
+        }
+        return cx.vector(&format!("{p}.goal"), g, m, "the task dimension");
+    }
+    let mut out = DVector::zeros(m);
+    let mut o = 0;
+    for (k, (g, d)) in tasks.iter().enumerate() {
+        let path = if tasks.len() == 1 && !cx.stacked {
+            format!("{p}.goal")
+        } else {
+            format!("{p}.task[{k}].goal")
+        };
+        let g = g.ok_or_else(|| cx.err(&path, "is required (or a goal for the level)"))?;
+        out.rows_mut(o, *d)
+            .copy_from(&cx.vector(&path, g, *d, "the task dimension")?);
+        o += d;
+    }
+    Ok(out)
+}
+
+fn resolve_level(
+    cx: &Ctx,
+    model: &Model,
+    i: usize,
+    l: &LevelSection,
+) -> Result<LevelSpec, ConfigError> {
+    let p = format!("level[{i}]");
+    let n = model.nq();
+    let level_keys = TaskKeys {
+        kind: TaskKind::Joint,
+        frame: l.frame.as_ref(),
+        axes: l.axes.as_ref(),
+        joints: l.joints.as_ref(),
+        weights: l.weights.as_ref(),
     };
-    let m = task.dim();
-    let stiffness = cx.gain(&p("stiffness"), &l.stiffness, m)?;
-    let damping = cx.gain(&p("damping"), &l.damping, m)?;
-    let goal = cx.vector(&p("goal"), &l.goal, m, "the task dimension")?;
-    let name = l.name.clone().unwrap_or_else(|| default_name(model, &task));
-    Ok(Level {
+    let (tasks, stiffness, damping, goal) = match &l.task {
+        LevelTasks::Kind(kind) => {
+            let task = resolve_task(
+                cx,
+                model,
+                &p,
+                &TaskKeys {
+                    kind: *kind,
+                    ..level_keys
+                },
+            )?;
+            let m = task.dim(n);
+            let stiffness = level_gain(cx, &p, "stiffness", None, &[(l.stiffness.as_ref(), m)])?;
+            let damping = level_gain(cx, &p, "damping", None, &[(l.damping.as_ref(), m)])?;
+            let goal = level_goal(cx, &p, None, &[(l.goal.as_ref(), m)])?;
+            (vec![task], stiffness, damping, goal)
+        }
+        LevelTasks::Stack(tables) => {
+            for (field, present) in [
+                ("frame", l.frame.is_some()),
+                ("axes", l.axes.is_some()),
+                ("joints", l.joints.is_some()),
+                ("weights", l.weights.is_some()),
+            ] {
+                if present {
+                    return Err(cx.err(
+                        &format!("{p}.{field}"),
+                        "belongs in a [[level.task]] table when the level stacks tasks",
+                    ));
+                }
+            }
+            if tables.is_empty() {
+                return Err(cx.err(&format!("{p}.task"), "must hold at least one task"));
+            }
+            let mut tasks = Vec::with_capacity(tables.len());
+            for (k, t) in tables.iter().enumerate() {
+                let keys = TaskKeys {
+                    kind: t.kind,
+                    frame: t.frame.as_ref(),
+                    axes: t.axes.as_ref(),
+                    joints: t.joints.as_ref(),
+                    weights: t.weights.as_ref(),
+                };
+                tasks.push(resolve_task(cx, model, &format!("{p}.task[{k}]"), &keys)?);
+            }
+            let dims: Vec<usize> = tasks.iter().map(|t| t.dim(n)).collect();
+            let cxs = Ctx {
+                stacked: true,
+                ..*cx
+            };
+            let gains =
+                |f: fn(&TaskTable) -> Option<&GainValue>| -> Vec<(Option<&GainValue>, usize)> {
+                    tables.iter().zip(&dims).map(|(t, &d)| (f(t), d)).collect()
+                };
+            let stiffness = level_gain(
+                &cxs,
+                &p,
+                "stiffness",
+                l.stiffness.as_ref(),
+                &gains(|t| t.stiffness.as_ref()),
+            )?;
+            let damping = level_gain(
+                &cxs,
+                &p,
+                "damping",
+                l.damping.as_ref(),
+                &gains(|t| t.damping.as_ref()),
+            )?;
+            let goals: Vec<_> = tables
+                .iter()
+                .zip(&dims)
+                .map(|(t, &d)| (t.goal.as_ref(), d))
+                .collect();
+            let goal = level_goal(&cxs, &p, l.goal.as_ref(), &goals)?;
+            (tasks, stiffness, damping, goal)
+        }
+    };
+    let name = l
+        .name
+        .clone()
+        .unwrap_or_else(|| default_name(model, &tasks));
+    Ok(LevelSpec {
         name,
-        task,
+        tasks,
         stiffness,
         damping,
         goal,
     })
 }
 
-fn default_name(model: &Model, task: &Task) -> String {
+fn default_name(model: &Model, tasks: &[TaskSpec]) -> String {
     const AX: [&str; 3] = ["x", "y", "z"];
-    match task {
-        Task::Position { frame, axes, .. } => {
-            let a: String = axes.iter().map(|&k| AX[k]).collect();
-            format!("{frame} position {a}")
-        }
-        Task::Orientation { frame, .. } => format!("{frame} orientation"),
-        Task::PlanarOrientation { frame, axis, .. } => {
-            format!("{frame} rotation about {}", AX[*axis])
-        }
-        Task::Posture { .. } => "joint posture".to_string(),
-        Task::JointCombination { .. } => "joint combination".to_string(),
-        Task::Joint { joints } => {
-            let names: Vec<&str> = joints
-                .iter()
-                .map(|&j| model.joints[j].name.as_str())
-                .collect();
-            format!("joint {}", names.join(", "))
-        }
-    }
+    let frame = |f: &FrameId| model.frames[*f].name.clone();
+    let names: Vec<String> = tasks
+        .iter()
+        .map(|t| match t {
+            TaskSpec::Position { frame: f, axes } => {
+                let a: String = axes.iter().map(|&k| AX[k]).collect();
+                format!("{} position {a}", frame(f))
+            }
+            TaskSpec::Orientation { frame: f } => format!("{} orientation", frame(f)),
+            TaskSpec::Pose { frame: f } => format!("{} pose", frame(f)),
+            TaskSpec::PlanarOrientation { frame: f, axis } => {
+                format!("{} rotation about {}", frame(f), AX[*axis])
+            }
+            TaskSpec::Posture => "joint posture".to_string(),
+            TaskSpec::JointCombination { .. } => "joint combination".to_string(),
+            TaskSpec::Joints { indices } => {
+                let names: Vec<&str> = indices
+                    .iter()
+                    .map(|&j| model.joints[j].name.as_str())
+                    .collect();
+                format!("joint {}", names.join(", "))
+            }
+        })
+        .collect();
+    names.join(" + ")
 }
 
 /// Dimension rules of the hierarchy (Sec. II): every level but the last must leave a
 /// null space, Σ_{i<r} m_i < n; the last level may be of any dimension.
-fn check_hierarchy(cx: &Ctx, levels: &[Level], n: usize) -> Result<(), ConfigError> {
+fn check_hierarchy(cx: &Ctx, levels: &[LevelSpec], n: usize) -> Result<(), ConfigError> {
     let mut sum = 0;
     let r = levels.len();
     for (i, l) in levels.iter().enumerate() {
-        let m = l.task.dim();
+        let m = l.dim(n);
         if m > n {
             return Err(cx.err(
                 &format!("level[{i}]"),

@@ -70,7 +70,7 @@ pub enum PerJoint {
     Vector(Vec<f64>),
 }
 
-/// Kind of task of a level.
+/// Kind of task (the `task` key of a `[[level]]`, the `kind` key of a `[[level.task]]`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TaskKind {
@@ -79,10 +79,61 @@ pub enum TaskKind {
     /// Orientation of a frame: 3-D (goal as roll-pitch-yaw in rad), or the rotation
     /// angle about one world axis for planar arms (`axes = ["z"]`, goal one angle).
     Orientation,
+    /// Position and orientation of a frame (6-D, goal x, y, z, roll, pitch, yaw).
+    Pose,
     /// Joint positions of the listed joints (default: all joints, the posture).
     Joint,
     /// A linear combination of joint positions, x = W q (`weights`: m rows of n).
     JointCombination,
+}
+
+/// The `task` of a `[[level]]`: one kind (`task = "pose"`), or the stacked tasks of
+/// the level as `[[level.task]]` tables.
+#[derive(Clone, Debug)]
+pub enum LevelTasks {
+    Kind(TaskKind),
+    Stack(Vec<TaskTable>),
+}
+
+impl<'de> Deserialize<'de> for LevelTasks {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = LevelTasks;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a task kind (e.g. \"position\") or [[level.task]] tables")
+            }
+            fn visit_str<E: serde::de::Error>(self, s: &str) -> Result<LevelTasks, E> {
+                use serde::de::IntoDeserializer;
+                TaskKind::deserialize(s.into_deserializer()).map(LevelTasks::Kind)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, a: A) -> Result<LevelTasks, A::Error> {
+                Vec::<TaskTable>::deserialize(serde::de::value::SeqAccessDeserializer::new(a))
+                    .map(LevelTasks::Stack)
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// `[[level.task]]`: one of the stacked tasks of a level. Its gains and goal are
+/// either given here (the level's K_i and D_i are then block-diagonal) or for the
+/// whole level.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskTable {
+    pub kind: TaskKind,
+    /// Frame (link) of a Cartesian task (default: the tip link).
+    pub frame: Option<String>,
+    /// Axes of a position task, or the single axis of a planar orientation task.
+    pub axes: Option<Vec<AxisName>>,
+    /// Joints of a joint task (default: all).
+    pub joints: Option<Vec<String>>,
+    /// Rows of W for a joint-combination task (each of length n).
+    pub weights: Option<Vec<Vec<f64>>>,
+    pub stiffness: Option<GainValue>,
+    pub damping: Option<GainValue>,
+    pub goal: Option<Vec<f64>>,
 }
 
 /// A Cartesian axis name.
@@ -111,7 +162,7 @@ impl AxisName {
 pub struct LevelSection {
     /// Name for reports (default from the task).
     pub name: Option<String>,
-    pub task: TaskKind,
+    pub task: LevelTasks,
     /// Frame (link) of a Cartesian task (default: the tip link).
     pub frame: Option<String>,
     /// Axes of a position task (default x, y, z), or the single rotation axis of a
@@ -121,23 +172,13 @@ pub struct LevelSection {
     pub joints: Option<Vec<String>>,
     /// Rows of W for a joint-combination task (each of length n).
     pub weights: Option<Vec<Vec<f64>>>,
-    /// Stiffness K_i (N/m, Nm/rad): scalar, diagonal or full symmetric positive definite.
-    pub stiffness: GainValue,
+    /// Stiffness K_i (N/m, Nm/rad): scalar, diagonal or full symmetric positive
+    /// definite over the level's (stacked) coordinates.
+    pub stiffness: Option<GainValue>,
     /// Damping D_i (Ns/m, Nms/rad): scalar, diagonal or full symmetric positive definite.
-    pub damping: GainValue,
+    pub damping: Option<GainValue>,
     /// Virtual equilibrium x_{i,d} (task dimension; roll-pitch-yaw for 3-D orientation).
-    pub goal: Vec<f64>,
-}
-
-/// Form of the null-space projection.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum FormName {
-    /// J̄_iᵀ Z_i J_iᵀ with the extended Jacobian (eqs. 5, 12, 21).
-    #[default]
-    Extended,
-    /// N_i J_iᵀ with the classical projector (eqs. 8, 9, 10).
-    Projector,
+    pub goal: Option<Vec<f64>>,
 }
 
 /// `[controller]`
@@ -147,8 +188,9 @@ pub struct ControllerSection {
     /// Add the power-conserving Coriolis cancellation τ_μ (eq. 22).
     #[serde(default = "yes")]
     pub coriolis_cancellation: bool,
+    /// Form of the null-space torques (`extended`, `projector`, `kinematic_projector`).
     #[serde(default)]
-    pub form: FormName,
+    pub form: hcc_control::Form,
     #[serde(default)]
     pub singularity: SingularitySection,
 }
@@ -157,7 +199,7 @@ impl Default for ControllerSection {
     fn default() -> Self {
         ControllerSection {
             coriolis_cancellation: true,
-            form: FormName::Extended,
+            form: hcc_control::Form::Extended,
             singularity: SingularitySection::default(),
         }
     }

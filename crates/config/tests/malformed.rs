@@ -1,7 +1,7 @@
 //! Table-driven checks of malformed scenario files: each case must fail with an
 //! error that names the offending field (dotted path) and, where given, the line.
 
-use hcc_config::{ConfigError, Scenario, Task};
+use hcc_config::{ConfigError, Scenario, TaskSpec};
 use std::path::PathBuf;
 
 /// A valid scenario (the paper's simulation #1). The file name is virtual; the
@@ -79,15 +79,17 @@ fn edit(from: &str, to: &str) -> String {
 fn base_is_valid() {
     let s = load(BASE).unwrap();
     assert_eq!(s.model.nq(), 4);
-    assert_eq!(s.levels.len(), 3);
-    assert_eq!(s.levels[0].task.dim(), 2);
+    assert_eq!(s.levels().len(), 3);
+    assert_eq!(s.levels()[0].dim(4), 2);
     assert!(matches!(
-        s.levels[1].task,
-        Task::PlanarOrientation { axis: 2, .. }
+        s.levels()[1].tasks[..],
+        [TaskSpec::PlanarOrientation { axis: 2, .. }]
     ));
-    assert!(matches!(&s.levels[2].task, Task::Joint { joints } if joints == &vec![0]));
-    assert_eq!(s.levels[0].stiffness[(1, 1)], 1000.0);
-    assert_eq!(s.levels[1].damping[(0, 0)], 5.0);
+    assert!(
+        matches!(&s.levels()[2].tasks[..], [TaskSpec::Joints { indices }] if indices == &vec![0])
+    );
+    assert_eq!(s.levels()[0].stiffness[(1, 1)], 1000.0);
+    assert_eq!(s.levels()[1].damping[(0, 0)], 5.0);
     assert_eq!(s.simulation.substeps, 10);
     assert_eq!(s.simulation.wrenches.len(), 1);
     assert_eq!(s.qd0.len(), 4);
@@ -95,14 +97,9 @@ fn base_is_valid() {
     assert_eq!(s.controller_daemon.sched_priority, Some(80));
     assert_eq!(s.sim_daemon.mode, hcc_config::SimMode::Lockstep);
     assert_eq!(s.ipc.namespace, "hcc");
-    assert!(s.gravity_compensation && s.coriolis_cancellation);
     assert_eq!(s.name, "base");
-    // The controller spec mirrors the levels.
+    // The controller spec holds the levels.
     assert_eq!(s.spec.levels.len(), 3);
-    assert!(matches!(
-        s.spec.levels[1].task,
-        hcc_control::TaskSpec::PlanarOrientation { axis: 2, .. }
-    ));
     assert_eq!(s.spec.levels[2].goal[0], 0.35);
     assert!(s.spec.coriolis_cancellation && s.spec.gravity_compensation);
 }
@@ -120,13 +117,10 @@ fn joint_combination_and_posture() {
     );
     let s = load(&text).unwrap();
     assert!(
-        matches!(&s.spec.levels[1].task, hcc_control::TaskSpec::JointCombination { weights } if weights.shape() == (1, 4))
+        matches!(&s.spec.levels[1].tasks[..], [TaskSpec::JointCombination { weights }] if weights.shape() == (1, 4))
     );
-    assert!(matches!(
-        s.spec.levels[2].task,
-        hcc_control::TaskSpec::Posture
-    ));
-    assert_eq!(s.levels[2].task.dim(), 4);
+    assert!(matches!(s.spec.levels[2].tasks[..], [TaskSpec::Posture]));
+    assert_eq!(s.levels()[2].dim(4), 4);
     let mut s = s;
     s.set_coriolis_cancellation(false).unwrap();
     assert!(!s.spec.coriolis_cancellation);
@@ -560,6 +554,7 @@ fn shipped_scenarios_load() {
         "paper-sim1.toml",
         "paper-sim2.toml",
         "panda-pose-posture.toml",
+        "panda-cartesian-impedance.toml",
     ] {
         let p = dir.join(f);
         if f.starts_with("panda") && !p.exists() {
@@ -567,6 +562,16 @@ fn shipped_scenarios_load() {
         }
         let s = Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(s.simulation.duration_s, 3.0, "{f}");
+    }
+    for f in [
+        "panda-null-space-comparison.toml",
+        "panda-null-space-comparison-push.toml",
+    ] {
+        let s = Scenario::load(dir.join(f)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            matches!(s.levels()[0].tasks[..], [TaskSpec::Pose { .. }]),
+            "{f}"
+        );
     }
 }
 
@@ -594,4 +599,171 @@ fn cpu_cores_are_checked_against_the_available_ones() {
     assert_eq!(s.controller_daemon.stale_timeout_ms, 3.0);
     let slow = load(&edit("control_rate_hz = 1000.0", "control_rate_hz = 500.0")).unwrap();
     assert_eq!(slow.controller_daemon.stale_timeout_ms, 6.0);
+}
+
+/// A two-level Panda scenario whose first level is written as stacked
+/// `[[level.task]]` tables (`STACK`), to be edited by the tests below.
+const STACKED: &str = r#"[robot]
+urdf = "robots/panda/panda.urdf"
+tip_link = "panda_hand_tcp"
+
+[[level]]
+name = "hand"
+
+[[level.task]]
+kind = "position"
+stiffness = 300.0
+damping = 35.0
+goal = [0.48, 0.0, 0.41]
+
+[[level.task]]
+kind = "orientation"
+stiffness = [20.0, 20.0, 20.0]
+damping = 9.0
+goal = [3.0, 0.0, 0.0]
+
+[[level]]
+task = "joint"
+stiffness = 5.0
+damping = 4.5
+goal = [0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]
+
+[initial]
+q0 = [0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]
+"#;
+
+#[test]
+fn stacked_tasks_and_the_pose_task() {
+    let s = load(STACKED).unwrap_or_else(|e| panic!("{e}"));
+    let l = &s.levels()[0];
+    assert!(matches!(
+        l.tasks[..],
+        [TaskSpec::Position { .. }, TaskSpec::Orientation { .. }]
+    ));
+    assert_eq!(l.dim(7), 6);
+    // Block-diagonal K and D from the per-task gains, goals stacked.
+    assert_eq!(l.stiffness[(2, 2)], 300.0);
+    assert_eq!(l.stiffness[(3, 3)], 20.0);
+    assert_eq!(l.stiffness[(0, 3)], 0.0);
+    assert_eq!(l.damping[(5, 5)], 9.0);
+    assert_eq!(l.goal.as_slice(), &[0.48, 0.0, 0.41, 3.0, 0.0, 0.0]);
+    assert_eq!(l.unit(7), None);
+    assert_eq!(s.levels()[1].unit(7), Some(hcc_config::TaskUnit::Angle));
+
+    // One gain for the whole stacked level (here a full 6×6 matrix).
+    let full = STACKED
+        .replace("stiffness = 300.0\n", "")
+        .replace("stiffness = [20.0, 20.0, 20.0]\n", "")
+        .replace(
+            "name = \"hand\"\n",
+            "name = \"hand\"\nstiffness = [[300, 0, 0, 0, 5, 0], [0, 300, 0, 0, 0, 0], [0, 0, 300, 0, 0, 0], [0, 0, 0, 20, 0, 0], [5, 0, 0, 0, 20, 0], [0, 0, 0, 0, 0, 20]]\n",
+        );
+    let s = load(&full).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.levels()[0].stiffness[(4, 0)], 5.0);
+
+    // task = "pose": the same level as one task.
+    let pose = STACKED.replacen(
+        "name = \"hand\"\n",
+        "name = \"hand\"\ntask = \"pose\"\nstiffness = [300, 300, 300, 20, 20, 20]\ndamping = [35, 35, 35, 9, 9, 9]\ngoal = [0.48, 0.0, 0.41, 3.0, 0.0, 0.0]\n",
+        1,
+    );
+    let pose = pose[..pose.find("[[level.task]]").unwrap()].to_string()
+        + &pose[pose.find("[[level]]\ntask = \"joint\"").unwrap()..];
+    let s = load(&pose).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(s.levels()[0].tasks[..], [TaskSpec::Pose { .. }]));
+    assert_eq!(s.levels()[0].name, "hand");
+    assert_eq!(s.levels()[0].damping[(4, 4)], 9.0);
+
+    // The comparison form.
+    let kin = STACKED.replace(
+        "[initial]",
+        "[controller]\nform = \"kinematic_projector\"\n\n[initial]",
+    );
+    let s = load(&kin).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.spec.form, hcc_config::Form::KinematicProjector);
+}
+
+#[test]
+fn malformed_stacked_levels_name_the_field() {
+    let cases: Vec<(&str, String, &str)> = vec![
+        (
+            "gain for the level and a task",
+            STACKED.replacen(
+                "name = \"hand\"\n",
+                "name = \"hand\"\nstiffness = 300.0\n",
+                1,
+            ),
+            "level[0].task[0].stiffness",
+        ),
+        (
+            "missing task gain",
+            STACKED.replacen("damping = 9.0\n", "", 1),
+            "level[0].task[1].damping",
+        ),
+        (
+            "task gain of the wrong size",
+            STACKED.replacen(
+                "stiffness = [20.0, 20.0, 20.0]",
+                "stiffness = [20.0, 20.0]",
+                1,
+            ),
+            "level[0].task[1].stiffness",
+        ),
+        (
+            "frame on a stacked level",
+            STACKED.replacen(
+                "name = \"hand\"\n",
+                "name = \"hand\"\nframe = \"panda_hand_tcp\"\n",
+                1,
+            ),
+            "level[0].frame",
+        ),
+        (
+            "unknown frame in a task table",
+            STACKED.replacen(
+                "kind = \"orientation\"",
+                "kind = \"orientation\"\nframe = \"nowhere\"",
+                1,
+            ),
+            "level[0].task[1].frame",
+        ),
+        (
+            "unknown task kind in a table",
+            STACKED.replacen("kind = \"orientation\"", "kind = \"torque\"", 1),
+            "level[0].task",
+        ),
+        (
+            "unknown key in a task table",
+            STACKED.replacen(
+                "kind = \"orientation\"",
+                "kind = \"orientation\"\ngain = 1.0",
+                1,
+            ),
+            "level[0].task",
+        ),
+        (
+            "missing goal of a single-task level",
+            STACKED.replacen("goal = [0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]\n", "", 1),
+            "level[1].goal",
+        ),
+        (
+            "kinematic projector with three levels",
+            edit(
+                "coriolis_cancellation = true",
+                "coriolis_cancellation = true\nform = \"kinematic_projector\"",
+            ),
+            "controller.form",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, text, field) in cases {
+        match load(&text) {
+            Ok(_) => failures.push(format!("{name}: loaded without error")),
+            Err(e) if !e.to_string().contains(field) => {
+                failures.push(format!("{name}: message does not name {field:?}: {e}"))
+            }
+            Err(_) => {}
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

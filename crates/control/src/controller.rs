@@ -5,9 +5,10 @@ use crate::dense::{
     AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemm_tn_sym,
     gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
-use crate::spec::{ControllerSpec, Form, TaskSpec};
+use crate::spec::{ControllerSpec, Form, LevelSpec};
+use crate::task::{FrameWork, PotentialWork};
 use hcc_model::{Data, Model};
-use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector};
 
 /// The lower levels' torques and τ_μ fade out between `FADE_RANGE × singular_ratio`
 /// and `singular_ratio` of a level's eigenvalue ratio (see the crate docs, "Singularities").
@@ -67,6 +68,31 @@ pub struct Output {
     pub fade: Vec<f64>,
     /// The factor τ_μ was scaled by (it fades with the conditioning of every level).
     pub fade_mu: f64,
+    /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`] only (zero otherwise).
+    pub coriolis: DVector<f64>,
+}
+
+impl Output {
+    fn new(n: usize, dims: &[usize], v_dims: &[usize]) -> Output {
+        let r = dims.len();
+        Output {
+            tau: DVector::zeros(n),
+            tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
+            tau_mu: DVector::zeros(n),
+            gravity: DVector::zeros(n),
+            task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
+            v: v_dims.iter().map(|&d| DVector::zeros(d)).collect(),
+            potential: vec![0.0; r],
+            storage: vec![0.0; r],
+            p_mu: 0.0,
+            singular: vec![false; r],
+            any_singular: false,
+            conditioning: vec![1.0; r],
+            fade: vec![1.0; r],
+            fade_mu: 1.0,
+            coriolis: DVector::zeros(n),
+        }
+    }
 }
 
 /// Per-level workspace.
@@ -78,7 +104,8 @@ struct Level {
     stiffness: DMatrix<f64>,
     damping: DMatrix<f64>,
     goal: DVector<f64>,
-    goal_rotation: Rotation3<f64>,
+    /// R_d of the quaternion tasks and the buffers of the potential.
+    pot: PotentialWork,
     // task
     j: DMatrix<f64>,
     jdot: DMatrix<f64>,
@@ -153,6 +180,58 @@ impl Projection {
     }
 }
 
+impl Level {
+    /// Buffers of level `i` (0-based) of `r` for `n` joints: m = m_i, `k` = Σ_{j<i} m_j,
+    /// `ktop` the rows of the levels above the lowest.
+    fn new(
+        spec: &LevelSpec,
+        i: usize,
+        r: usize,
+        m: usize,
+        n: usize,
+        k: usize,
+        ktop: usize,
+    ) -> Level {
+        let d = if i > 0 && i == r - 1 { n - k } else { m };
+        let middle = i > 0 && i < r - 1;
+        let proj = if middle {
+            Projection::new(k, m, n, ktop)
+        } else {
+            Projection::new(0, 0, 0, 0)
+        };
+        Level {
+            m,
+            d,
+            stiffness: spec.stiffness.clone(),
+            damping: spec.damping.clone(),
+            goal: spec.goal.clone(),
+            pot: PotentialWork::new(&spec.tasks, &spec.goal, n),
+            j: DMatrix::zeros(m, n),
+            jdot: DMatrix::zeros(m, n),
+            err: DVector::zeros(m),
+            grad: DVector::zeros(m),
+            xdot: DVector::zeros(m),
+            f: DVector::zeros(m),
+            potential: 0.0,
+            z: DMatrix::zeros(d, n),
+            zdot: DMatrix::zeros(d, n),
+            zm: DMatrix::zeros(if middle { d } else { 0 }, n),
+            zmdot: DMatrix::zeros(if middle { d } else { 0 }, n),
+            lambda: DMatrix::zeros(d, d),
+            lambda_inv: DMatrix::zeros(d, d),
+            lambda_dot: DMatrix::zeros(d, d),
+            jbar: DMatrix::zeros(d, n),
+            jbar_inv: DMatrix::zeros(n, d),
+            v: DVector::zeros(d),
+            y_d: DVector::zeros(d),
+            y_d2: DVector::zeros(d),
+            y_d3: DVector::zeros(d),
+            spd: SpdWork::new(d),
+            proj,
+        }
+    }
+}
+
 /// Null space of the augmented Jacobian of the levels above the lowest one
 /// (eqs. 6–9), for Z_r = V_{r−1}ᵀ.
 #[derive(Clone, Debug)]
@@ -181,11 +260,49 @@ struct NullSpace {
     /// Vᵀ x and S Vᵀ x for the classical projector form.
     y_nd: DVector<f64>,
     y_nd2: DVector<f64>,
+    /// J x and (J Jᵀ)⁻¹ J x for the kinematic projector form.
+    y_k: DVector<f64>,
+    y_k2: DVector<f64>,
     spd_k: SpdWork,
     spd_d: SpdWork,
     align: AlignWork,
     gram_cond: Conditioning,
     s_cond: Conditioning,
+}
+
+impl NullSpace {
+    /// Buffers for an `nb`-joint robot (0 without a null-space level), `kb` rows above
+    /// the lowest level and an `nd`-dimensional null space.
+    fn new(nb: usize, kb: usize, nd: usize) -> NullSpace {
+        NullSpace {
+            qr_work: DMatrix::zeros(nb, kb),
+            qr_q: DMatrix::zeros(nb, nb),
+            v: DMatrix::zeros(nb, nd),
+            v_prev: DMatrix::zeros(nb, nd),
+            has_prev: false,
+            vdot: DMatrix::zeros(nb, nd),
+            gram: DMatrix::zeros(kb, kb),
+            gram_inv: DMatrix::zeros(kb, kb),
+            t1: DMatrix::zeros(kb, nd),
+            t2: DMatrix::zeros(kb, nd),
+            mv: DMatrix::zeros(nb, nd),
+            mdv: DMatrix::zeros(nb, nd),
+            vtmv: DMatrix::zeros(nd, nd),
+            s: DMatrix::zeros(nd, nd),
+            x: DMatrix::zeros(nd, nd),
+            tmp_dd: DMatrix::zeros(nd, nd),
+            jbar_t: DMatrix::zeros(nb, nd),
+            y_nd: DVector::zeros(nd),
+            y_nd2: DVector::zeros(nd),
+            y_k: DVector::zeros(kb),
+            y_k2: DVector::zeros(kb),
+            spd_k: SpdWork::new(kb),
+            spd_d: SpdWork::new(nd),
+            align: AlignWork::new(nb, nd),
+            gram_cond: Conditioning::default(),
+            s_cond: Conditioning::default(),
+        }
+    }
 }
 
 /// The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer (IROS 2013).
@@ -221,10 +338,8 @@ pub struct Controller {
     /// Cholesky factor of M (M⁻¹ is applied by solves, never formed).
     chol: DMatrix<f64>,
     mdot: DMatrix<f64>,
-    frame_j: DMatrix<f64>,
-    frame_jdot: DMatrix<f64>,
-    /// The frame whose J, J̇ and placement `frame_j`, `frame_jdot` hold in this cycle.
-    frame_cache: Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
+    /// Frame Jacobians of the current cycle (shared by the tasks on one frame).
+    frames: FrameWork,
     /// M⁻¹ J_1ᵀ (n × m_1).
     minv_j1t: DMatrix<f64>,
     /// Ẏ and Ẇ are needed (a level between the first and the lowest exists).
@@ -260,105 +375,19 @@ impl Controller {
         let mut levels = Vec::with_capacity(r);
         let mut k = 0;
         for (i, l) in spec.levels.iter().enumerate() {
-            let m = dims[i];
-            let d = if i == 0 {
-                m
-            } else if i == r - 1 {
-                n - k
-            } else {
-                m
-            };
-            let goal_rotation = match &l.task {
-                TaskSpec::Orientation { .. } => {
-                    Rotation3::from_euler_angles(l.goal[0], l.goal[1], l.goal[2])
-                }
-                _ => Rotation3::identity(),
-            };
-            let proj = if i > 0 && i < r - 1 {
-                Projection::new(k, m, n, ktop)
-            } else {
-                Projection::new(0, 0, 0, 0)
-            };
-            levels.push(Level {
-                m,
-                d,
-                stiffness: l.stiffness.clone(),
-                damping: l.damping.clone(),
-                goal: l.goal.clone(),
-                goal_rotation,
-                j: DMatrix::zeros(m, n),
-                jdot: DMatrix::zeros(m, n),
-                err: DVector::zeros(m),
-                grad: DVector::zeros(m),
-                xdot: DVector::zeros(m),
-                f: DVector::zeros(m),
-                potential: 0.0,
-                z: DMatrix::zeros(d, n),
-                zdot: DMatrix::zeros(d, n),
-                zm: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
-                zmdot: DMatrix::zeros(if i > 0 && i < r - 1 { d } else { 0 }, n),
-                lambda: DMatrix::zeros(d, d),
-                lambda_inv: DMatrix::zeros(d, d),
-                lambda_dot: DMatrix::zeros(d, d),
-                jbar: DMatrix::zeros(d, n),
-                jbar_inv: DMatrix::zeros(n, d),
-                v: DVector::zeros(d),
-                y_d: DVector::zeros(d),
-                y_d2: DVector::zeros(d),
-                y_d3: DVector::zeros(d),
-                spd: SpdWork::new(d),
-                proj,
-            });
-            k += m;
+            levels.push(Level::new(l, i, r, dims[i], n, k, ktop));
+            k += dims[i];
         }
         // The lowest level's null space: k = K rows above it, n − K columns.
-        let (kb, nd) = if r > 1 { (ktop, n - ktop) } else { (0, 0) };
-        let nb = if r > 1 { n } else { 0 };
-        let basis = NullSpace {
-            qr_work: DMatrix::zeros(nb, kb),
-            qr_q: DMatrix::zeros(nb, nb),
-            v: DMatrix::zeros(nb, nd),
-            v_prev: DMatrix::zeros(nb, nd),
-            has_prev: false,
-            vdot: DMatrix::zeros(nb, nd),
-            gram: DMatrix::zeros(kb, kb),
-            gram_inv: DMatrix::zeros(kb, kb),
-            t1: DMatrix::zeros(kb, nd),
-            t2: DMatrix::zeros(kb, nd),
-            mv: DMatrix::zeros(nb, nd),
-            mdv: DMatrix::zeros(nb, nd),
-            vtmv: DMatrix::zeros(nd, nd),
-            s: DMatrix::zeros(nd, nd),
-            x: DMatrix::zeros(nd, nd),
-            tmp_dd: DMatrix::zeros(nd, nd),
-            jbar_t: DMatrix::zeros(nb, nd),
-            y_nd: DVector::zeros(nd),
-            y_nd2: DVector::zeros(nd),
-            spd_k: SpdWork::new(kb),
-            spd_d: SpdWork::new(nd),
-            align: AlignWork::new(nb, nd),
-            gram_cond: Conditioning::default(),
-            s_cond: Conditioning::default(),
+        let basis = if r > 1 {
+            NullSpace::new(n, ktop, n - ktop)
+        } else {
+            NullSpace::new(0, 0, 0)
         };
         let middle = r > 2;
         let kd = if middle { ktop } else { 0 };
-        let m1 = dims[0];
-        let out = Output {
-            tau: DVector::zeros(n),
-            tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
-            tau_mu: DVector::zeros(n),
-            gravity: DVector::zeros(n),
-            task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
-            v: levels.iter().map(|l| DVector::zeros(l.d)).collect(),
-            potential: vec![0.0; r],
-            storage: vec![0.0; r],
-            p_mu: 0.0,
-            singular: vec![false; r],
-            any_singular: false,
-            conditioning: vec![1.0; r],
-            fade: vec![1.0; r],
-            fade_mu: 1.0,
-        };
+        let v_dims: Vec<usize> = levels.iter().map(|l| l.d).collect();
+        let out = Output::new(n, &dims, &v_dims);
         let mut c = Controller {
             data: Data::new(model),
             model: model.clone(),
@@ -380,10 +409,8 @@ impl Controller {
             qd: DVector::zeros(n),
             chol: DMatrix::zeros(n, n),
             mdot: DMatrix::zeros(n, n),
-            frame_j: DMatrix::zeros(6, n),
-            frame_jdot: DMatrix::zeros(6, n),
-            frame_cache: None,
-            minv_j1t: DMatrix::zeros(n, m1),
+            frames: FrameWork::new(n),
+            minv_j1t: DMatrix::zeros(n, dims[0]),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
@@ -494,6 +521,11 @@ impl Controller {
         self.levels[i].m
     }
 
+    /// The (stacked) task Jacobian J_i of level `i` (0-based) of the last cycle.
+    pub fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        &self.levels[i].j
+    }
+
     /// The model the controller was built with.
     pub fn model(&self) -> &Model {
         &self.model
@@ -507,14 +539,6 @@ impl Controller {
     /// Result of the last cycle.
     pub fn output(&self) -> &Output {
         &self.out
-    }
-
-    /// The task Jacobian J_i (m_i × n) of level `i` (0-based) at the state of the
-    /// last [`Controller::step`]: selection rows of the frame Jacobian for a
-    /// position, its angular rows for an orientation, selection or weights for a
-    /// joint task (eqs. 20, 21).
-    pub fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
-        &self.levels[i].j
     }
 
     /// Switches τ_μ (eq. 22) on or off (the ablation).
@@ -538,9 +562,7 @@ impl Controller {
             ));
         }
         l.goal.as_mut_slice().copy_from_slice(goal);
-        if let TaskSpec::Orientation { .. } = self.spec.levels[i].task {
-            l.goal_rotation = Rotation3::from_euler_angles(goal[0], goal[1], goal[2]);
-        }
+        l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
         Ok(())
     }
 
@@ -576,8 +598,8 @@ impl Controller {
         }
     }
 
+    /// One evaluation of the law at (q, q̇) into [`Controller::output`].
     fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
-        let n = self.n;
         let r = self.levels.len();
         let eps = self.spec.singular_ratio;
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
@@ -590,7 +612,7 @@ impl Controller {
         self.out.gravity.copy_from(&self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
-        self.frame_cache = None;
+        self.frames.invalidate();
         for i in 0..r {
             self.evaluate_task(i, q, qd);
         }
@@ -599,107 +621,10 @@ impl Controller {
         // formed), W = J M⁻¹ Jᵀ, whose diagonal blocks are J_i M⁻¹ J_iᵀ and whose
         // leading blocks are J_aug M⁻¹ J_augᵀ (eq. 8), and their derivatives with
         // d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹.
-        {
-            let mut row = 0;
-            let top = self.jtop.nrows();
-            for l in &self.levels {
-                if row == top {
-                    break;
-                }
-                copy_block(&mut self.jtop, row, 0, &l.j, 0, 0, l.m, n);
-                copy_block(&mut self.jtop_dot, row, 0, &l.jdot, 0, 0, l.m, n);
-                row += l.m;
-            }
-            transpose_into(&mut self.jtop_t, &self.jtop);
-            self.yt.copy_from(&self.jtop_t);
-            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
-                .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
-            transpose_into(&mut self.y, &self.yt);
-            gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
-            if self.middle {
-                transpose_into(&mut self.yt_dot, &self.jtop_dot);
-                gemm(&mut self.yt_dot, -1.0, &self.mdot, &self.yt, 1.0);
-                hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt_dot)
-                    .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
-                transpose_into(&mut self.y_dot, &self.yt_dot);
-                gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
-                gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
-            }
-        }
-
-        // Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
-        {
-            let l = &mut self.levels[0];
-            copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
-            copy_block(&mut self.minv_j1t, 0, 0, &self.yt, 0, 0, n, l.m);
-            let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
-            self.out.conditioning[0] = c.ratio;
-            self.out.singular[0] = c.damping > 0.0;
-            l.jbar.copy_from(&l.j);
-            // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
-            gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
-        }
-
-        // Null-space levels (eqs. 5–13, 16–18).
+        self.stack_top()?;
+        self.first_level();
         for i in 1..r {
-            let lowest = i == r - 1;
-            if lowest {
-                self.null_space()?;
-            }
-            let l = &mut self.levels[i];
-            let (c, gc) = if lowest {
-                // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
-                // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
-                let ns = &mut self.basis;
-                transpose_into(&mut l.z, &ns.v);
-                transpose_into(&mut l.zdot, &ns.vdot);
-                l.lambda.copy_from(&ns.vtmv);
-                l.lambda_inv.copy_from(&ns.s);
-                l.lambda_dot.copy_from(&ns.x);
-                gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
-                transpose_into(&mut l.jbar, &ns.jbar_t);
-                (ns.s_cond, ns.gram_cond)
-            } else {
-                // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
-                // Z_i = Y_i − T Y_aug, T = H G⁻¹, and Ż_i = Ẏ_i − Ṫ Y_aug − T Ẏ_aug with
-                // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
-                let p = &mut l.proj;
-                let (k, m) = (p.k, l.m);
-                copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
-                copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
-                copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
-                copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
-                copy_block(&mut p.y_aug, 0, 0, &self.y, 0, 0, k, n);
-                copy_block(&mut p.y_aug_dot, 0, 0, &self.y_dot, 0, 0, k, n);
-                copy_block(&mut l.z, 0, 0, &self.y, k, 0, m, n);
-                copy_block(&mut l.zdot, 0, 0, &self.y_dot, k, 0, m, n);
-                p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
-                gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
-                gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
-                gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
-                gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
-                gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
-                gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
-                // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
-                gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
-                gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
-                gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
-                gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
-                gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
-                gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
-                let c =
-                    damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
-                // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
-                gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
-                (c, p.g_cond)
-            };
-            self.out.conditioning[i] = c.ratio.min(gc.ratio);
-            self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
-            // The projection of level i inverts the Gram matrix of the levels above
-            // it: its torque fades as that one becomes singular (crate docs).
-            self.out.fade[i] = fade_factor(gc.ratio, eps);
-            // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-            transpose_into(&mut l.jbar_inv, &l.z);
+            self.null_space_level(i)?;
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
         // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
@@ -710,7 +635,138 @@ impl Controller {
             .map(|&c| fade_factor(c, eps))
             .product();
 
-        // Torques of the levels (eqs. 20, 21) and the local velocities v_i (eq. 3).
+        self.level_torques(qd);
+        self.coriolis_cancellation(qd)?;
+        // τ = Σ τ_i + τ_μ + g (eq. 19).
+        self.out.tau.copy_from(&self.out.tau_mu);
+        for t in &self.out.tau_level {
+            self.out.tau += t;
+        }
+        if self.spec.form == Form::KinematicProjector {
+            // The comparison law adds C q̇ instead of τ_μ.
+            gemv(&mut self.out.coriolis, 1.0, &self.data.c, qd, 0.0);
+            self.out.tau += &self.out.coriolis;
+        }
+        if self.spec.gravity_compensation {
+            self.out.tau += &self.data.g;
+        }
+        if self.out.tau.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::Numerical("non-finite torque"));
+        }
+        Ok(())
+    }
+
+    /// The levels above the lowest, stacked (see the comment in [`Controller::compute`]).
+    fn stack_top(&mut self) -> Result<(), ControlError> {
+        let n = self.n;
+        let mut row = 0;
+        let top = self.jtop.nrows();
+        for l in &self.levels {
+            if row == top {
+                break;
+            }
+            copy_block(&mut self.jtop, row, 0, &l.j, 0, 0, l.m, n);
+            copy_block(&mut self.jtop_dot, row, 0, &l.jdot, 0, 0, l.m, n);
+            row += l.m;
+        }
+        transpose_into(&mut self.jtop_t, &self.jtop);
+        self.yt.copy_from(&self.jtop_t);
+        hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
+            .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
+        transpose_into(&mut self.y, &self.yt);
+        gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
+        if self.middle {
+            transpose_into(&mut self.yt_dot, &self.jtop_dot);
+            gemm(&mut self.yt_dot, -1.0, &self.mdot, &self.yt, 1.0);
+            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt_dot)
+                .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
+            transpose_into(&mut self.y_dot, &self.yt_dot);
+            gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
+            gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
+        }
+        Ok(())
+    }
+
+    /// Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
+    fn first_level(&mut self) {
+        let (n, eps) = (self.n, self.spec.singular_ratio);
+        let l = &mut self.levels[0];
+        copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
+        copy_block(&mut self.minv_j1t, 0, 0, &self.yt, 0, 0, n, l.m);
+        let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
+        self.out.conditioning[0] = c.ratio;
+        self.out.singular[0] = c.damping > 0.0;
+        l.jbar.copy_from(&l.j);
+        // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
+        gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
+    }
+
+    /// Null-space level i ≥ 2 (eqs. 5–13, 16–18).
+    fn null_space_level(&mut self, i: usize) -> Result<(), ControlError> {
+        let (n, r, eps) = (self.n, self.levels.len(), self.spec.singular_ratio);
+        let lowest = i == r - 1;
+        if lowest {
+            self.null_space()?;
+        }
+        let l = &mut self.levels[i];
+        let (c, gc) = if lowest {
+            // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
+            // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
+            let ns = &mut self.basis;
+            transpose_into(&mut l.z, &ns.v);
+            transpose_into(&mut l.zdot, &ns.vdot);
+            l.lambda.copy_from(&ns.vtmv);
+            l.lambda_inv.copy_from(&ns.s);
+            l.lambda_dot.copy_from(&ns.x);
+            gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
+            transpose_into(&mut l.jbar, &ns.jbar_t);
+            (ns.s_cond, ns.gram_cond)
+        } else {
+            // Z_i = J_i M⁻¹ N_i (eq. 11) with N_i = I − J_augᵀ (J_aug^{M+})ᵀ (eq. 8):
+            // Z_i = Y_i − T Y_aug, T = H G⁻¹, and Ż_i = Ẏ_i − Ṫ Y_aug − T Ẏ_aug with
+            // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
+            let p = &mut l.proj;
+            let (k, m) = (p.k, l.m);
+            copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
+            copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
+            copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
+            copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
+            copy_block(&mut p.y_aug, 0, 0, &self.y, 0, 0, k, n);
+            copy_block(&mut p.y_aug_dot, 0, 0, &self.y_dot, 0, 0, k, n);
+            copy_block(&mut l.z, 0, 0, &self.y, k, 0, m, n);
+            copy_block(&mut l.zdot, 0, 0, &self.y_dot, k, 0, m, n);
+            p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+            gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
+            gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
+            gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
+            gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
+            gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
+            gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
+            // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
+            gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
+            gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
+            gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+            gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
+            let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
+            // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
+            gemm(&mut l.jbar, 1.0, &l.lambda_inv, &l.zm, 0.0);
+            (c, p.g_cond)
+        };
+        self.out.conditioning[i] = c.ratio.min(gc.ratio);
+        self.out.singular[i] = c.damping > 0.0 || gc.damping > 0.0;
+        // The projection of level i inverts the Gram matrix of the levels above
+        // it: its torque fades as that one becomes singular (crate docs).
+        self.out.fade[i] = fade_factor(gc.ratio, eps);
+        // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+        transpose_into(&mut l.jbar_inv, &l.z);
+        Ok(())
+    }
+
+    /// Torques of the levels (eqs. 20, 21) and the local velocities v_i (eq. 3).
+    fn level_torques(&mut self, qd: &DVector<f64>) {
+        let r = self.levels.len();
         for i in 0..r {
             let l = &mut self.levels[i];
             gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
@@ -748,6 +804,16 @@ impl Controller {
                         tau_i.copy_from(&self.tmp_n);
                         gemv_t(tau_i, 1.0, &self.jtop, &p.y_top, -1.0);
                     }
+                    Form::KinematicProjector => {
+                        // (I − J_1ᵀ (J_1ᵀ)⁺) τ_2 with (J_1ᵀ)⁺ = (J_1 J_1ᵀ)⁻¹ J_1 (r = 2:
+                        // `jtop` = J_1, the Gram matrix and its damped inverse are the
+                        // null space's), τ_2 = −J_2ᵀ F_2.
+                        let ns = &mut self.basis;
+                        gemv(&mut ns.y_k, 1.0, &self.jtop, &self.tmp_n, 0.0);
+                        gemv(&mut ns.y_k2, 1.0, &ns.gram_inv, &ns.y_k, 0.0);
+                        tau_i.copy_from(&self.tmp_n);
+                        gemv_t(tau_i, 1.0, &self.jtop, &ns.y_k2, -1.0);
+                    }
                 }
             }
             if self.out.fade[i] < 1.0 {
@@ -760,13 +826,16 @@ impl Controller {
             gemv(&mut l.y_d2, 1.0, &l.lambda, &l.v, 0.0);
             self.out.storage[i] = 0.5 * l.v.dot(&l.y_d2) + l.potential;
         }
+    }
 
-        // τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22) with μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17):
-        // Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i = u, so each level needs one
-        // matrix-vector chain, J̄̇_i u = Λ_i⁻¹ (Ż_i M u + Z_i Ṁ u − Λ̇_i J̄_i u) included
-        // (J̄̇_1 = J̇_1): J̄̇_i itself is never formed.
+    /// τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22) with μ = Λ (J̄ M⁻¹ C − J̄̇) J̄⁻¹ (eq. 17):
+    /// Σ_{j≠i} (J̄⁻¹)_j v_j = q̇ − (J̄⁻¹)_i v_i = u, so each level needs one
+    /// matrix-vector chain, J̄̇_i u = Λ_i⁻¹ (Ż_i M u + Z_i Ṁ u − Λ̇_i J̄_i u) included
+    /// (J̄̇_1 = J̇_1): J̄̇_i itself is never formed.
+    fn coriolis_cancellation(&mut self, qd: &DVector<f64>) -> Result<(), ControlError> {
+        let r = self.levels.len();
         self.out.tau_mu.fill(0.0);
-        if self.spec.coriolis_cancellation {
+        if self.spec.coriolis_cancellation && self.spec.form != Form::KinematicProjector {
             for i in 0..r {
                 let l = &mut self.levels[i];
                 self.tmp_n.copy_from(qd);
@@ -794,18 +863,6 @@ impl Controller {
             self.out.tau_mu *= self.out.fade_mu;
         }
         self.out.p_mu = self.out.tau_mu.dot(qd);
-
-        // τ = Σ τ_i + τ_μ + g (eq. 19).
-        self.out.tau.copy_from(&self.out.tau_mu);
-        for t in &self.out.tau_level {
-            self.out.tau += t;
-        }
-        if self.spec.gravity_compensation {
-            self.out.tau += &self.data.g;
-        }
-        if self.out.tau.iter().any(|x| !x.is_finite()) {
-            return Err(ControlError::Numerical("non-finite torque"));
-        }
         Ok(())
     }
 
@@ -862,109 +919,28 @@ impl Controller {
 
     /// x̃_i, J_i, J̇_i, the potential V_i and its gradient, ẋ_i and F_i.
     fn evaluate_task(&mut self, i: usize, q: &DVector<f64>, qd: &DVector<f64>) {
-        let n = self.n;
         let l = &mut self.levels[i];
-        let task = &self.spec.levels[i].task;
-        match task {
-            TaskSpec::Position { frame, axes } => {
-                let placement = frame_terms(
-                    &self.model,
-                    &self.data,
-                    *frame,
-                    &mut self.frame_j,
-                    &mut self.frame_jdot,
-                    &mut self.frame_cache,
-                );
-                let p = placement.translation.vector;
-                for (a, &ax) in axes.iter().enumerate() {
-                    l.err[a] = p[ax] - l.goal[a];
-                    for b in 0..n {
-                        l.j[(a, b)] = self.frame_j[(ax, b)];
-                        l.jdot[(a, b)] = self.frame_jdot[(ax, b)];
-                    }
-                }
-                quadratic(l);
-            }
-            TaskSpec::PlanarOrientation { frame, axis } => {
-                let placement = frame_terms(
-                    &self.model,
-                    &self.data,
-                    *frame,
-                    &mut self.frame_j,
-                    &mut self.frame_jdot,
-                    &mut self.frame_cache,
-                );
-                let rot = placement.rotation.to_rotation_matrix();
-                let m = rot.matrix();
-                let angle = match axis {
-                    0 => m[(2, 1)].atan2(m[(1, 1)]),
-                    1 => m[(0, 2)].atan2(m[(2, 2)]),
-                    _ => m[(1, 0)].atan2(m[(0, 0)]),
-                };
-                l.err[0] = wrap_angle(angle - l.goal[0]);
-                for b in 0..n {
-                    l.j[(0, b)] = self.frame_j[(3 + axis, b)];
-                    l.jdot[(0, b)] = self.frame_jdot[(3 + axis, b)];
-                }
-                quadratic(l);
-            }
-            TaskSpec::Orientation { frame } => {
-                let placement = frame_terms(
-                    &self.model,
-                    &self.data,
-                    *frame,
-                    &mut self.frame_j,
-                    &mut self.frame_jdot,
-                    &mut self.frame_cache,
-                );
-                let rot = placement.rotation.to_rotation_matrix();
-                let re = l.goal_rotation.inverse() * rot;
-                let quat = UnitQuaternion::from_rotation_matrix(&re);
-                let (mut eta, mut eps) = (quat.w, quat.imag());
-                if eta < 0.0 {
-                    eta = -eta;
-                    eps = -eps;
-                }
-                let k = Matrix3::from_fn(|a, b| l.stiffness[(a, b)]);
-                let keps = k * eps;
-                // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
-                l.potential = 2.0 * eps.dot(&keps);
-                let f_goal = 2.0 * (eta * keps + eps.cross(&keps));
-                let grad = l.goal_rotation * f_goal;
-                let err: Vector3<f64> = l.goal_rotation * (2.0 * eps);
-                for a in 0..3 {
-                    l.err[a] = err[a];
-                    l.grad[a] = grad[a];
-                    for b in 0..n {
-                        l.j[(a, b)] = self.frame_j[(3 + a, b)];
-                        l.jdot[(a, b)] = self.frame_jdot[(3 + a, b)];
-                    }
-                }
-            }
-            TaskSpec::Joints { indices } => {
-                l.j.fill(0.0);
-                l.jdot.fill(0.0);
-                for (a, &ix) in indices.iter().enumerate() {
-                    l.err[a] = q[ix] - l.goal[a];
-                    l.j[(a, ix)] = 1.0;
-                }
-                quadratic(l);
-            }
-            TaskSpec::JointCombination { weights } => {
-                l.j.copy_from(weights);
-                l.jdot.fill(0.0);
-                gemv(&mut l.err, 1.0, weights, q, 0.0);
-                l.err -= &l.goal;
-                quadratic(l);
-            }
-            TaskSpec::Posture => {
-                l.j.fill_with_identity();
-                l.jdot.fill(0.0);
-                l.err.copy_from(q);
-                l.err -= &l.goal;
-                quadratic(l);
-            }
-        }
+        let tasks = &self.spec.levels[i].tasks;
+        let (model, data) = (&self.model, &self.data);
+        crate::task::jacobian(
+            model,
+            data,
+            tasks,
+            &mut self.frames,
+            &mut l.j,
+            Some(&mut l.jdot),
+        );
+        l.potential = crate::task::potential(
+            model,
+            data,
+            tasks,
+            q,
+            &l.stiffness,
+            &l.goal,
+            &mut l.pot,
+            &mut l.err,
+            &mut l.grad,
+        );
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
         // F_i = (∂V_i/∂x_i)ᵀ + D_i ẋ_i.
         l.f.copy_from(&l.grad);
@@ -1041,47 +1017,6 @@ pub struct Diagnostics {
     pub m: DMatrix<f64>,
     pub minv: DMatrix<f64>,
     pub c: DMatrix<f64>,
-}
-
-/// Frame Jacobian J and its time derivative J̇ (world axes at the frame origin) into
-/// the given buffers, and the frame's world placement. `cache` names the frame the
-/// buffers hold in this cycle (consecutive tasks on one frame, e.g. TCP position and
-/// orientation, compute them once).
-fn frame_terms(
-    model: &Model,
-    data: &Data,
-    frame: hcc_model::FrameId,
-    j: &mut DMatrix<f64>,
-    jdot: &mut DMatrix<f64>,
-    cache: &mut Option<(hcc_model::FrameId, nalgebra::Isometry3<f64>)>,
-) -> nalgebra::Isometry3<f64> {
-    if let Some((f, placement)) = *cache
-        && f == frame
-    {
-        return placement;
-    }
-    hcc_model::frame_jacobian(model, data, frame, j);
-    hcc_model::frame_jacobian_time_variation(model, data, frame, jdot);
-    let placement = hcc_model::frame_placement(model, data, frame);
-    *cache = Some((frame, placement));
-    placement
-}
-
-/// V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
-fn quadratic(l: &mut Level) {
-    gemv(&mut l.grad, 1.0, &l.stiffness, &l.err, 0.0);
-    l.potential = 0.5 * l.err.dot(&l.grad);
-}
-
-fn wrap_angle(a: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    let mut x = a % two_pi;
-    if x > std::f64::consts::PI {
-        x -= two_pi;
-    } else if x <= -std::f64::consts::PI {
-        x += two_pi;
-    }
-    x
 }
 
 /// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).

@@ -19,6 +19,18 @@
 //!   τ_i = −J̄_iᵀ Z_i J_iᵀ F_i (eq. 21), F_i = ∂V_i/∂x_iᵀ + D_i ẋ_i, and the
 //!   power-conserving τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22).
 //!
+//! **Levels of several tasks.** A level stacks the rows of its tasks ([`TaskSpec`],
+//! e.g. the 6-D [`TaskSpec::Pose`] or a position and an orientation): x_i, J_i and
+//! J̇_i are stacked, V_i = ½ eᵀ K_i e over the stacked errors (e = 2ε on quaternion
+//! rows), K_i and D_i are m_i × m_i over the stacked coordinates; everything above
+//! holds for the stacked level. [`task::jacobian`] assembles J_i (one routine for the
+//! law and the recorders).
+//!
+//! **Comparison form.** [`Form::KinematicProjector`] (for comparison only, r = 2) is
+//! the common Cartesian impedance law τ = −J_1ᵀ F_1 + (I − J_1ᵀ (J_1ᵀ)⁺) τ_2 + C q̇,
+//! with the Moore–Penrose pseudo-inverse and no τ_μ: its posture torque disturbs
+//! level 1 (J_1 M⁻¹ τ_2 ≠ 0), which eqs. (5), (21) avoid.
+//!
 //! **Basis continuity.** Z_i for i < r does not depend on a basis (only on the
 //! subspace, eq. 11), but Z_r = V_{r−1}ᵀ does, and a QR basis is not a
 //! continuous function of q. Each cycle the previous basis is therefore projected onto
@@ -59,10 +71,11 @@ pub mod controller;
 pub mod dense;
 pub mod saturation;
 pub mod spec;
+pub mod task;
 
 pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
 pub use saturation::saturate;
-pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec};
+pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 
 /// Errors of construction and of a cycle.
 #[derive(Debug, thiserror::Error)]

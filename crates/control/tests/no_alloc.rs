@@ -45,3 +45,43 @@ fn ten_thousand_panda_steps_allocate_nothing() {
         after - before
     );
 }
+
+/// The same for the stacked pose level (coupled 6×6 stiffness) above the posture, in
+/// the extended and the kinematic projector form.
+#[test]
+fn pose_level_steps_allocate_nothing() {
+    let model = panda();
+    let q0 = vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8];
+    for form in [
+        hcc_control::Form::Extended,
+        hcc_control::Form::KinematicProjector,
+    ] {
+        let mut spec = panda_pose_spec(&model, true);
+        spec.form = form;
+        let mut c =
+            Controller::new(&model, spec, &DVector::from_vec(q0.clone())).expect("controller");
+        let mut q = q0.clone();
+        let qd = vec![0.1, -0.2, 0.15, 0.1, -0.3, 0.2, 0.25];
+        c.step(&q, &qd).expect("warm-up");
+        let before = hcc_rtalloc::thread_stats().allocs;
+        let mut sum = 0.0;
+        for k in 0..2_000 {
+            for (qi, vi) in q.iter_mut().zip(&qd) {
+                *qi += 1e-4 * vi;
+            }
+            sum += c.step(&q, &qd).expect("step").tau[0];
+            if k % 500 == 0 {
+                c.set_goal(0, &[0.4, 0.1, 0.5, 3.0, 0.1, 0.2])
+                    .expect("goal");
+            }
+        }
+        let after = hcc_rtalloc::thread_stats().allocs;
+        assert!(sum.is_finite());
+        assert_eq!(
+            after - before,
+            0,
+            "{form:?}: allocated {} times",
+            after - before
+        );
+    }
+}

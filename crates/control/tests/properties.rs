@@ -180,6 +180,42 @@ fn panda_properties() {
     report("panda", &w);
 }
 
+/// The same checks with a stacked level: the 6-D TCP pose (one level) above the posture.
+#[test]
+fn panda_pose_posture_properties() {
+    let model = panda();
+    let w = check_robot(&model, panda_pose_spec(&model, false), 4);
+    report("panda pose/posture", &w);
+    let w = check_robot(&model, panda_stacked_spec(&model), 5);
+    report("panda position+orientation stacked/posture", &w);
+}
+
+/// A pose level and the same level written as two stacked tasks (position, orientation)
+/// are one law: identical torques.
+#[test]
+fn pose_task_equals_stacked_position_and_orientation() {
+    let model = panda();
+    let mut rng = StdRng::seed_from_u64(6);
+    let (mut a, mut b) = (None, None);
+    let mut tested = 0;
+    while tested < 50 {
+        let (q, qd) = random_state(&model, &mut rng);
+        let q0 = DVector::from_vec(q.clone());
+        let (Ok(ca), Ok(cb)) = (
+            Controller::new(&model, panda_pose_spec(&model, false), &q0),
+            Controller::new(&model, panda_stacked_spec(&model), &q0),
+        ) else {
+            continue;
+        };
+        tested += 1;
+        let ca = a.insert(ca);
+        let cb = b.insert(cb);
+        let ta = ca.step(&q, &qd).expect("step").tau.clone();
+        let tb = cb.step(&q, &qd).expect("step").tau.clone();
+        assert!(close(ta.as_slice(), tb.as_slice(), 1e-12), "{ta} vs {tb}");
+    }
+}
+
 /// The task force is the gradient of the task potential (the premise of eqs. 26–29):
 /// with q̇ = 0, τ_1 = −J_1ᵀ ∂V_1/∂x_1ᵀ, so V_1(q + h u) − V_1(q − h u) ≈ −2h τ_1ᵀ u for
 /// any direction u. Checked for the quaternion orientation potential and the position
@@ -220,4 +256,55 @@ fn task_forces_are_gradients_of_the_potentials() {
         }
     }
     println!("potential gradients: worst relative deviation {worst:.1e}");
+}
+
+/// The pose task (diagonal and coupled 6×6 stiffness): the force is the gradient of
+/// the potential (V(q + h u) − V(q − h u) ≈ −2h τ_1ᵀ u at q̇ = 0), and J̇ is the time
+/// derivative of J along q(t) = q + t q̇ (central differences).
+#[test]
+fn pose_task_gradient_and_jdot_by_finite_differences() {
+    let model = panda();
+    let mut rng = StdRng::seed_from_u64(7);
+    let (mut worst_grad, mut worst_jdot): (f64, f64) = (0.0, 0.0);
+    for coupled in [false, true] {
+        let full = panda_pose_spec(&model, coupled);
+        let mut spec = ControllerSpec::new(vec![full.levels[0].clone()]);
+        spec.gravity_compensation = false;
+        spec.coriolis_cancellation = false;
+        let mut tested = 0;
+        while tested < 50 {
+            let (q, u) = random_state(&model, &mut rng);
+            let Ok(mut c) = Controller::new(&model, spec.clone(), &DVector::from_vec(q.clone()))
+            else {
+                continue;
+            };
+            tested += 1;
+            let zero = vec![0.0; q.len()];
+            let tau = c.step(&q, &zero).expect("step").tau_level[0].clone();
+            let h = 1e-6;
+            let along = |s: f64| -> Vec<f64> { q.iter().zip(&u).map(|(a, b)| a + s * b).collect() };
+            let dv = (c.step(&along(h), &zero).expect("step").potential[0]
+                - c.step(&along(-h), &zero).expect("step").potential[0])
+                / (2.0 * h);
+            let predicted = -tau.dot(&DVector::from_vec(u.clone()));
+            let e = (dv - predicted).abs() / predicted.abs().max(1.0);
+            worst_grad = worst_grad.max(e);
+            assert!(
+                e <= 1e-6,
+                "coupled {coupled}: dV/dt {dv} vs −τᵀu {predicted}"
+            );
+            // J̇ at (q, u) against (J(q + h u) − J(q − h u)) / 2h.
+            c.step(&q, &u).expect("step");
+            let jdot = c.diagnostics().jbar_dot;
+            c.step(&along(h), &u).expect("step");
+            let jp = c.task_jacobian(0).clone();
+            c.step(&along(-h), &u).expect("step");
+            let jm = c.task_jacobian(0).clone();
+            let fd = (jp - jm) / (2.0 * h);
+            let e = (&fd - &jdot).norm() / jdot.norm().max(1.0);
+            worst_jdot = worst_jdot.max(e);
+            assert!(e <= 1e-6, "coupled {coupled}: J̇ relative {e:e}");
+        }
+    }
+    println!("pose task: gradient {worst_grad:.1e}, J̇ {worst_jdot:.1e} (worst relative)");
 }

@@ -52,10 +52,10 @@ fn invalid_hierarchies_are_refused_with_the_level() {
     let mut spec = planar_spec(&model, "sim1");
     spec.levels[1] = LevelSpec {
         name: "tcp x again".into(),
-        task: TaskSpec::Position {
+        tasks: vec![TaskSpec::Position {
             frame: tcp,
             axes: vec![0],
-        },
+        }],
         stiffness: DMatrix::from_element(1, 1, 100.0),
         damping: DMatrix::from_element(1, 1, 10.0),
         goal: DVector::from_element(1, 0.9),
@@ -64,7 +64,7 @@ fn invalid_hierarchies_are_refused_with_the_level() {
     assert!(err.contains("level 2"), "{err}");
     // Too many dimensions above the lowest level.
     let mut spec = planar_spec(&model, "sim1");
-    spec.levels[1].task = TaskSpec::Posture;
+    spec.levels[1].tasks = vec![TaskSpec::Posture];
     spec.levels[1].stiffness = DMatrix::identity(4, 4);
     spec.levels[1].damping = DMatrix::identity(4, 4);
     spec.levels[1].goal = DVector::zeros(4);
@@ -92,7 +92,7 @@ fn invalid_hierarchies_are_refused_with_the_level() {
     assert!(err.contains("level 1") && err.contains("goal"), "{err}");
     // Joint index out of range, found without a configuration by `validate`.
     let mut spec = planar_spec(&model, "sim1");
-    spec.levels[2].task = TaskSpec::Joints { indices: vec![4] };
+    spec.levels[2].tasks = vec![TaskSpec::Joints { indices: vec![4] }];
     let err = spec.validate(&model).unwrap_err().to_string();
     assert!(
         err.contains("level 3") && err.contains("joint indices"),

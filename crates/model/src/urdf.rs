@@ -174,168 +174,257 @@ struct Pending {
     locked_by: Option<usize>,
 }
 
-fn build(
-    text: &str,
-    file: &str,
-    root: Option<&str>,
-    tip: &str,
-    gravity: Option<Vector3<f64>>,
-) -> Result<Model, ModelError> {
-    let gravity = gravity.unwrap_or(DEFAULT_GRAVITY);
-    if !gravity.iter().all(|v| v.is_finite()) {
-        return Err(ModelError::InvalidGravity([
-            gravity.x, gravity.y, gravity.z,
-        ]));
-    }
-    let robot = urdf_rs::read_from_string(text).map_err(|e| ModelError::Parse {
-        file: file.to_string(),
-        message: e.to_string(),
-    })?;
-    let not_tree = |element: String, reason: &str| ModelError::NotATree {
+/// The joint tree of a URDF: link indices by name, each link's parent joint and
+/// each link's child joints (checked: unique names, known links, one parent per
+/// link, no cycle).
+struct Tree<'a> {
+    robot: &'a urdf_rs::Robot,
+    link_index: HashMap<&'a str, usize>,
+    parent_joint: Vec<Option<usize>>,
+    children: Vec<Vec<usize>>,
+}
+
+fn not_tree(file: &str, element: String, reason: &str) -> ModelError {
+    ModelError::NotATree {
         file: file.to_string(),
         element,
         reason: reason.to_string(),
-    };
+    }
+}
 
-    // Index links and joints; check names and the parent relation.
-    let mut link_index: HashMap<&str, usize> = HashMap::new();
-    for (i, l) in robot.links.iter().enumerate() {
-        if link_index.insert(l.name.as_str(), i).is_some() {
-            return Err(not_tree(
-                format!("link '{}'", l.name),
-                "duplicate link name",
-            ));
-        }
-    }
-    if robot.links.is_empty() {
-        return Err(not_tree("robot".into(), "no links"));
-    }
-    let mut joint_names: HashMap<&str, ()> = HashMap::new();
-    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
-    for (ji, j) in robot.joints.iter().enumerate() {
-        if joint_names.insert(j.name.as_str(), ()).is_some() {
-            return Err(not_tree(
-                format!("joint '{}'", j.name),
-                "duplicate joint name",
-            ));
-        }
-        let p = *link_index
-            .get(j.parent.link.as_str())
-            .ok_or_else(|| ModelError::UnknownLink {
-                file: file.to_string(),
-                what: format!("parent of joint '{}'", j.name),
-                link: j.parent.link.clone(),
-            })?;
-        let c = *link_index
-            .get(j.child.link.as_str())
-            .ok_or_else(|| ModelError::UnknownLink {
-                file: file.to_string(),
-                what: format!("child of joint '{}'", j.name),
-                link: j.child.link.clone(),
-            })?;
-        if let Some(other) = parent_joint[c] {
-            return Err(not_tree(
-                format!("link '{}'", j.child.link),
-                &format!(
-                    "has two parent joints '{}' and '{}'",
-                    robot.joints[other].name, j.name
-                ),
-            ));
-        }
-        parent_joint[c] = Some(ji);
-        children[p].push(ji);
-    }
-    // Cycle check: walking up from any link must end at a parentless link.
-    for start in 0..robot.links.len() {
-        let mut l = start;
-        let mut steps = 0;
-        while let Some(j) = parent_joint[l] {
-            l = link_index[robot.joints[j].parent.link.as_str()];
-            steps += 1;
-            if steps > robot.links.len() {
+impl<'a> Tree<'a> {
+    fn new(robot: &'a urdf_rs::Robot, file: &str) -> Result<Tree<'a>, ModelError> {
+        let mut link_index: HashMap<&str, usize> = HashMap::new();
+        for (i, l) in robot.links.iter().enumerate() {
+            if link_index.insert(l.name.as_str(), i).is_some() {
                 return Err(not_tree(
-                    format!("link '{}'", robot.links[start].name),
-                    "lies on a cycle of joints",
+                    file,
+                    format!("link '{}'", l.name),
+                    "duplicate link name",
                 ));
             }
         }
-    }
-
-    let root_idx = match root {
-        Some(r) => *link_index.get(r).ok_or_else(|| ModelError::UnknownLink {
-            file: file.to_string(),
-            what: "root".into(),
-            link: r.to_string(),
-        })?,
-        None => {
-            let roots: Vec<usize> = (0..robot.links.len())
-                .filter(|&l| parent_joint[l].is_none())
-                .collect();
-            if roots.len() != 1 {
-                let names: Vec<&str> = roots
-                    .iter()
-                    .map(|&l| robot.links[l].name.as_str())
-                    .collect();
-                return Err(not_tree(
-                    "robot".into(),
-                    &format!("expected one root link, found {}: {:?}", roots.len(), names),
-                ));
-            }
-            roots[0]
+        if robot.links.is_empty() {
+            return Err(not_tree(file, "robot".into(), "no links"));
         }
-    };
-    let root_name = robot.links[root_idx].name.clone();
-    let tip_idx = *link_index.get(tip).ok_or_else(|| ModelError::UnknownLink {
-        file: file.to_string(),
-        what: "tip".into(),
-        link: tip.to_string(),
-    })?;
-
-    // The chain: joints from root to tip.
-    let mut chain: Vec<usize> = Vec::new();
-    let mut l = tip_idx;
-    while l != root_idx {
-        match parent_joint[l] {
-            Some(j) => {
-                chain.push(j);
-                l = link_index[robot.joints[j].parent.link.as_str()];
-            }
-            None => {
-                return Err(ModelError::TipNotBelowRoot {
+        let mut joint_names: HashMap<&str, ()> = HashMap::new();
+        let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+        let link = |name: &str, what: String| {
+            link_index
+                .get(name)
+                .copied()
+                .ok_or_else(|| ModelError::UnknownLink {
                     file: file.to_string(),
-                    root: root_name,
-                    tip: tip.to_string(),
-                });
+                    what,
+                    link: name.to_string(),
+                })
+        };
+        for (ji, j) in robot.joints.iter().enumerate() {
+            if joint_names.insert(j.name.as_str(), ()).is_some() {
+                return Err(not_tree(
+                    file,
+                    format!("joint '{}'", j.name),
+                    "duplicate joint name",
+                ));
+            }
+            let p = link(&j.parent.link, format!("parent of joint '{}'", j.name))?;
+            let c = link(&j.child.link, format!("child of joint '{}'", j.name))?;
+            if let Some(other) = parent_joint[c] {
+                return Err(not_tree(
+                    file,
+                    format!("link '{}'", j.child.link),
+                    &format!(
+                        "has two parent joints '{}' and '{}'",
+                        robot.joints[other].name, j.name
+                    ),
+                ));
+            }
+            parent_joint[c] = Some(ji);
+            children[p].push(ji);
+        }
+        let tree = Tree {
+            robot,
+            link_index,
+            parent_joint,
+            children,
+        };
+        // Cycle check: walking up from any link must end at a parentless link.
+        for start in 0..robot.links.len() {
+            let mut l = start;
+            let mut steps = 0;
+            while let Some(j) = tree.parent_joint[l] {
+                l = tree.parent_of(j);
+                steps += 1;
+                if steps > robot.links.len() {
+                    return Err(not_tree(
+                        file,
+                        format!("link '{}'", robot.links[start].name),
+                        "lies on a cycle of joints",
+                    ));
+                }
             }
         }
+        Ok(tree)
     }
-    if chain.is_empty() {
-        return Err(ModelError::TipNotBelowRoot {
+
+    /// The parent link of joint `j`.
+    fn parent_of(&self, j: usize) -> usize {
+        self.link_index[self.robot.joints[j].parent.link.as_str()]
+    }
+
+    /// The named root link, or the one parentless link.
+    fn root(&self, root: Option<&str>, file: &str) -> Result<usize, ModelError> {
+        if let Some(r) = root {
+            return self
+                .link_index
+                .get(r)
+                .copied()
+                .ok_or_else(|| ModelError::UnknownLink {
+                    file: file.to_string(),
+                    what: "root".into(),
+                    link: r.to_string(),
+                });
+        }
+        let links = &self.robot.links;
+        let roots: Vec<usize> = (0..links.len())
+            .filter(|&l| self.parent_joint[l].is_none())
+            .collect();
+        if roots.len() != 1 {
+            let names: Vec<&str> = roots.iter().map(|&l| links[l].name.as_str()).collect();
+            return Err(not_tree(
+                file,
+                "robot".into(),
+                &format!("expected one root link, found {}: {:?}", roots.len(), names),
+            ));
+        }
+        Ok(roots[0])
+    }
+
+    /// Marks the joints on the chain from `root_idx` to the tip (of supported kinds).
+    fn chain(&self, root_idx: usize, tip: &str, file: &str) -> Result<Vec<bool>, ModelError> {
+        let robot = self.robot;
+        let root_name = robot.links[root_idx].name.clone();
+        let tip_idx = *self
+            .link_index
+            .get(tip)
+            .ok_or_else(|| ModelError::UnknownLink {
+                file: file.to_string(),
+                what: "tip".into(),
+                link: tip.to_string(),
+            })?;
+        let not_below = || ModelError::TipNotBelowRoot {
             file: file.to_string(),
-            root: root_name,
+            root: root_name.clone(),
             tip: tip.to_string(),
-        });
-    }
-    chain.reverse();
-    let mut on_chain = vec![false; robot.joints.len()];
-    for &j in &chain {
-        on_chain[j] = true;
-        let jt = &robot.joints[j];
-        use urdf_rs::JointType as T;
-        match jt.joint_type {
-            T::Revolute | T::Continuous | T::Prismatic | T::Fixed => {}
-            ref other => {
+        };
+        let mut chain: Vec<usize> = Vec::new();
+        let mut l = tip_idx;
+        while l != root_idx {
+            let j = self.parent_joint[l].ok_or_else(not_below)?;
+            chain.push(j);
+            l = self.parent_of(j);
+        }
+        if chain.is_empty() {
+            return Err(not_below());
+        }
+        let mut on_chain = vec![false; robot.joints.len()];
+        for &j in chain.iter().rev() {
+            on_chain[j] = true;
+            let jt = &robot.joints[j];
+            use urdf_rs::JointType as T;
+            if !matches!(
+                jt.joint_type,
+                T::Revolute | T::Continuous | T::Prismatic | T::Fixed
+            ) {
                 return Err(ModelError::UnsupportedJoint {
                     file: file.to_string(),
                     joint: jt.name.clone(),
-                    kind: format!("{other:?}").to_lowercase(),
+                    kind: format!("{:?}", jt.joint_type).to_lowercase(),
                 });
             }
         }
+        Ok(on_chain)
     }
+}
 
-    // Depth-first walk from the root: assign every link to a chain body.
+/// A movable joint of the chain, placed at `placement` in its parent body.
+fn chain_joint(
+    j: &urdf_rs::Joint,
+    placement: Isometry3<f64>,
+    file: &str,
+) -> Result<Joint, ModelError> {
+    use urdf_rs::JointType as T;
+    let kind = if matches!(j.joint_type, T::Prismatic) {
+        JointKind::Prismatic
+    } else {
+        JointKind::Revolute
+    };
+    let axis = Vector3::new(j.axis.xyz.0[0], j.axis.xyz.0[1], j.axis.xyz.0[2]);
+    let norm = axis.norm();
+    if !(norm.is_finite() && norm > 1e-12) {
+        return Err(ModelError::ZeroAxis {
+            file: file.to_string(),
+            joint: j.name.clone(),
+        });
+    }
+    let lim = &j.limit;
+    let (lower, upper) =
+        if matches!(j.joint_type, T::Continuous) || (lim.lower == 0.0 && lim.upper == 0.0) {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        } else {
+            (lim.lower, lim.upper)
+        };
+    if lower.is_nan() || upper.is_nan() || lower > upper {
+        return Err(ModelError::InvalidJoint {
+            file: file.to_string(),
+            joint: j.name.clone(),
+            reason: format!("lower limit {lower} above upper limit {upper}"),
+        });
+    }
+    let positive_or_inf = |v: f64| if v > 0.0 { v } else { f64::INFINITY };
+    Ok(Joint {
+        name: j.name.clone(),
+        kind,
+        placement,
+        axis: axis / norm,
+        inertia: SpatialInertia {
+            mass: 0.0,
+            com: Vector3::zeros(),
+            inertia: Matrix3::zeros(),
+        },
+        lower,
+        upper,
+        velocity_limit: positive_or_inf(lim.velocity),
+        effort_limit: positive_or_inf(lim.effort),
+    })
+}
+
+/// The inertia of `link` (placed at `t_b_l` in its body) in body axes, added to `acc`.
+fn add_link_inertia(acc: &mut Accum, link: &urdf_rs::Link, t_b_l: &Isometry3<f64>) {
+    let inl = &link.inertial;
+    let t_b_c = t_b_l * pose(&inl.origin);
+    let i = &inl.inertia;
+    let ic = Matrix3::new(
+        i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
+    );
+    let r = t_b_c.rotation.to_rotation_matrix();
+    let ic_b = r.matrix() * ic * r.matrix().transpose();
+    acc.add(inl.mass.value, t_b_c.translation.vector, ic_b);
+}
+
+/// What the depth-first walk produces.
+struct Walk {
+    joints: Vec<Joint>,
+    frames: Vec<Frame>,
+    locked_joints: Vec<String>,
+}
+
+/// Depth-first walk from the root: every link is assigned to a chain body (its
+/// inertia lumped into the body's, its frame recorded); movable joints off the chain
+/// are locked.
+fn walk(tree: &Tree, root_idx: usize, on_chain: &[bool], file: &str) -> Result<Walk, ModelError> {
+    let robot = tree.robot;
     let mut joints: Vec<Joint> = Vec::new();
     let mut accum: Vec<Accum> = Vec::new();
     let mut frames: Vec<Frame> = Vec::new();
@@ -364,19 +453,10 @@ fn build(
             placement: t_b_l,
         });
         if let Some(b) = body {
-            let inl = &link.inertial;
-            let t_l_c = pose(&inl.origin);
-            let t_b_c = t_b_l * t_l_c;
-            let i = &inl.inertia;
-            let ic = Matrix3::new(
-                i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
-            );
-            let r = t_b_c.rotation.to_rotation_matrix();
-            let ic_b = r.matrix() * ic * r.matrix().transpose();
-            accum[b].add(inl.mass.value, t_b_c.translation.vector, ic_b);
+            add_link_inertia(&mut accum[b], link, &t_b_l);
         }
         // Push children in reverse so that frames come out in document order.
-        for &ji in children[li].iter().rev() {
+        for &ji in tree.children[li].iter().rev() {
             let j = &robot.joints[ji];
             if !pose_finite(&j.origin) {
                 return Err(ModelError::InvalidJoint {
@@ -385,55 +465,11 @@ fn build(
                     reason: "non-finite origin".into(),
                 });
             }
-            let child = link_index[j.child.link.as_str()];
+            let child = tree.link_index[j.child.link.as_str()];
             let origin = pose(&j.origin);
-            use urdf_rs::JointType as T;
-            let movable = !matches!(j.joint_type, T::Fixed);
+            let movable = !matches!(j.joint_type, urdf_rs::JointType::Fixed);
             if on_chain[ji] && movable {
-                let kind = if matches!(j.joint_type, T::Prismatic) {
-                    JointKind::Prismatic
-                } else {
-                    JointKind::Revolute
-                };
-                let axis = Vector3::new(j.axis.xyz.0[0], j.axis.xyz.0[1], j.axis.xyz.0[2]);
-                let norm = axis.norm();
-                if !(norm.is_finite() && norm > 1e-12) {
-                    return Err(ModelError::ZeroAxis {
-                        file: file.to_string(),
-                        joint: j.name.clone(),
-                    });
-                }
-                let lim = &j.limit;
-                let (lower, upper) = if matches!(j.joint_type, T::Continuous)
-                    || (lim.lower == 0.0 && lim.upper == 0.0)
-                {
-                    (f64::NEG_INFINITY, f64::INFINITY)
-                } else {
-                    (lim.lower, lim.upper)
-                };
-                if lower.is_nan() || upper.is_nan() || lower > upper {
-                    return Err(ModelError::InvalidJoint {
-                        file: file.to_string(),
-                        joint: j.name.clone(),
-                        reason: format!("lower limit {lower} above upper limit {upper}"),
-                    });
-                }
-                let positive_or_inf = |v: f64| if v > 0.0 { v } else { f64::INFINITY };
-                joints.push(Joint {
-                    name: j.name.clone(),
-                    kind,
-                    placement: t_b_l * origin,
-                    axis: axis / norm,
-                    inertia: SpatialInertia {
-                        mass: 0.0,
-                        com: Vector3::zeros(),
-                        inertia: Matrix3::zeros(),
-                    },
-                    lower,
-                    upper,
-                    velocity_limit: positive_or_inf(lim.velocity),
-                    effort_limit: positive_or_inf(lim.effort),
-                });
+                joints.push(chain_joint(j, t_b_l * origin, file)?);
                 accum.push(Accum::zero());
                 stack.push(Pending {
                     link: child,
@@ -442,33 +478,61 @@ fn build(
                     locked_by: None,
                 });
             } else {
-                let locked_by = if movable { Some(ji) } else { None };
                 stack.push(Pending {
                     link: child,
                     body,
                     placement: t_b_l * origin,
-                    locked_by,
+                    locked_by: movable.then_some(ji),
                 });
             }
         }
     }
-    if joints.is_empty() {
+    for (j, a) in joints.iter_mut().zip(accum) {
+        j.inertia = a.finish();
+    }
+    Ok(Walk {
+        joints,
+        frames,
+        locked_joints,
+    })
+}
+
+fn build(
+    text: &str,
+    file: &str,
+    root: Option<&str>,
+    tip: &str,
+    gravity: Option<Vector3<f64>>,
+) -> Result<Model, ModelError> {
+    let gravity = gravity.unwrap_or(DEFAULT_GRAVITY);
+    if !gravity.iter().all(|v| v.is_finite()) {
+        return Err(ModelError::InvalidGravity([
+            gravity.x, gravity.y, gravity.z,
+        ]));
+    }
+    let robot = urdf_rs::read_from_string(text).map_err(|e| ModelError::Parse {
+        file: file.to_string(),
+        message: e.to_string(),
+    })?;
+    let tree = Tree::new(&robot, file)?;
+    let root_idx = tree.root(root, file)?;
+    let root_name = robot.links[root_idx].name.clone();
+    let on_chain = tree.chain(root_idx, tip, file)?;
+    let w = walk(&tree, root_idx, &on_chain, file)?;
+    if w.joints.is_empty() {
         return Err(ModelError::NoMovableJoint {
             file: file.to_string(),
             root: root_name,
             tip: tip.to_string(),
         });
     }
-    for (j, a) in joints.iter_mut().zip(accum) {
-        j.inertia = a.finish();
-    }
     Ok(Model {
         name: robot.name.clone(),
         root_link: root_name,
         tip_link: tip.to_string(),
-        joints,
-        frames,
+        joints: w.joints,
+        frames: w.frames,
         gravity,
-        locked_joints,
+        locked_joints: w.locked_joints,
     })
 }

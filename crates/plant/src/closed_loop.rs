@@ -201,7 +201,7 @@ impl HierarchicalLaw {
         Ok(HierarchicalLaw {
             controller,
             limits: scenario.controller_daemon.torque_limits.clone(),
-            gravity_compensation: scenario.gravity_compensation,
+            gravity_compensation: scenario.spec.gravity_compensation,
             tau: DVector::zeros(n),
             saturated_cycles: 0,
         })

@@ -103,7 +103,7 @@ fn law(s: &Scenario) -> JointPd {
     JointPd {
         model: s.model.clone(),
         data: hcc_model::Data::new(&s.model),
-        goals: [s.levels[0].goal.clone(), s.levels[1].goal.clone()],
+        goals: [s.levels()[0].goal.clone(), s.levels()[1].goal.clone()],
         gains: [(200.0, 30.0), (50.0, 8.0)],
         tau: z.clone(),
         level: [z.clone(), z.clone()],

@@ -123,7 +123,7 @@ fn run(
         controller: Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap(),
         tau: DVector::zeros(scenario.model.nq()),
         limits: scenario.controller_daemon.torque_limits.clone(),
-        gravity: scenario.gravity_compensation,
+        gravity: scenario.spec.gravity_compensation,
         period_s: 1.0 / scenario.simulation.control_rate_hz,
         k: 0,
         switch_s,

@@ -5,10 +5,12 @@ use hcc_config::{Scenario, TaskUnit};
 use hcc_report::{ErrorUnit, LevelDescription, RunDescription, columns};
 use std::collections::BTreeMap;
 
-fn unit(u: TaskUnit) -> ErrorUnit {
+/// The report's unit of task coordinates (`None`: a level that mixes units).
+fn unit(u: Option<TaskUnit>) -> ErrorUnit {
     match u {
-        TaskUnit::Length => ErrorUnit::Meter,
-        TaskUnit::Angle => ErrorUnit::Radian,
+        Some(TaskUnit::Length) => ErrorUnit::Meter,
+        Some(TaskUnit::Angle) => ErrorUnit::Radian,
+        None => ErrorUnit::Mixed,
     }
 }
 
@@ -27,17 +29,13 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
     put("integrator", "RK4".into());
     put(
         "coriolis_cancellation",
-        scenario.coriolis_cancellation.into(),
+        scenario.spec.coriolis_cancellation.into(),
     );
-    put("gravity_compensation", scenario.gravity_compensation.into());
     put(
-        "form",
-        match scenario.form {
-            hcc_config::FormName::Extended => "extended",
-            hcc_config::FormName::Projector => "projector",
-        }
-        .into(),
+        "gravity_compensation",
+        scenario.spec.gravity_compensation.into(),
     );
+    put("form", scenario.spec.form.name().into());
     put(
         "joint_friction",
         s.joint_friction
@@ -55,12 +53,25 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
         scenario: scenario.name.clone(),
         n_joints: scenario.model.nq(),
         levels: scenario
-            .levels
+            .levels()
             .iter()
-            .map(|l| LevelDescription {
-                name: l.name.clone(),
-                dim: l.task.dim(),
-                unit: unit(l.task.unit()),
+            .map(|l| {
+                let n = scenario.model.nq();
+                let unit = unit(l.unit(n));
+                LevelDescription {
+                    name: l.name.clone(),
+                    dim: l.dim(n),
+                    unit,
+                    // Per-row units only for a level that mixes them (a pose).
+                    row_units: match unit {
+                        ErrorUnit::Mixed => l
+                            .units(n)
+                            .into_iter()
+                            .map(|u| self::unit(Some(u)))
+                            .collect(),
+                        _ => Vec::new(),
+                    },
+                }
             })
             .collect(),
         settings,
@@ -71,8 +82,8 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
 /// provides J̄, so the `accv` columns are recorded).
 pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     let n = scenario.model.nq();
-    let r = scenario.levels.len();
-    let dims: Vec<usize> = scenario.levels.iter().map(|l| l.task.dim()).collect();
+    let r = scenario.levels().len();
+    let dims: Vec<usize> = scenario.task_dims();
     let mut c = columns::required(n, &dims);
     for i in 1..=r {
         c.extend((1..=n).map(|k| columns::level_torque(i, k)));

@@ -109,7 +109,7 @@ impl Recorder {
     ) -> Result<Recorder, RecordError> {
         let model = scenario.model.clone();
         let n = model.nq();
-        let dims: Vec<usize> = scenario.levels.iter().map(|l| l.task.dim()).collect();
+        let dims: Vec<usize> = scenario.task_dims();
         if dims.is_empty() {
             return Err(RecordError::Invalid(
                 "the scenario has no level to record".into(),

@@ -55,6 +55,43 @@ pub struct LevelDescription {
     pub dim: usize,
     /// Unit of the task error.
     pub unit: ErrorUnit,
+    /// Unit of every error row of a level that mixes units (e.g. a 6-D pose: three
+    /// metres, three radians; `unit` is then `Mixed`). Empty when all rows share
+    /// `unit`. The metrics then also report each group of rows of one unit.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub row_units: Vec<ErrorUnit>,
+}
+
+impl LevelDescription {
+    /// Unit label for plots: that of `unit`, or the distinct row units of a mixed
+    /// level ("m, rad").
+    pub fn unit_label(&self) -> String {
+        let mut labels: Vec<&str> = Vec::new();
+        for u in &self.row_units {
+            if !labels.contains(&u.label()) {
+                labels.push(u.label());
+            }
+        }
+        if self.unit == ErrorUnit::Mixed && !labels.is_empty() {
+            labels.join(", ")
+        } else {
+            self.unit.label().to_string()
+        }
+    }
+}
+
+/// Convergence figures of the error rows of one unit within a mixed level.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UnitGroupMetrics {
+    pub unit: ErrorUnit,
+    /// 0-based error rows of the group.
+    pub rows: Vec<usize>,
+    /// max over the run of the group's error norm.
+    pub max_error_norm: f64,
+    /// The group's error norm at the last sample.
+    pub final_error_norm: f64,
+    /// First time after which the group's error norm stays below 1 mm or 1 mrad.
+    pub time_below_abs_s: Option<f64>,
 }
 
 /// What the report needs to know about a run besides its trajectory.
@@ -98,6 +135,44 @@ pub struct LevelMetrics {
     /// Earliest time from which the level energy S_i never increases again
     /// (up to a relative tolerance of 1e-9 of max S_i); null if S_i is not recorded.
     pub energy_non_increasing_from_s: Option<f64>,
+    /// For a level of mixed units: the figures of each group of rows of one unit.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_unit: Vec<UnitGroupMetrics>,
+}
+
+/// The figures of the rows of each unit of a mixed level (`comps`: the error columns).
+fn unit_groups(t: &[f64], level: &LevelDescription, comps: &[Vec<f64>]) -> Vec<UnitGroupMetrics> {
+    let mut units: Vec<ErrorUnit> = Vec::new();
+    for u in &level.row_units {
+        if !units.contains(u) {
+            units.push(*u);
+        }
+    }
+    units
+        .into_iter()
+        .map(|unit| {
+            let rows: Vec<usize> = (0..level.row_units.len().min(comps.len()))
+                .filter(|&k| level.row_units[k] == unit)
+                .collect();
+            let norms: Vec<f64> = (0..t.len())
+                .map(|r| {
+                    rows.iter()
+                        .map(|&k| comps[k][r] * comps[k][r])
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .collect();
+            UnitGroupMetrics {
+                unit,
+                max_error_norm: norms.iter().fold(0.0, |a: f64, b| a.max(*b)),
+                final_error_norm: norms.last().copied().unwrap_or(0.0),
+                time_below_abs_s: unit
+                    .abs_threshold()
+                    .and_then(|thr| time_to_stay_below(t, &norms, thr)),
+                rows,
+            }
+        })
+        .collect()
 }
 
 /// Contents of `metrics.json`.
@@ -180,6 +255,7 @@ impl Metrics {
                 final_error: comps.iter().map(|c| c[last]).collect(),
                 max_error_norm: norms.iter().fold(0.0, |a: f64, b| a.max(*b)),
                 energy_non_increasing_from_s,
+                by_unit: unit_groups(&t, level, &comps),
             });
         }
         let max_abs = |v: Vec<f64>| v.iter().fold(0.0_f64, |a, b| a.max(b.abs()));
@@ -337,6 +413,7 @@ mod tests {
                 name: "joint".into(),
                 dim: 1,
                 unit: ErrorUnit::Radian,
+                row_units: Vec::new(),
             }],
             settings: BTreeMap::new(),
         };

@@ -220,7 +220,7 @@ impl Plotter<'_> {
             .enumerate()
             .map(|(i, l)| Panel {
                 title: format!("Level {}: {}", i + 1, l.name),
-                y_label: format!("error [{}]", l.unit.label()),
+                y_label: format!("error [{}]", l.unit_label()),
                 series: (1..=l.dim)
                     .filter_map(|k| {
                         self.series(&columns::error(i + 1, k), format!("e{}_{k}", i + 1))
@@ -279,7 +279,7 @@ impl Plotter<'_> {
                 "from tau_mu (cancellation)".into(),
             ));
             if !s.is_empty() {
-                let unit = match self.run.levels[i - 1].unit.label() {
+                let unit = match self.run.levels[i - 1].unit_label().as_str() {
                     "" => String::new(),
                     u => format!(" [{u}/s^2]"),
                 };

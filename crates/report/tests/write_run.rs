@@ -66,11 +66,13 @@ fn synthetic() -> (Trajectory, RunDescription) {
                 name: "TCP position".into(),
                 dim: 2,
                 unit: ErrorUnit::Meter,
+                row_units: Vec::new(),
             },
             LevelDescription {
                 name: "joint 1".into(),
                 dim: 1,
                 unit: ErrorUnit::Radian,
+                row_units: Vec::new(),
             },
         ],
         settings: BTreeMap::from([("control_rate_hz".to_string(), serde_json::json!(1000.0))]),

@@ -91,7 +91,7 @@ pub fn chain_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
         let m = axes.len();
         LevelSpec {
             name: "tcp position".into(),
-            task: TaskSpec::Position { frame: tcp, axes },
+            tasks: vec![TaskSpec::Position { frame: tcp, axes }],
             stiffness: diag(m, 800.0),
             damping: diag(m, 60.0),
             goal: DVector::from_vec(goal),
@@ -102,7 +102,7 @@ pub fn chain_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
         let goal = indices.iter().map(|&k| q0[k] + 0.1).collect();
         LevelSpec {
             name: "joints".into(),
-            task: TaskSpec::Joints { indices },
+            tasks: vec![TaskSpec::Joints { indices }],
             stiffness: diag(m, 50.0),
             damping: diag(m, 5.0),
             goal: DVector::from_vec(goal),
@@ -110,7 +110,7 @@ pub fn chain_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
     };
     let posture = LevelSpec {
         name: "posture".into(),
-        task: TaskSpec::Posture,
+        tasks: vec![TaskSpec::Posture],
         stiffness: diag(n, 20.0),
         damping: diag(n, 2.0),
         goal: DVector::from_column_slice(q0),
@@ -120,7 +120,7 @@ pub fn chain_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
     } else {
         let orientation = LevelSpec {
             name: "tcp orientation".into(),
-            task: TaskSpec::Orientation { frame: tcp },
+            tasks: vec![TaskSpec::Orientation { frame: tcp }],
             stiffness: diag(3, 60.0),
             damping: diag(3, 4.0),
             goal: DVector::from_vec(vec![roll + 0.2, pitch - 0.1, yaw + 0.3]),

@@ -50,26 +50,26 @@ pub fn planar_spec(model: &Model, sim: &str) -> ControllerSpec {
     ControllerSpec::new(vec![
         LevelSpec {
             name: "tcp position".into(),
-            task: TaskSpec::Position {
+            tasks: vec![TaskSpec::Position {
                 frame: tcp,
                 axes: vec![0, 1],
-            },
+            }],
             stiffness: diag(&vec(&g["K1"])),
             damping: diag(&vec(&g["D1"])),
             goal: DVector::from_vec(vec(&goal[0])),
         },
         LevelSpec {
             name: "tcp rotation".into(),
-            task: TaskSpec::JointCombination {
+            tasks: vec![TaskSpec::JointCombination {
                 weights: DMatrix::from_row_slice(1, 4, &[1.0, 1.0, 1.0, 1.0]),
-            },
+            }],
             stiffness: diag(&[f(&g["K2"])]),
             damping: diag(&[f(&g["D2"])]),
             goal: DVector::from_vec(vec(&goal[1])),
         },
         LevelSpec {
             name: "joint 1".into(),
-            task: TaskSpec::Joints { indices: vec![0] },
+            tasks: vec![TaskSpec::Joints { indices: vec![0] }],
             stiffness: diag(&[f(&g["K3"])]),
             damping: diag(&[f(&g["D3"])]),
             goal: DVector::from_vec(vec(&goal[2])),
@@ -83,24 +83,24 @@ pub fn panda_spec(model: &Model) -> ControllerSpec {
     ControllerSpec::new(vec![
         LevelSpec {
             name: "tcp position".into(),
-            task: TaskSpec::Position {
+            tasks: vec![TaskSpec::Position {
                 frame: tcp,
                 axes: vec![0, 1, 2],
-            },
+            }],
             stiffness: diag(&[800.0, 800.0, 800.0]),
             damping: diag(&[60.0, 60.0, 60.0]),
             goal: DVector::from_vec(vec![0.4, 0.1, 0.5]),
         },
         LevelSpec {
             name: "tcp orientation".into(),
-            task: TaskSpec::Orientation { frame: tcp },
+            tasks: vec![TaskSpec::Orientation { frame: tcp }],
             stiffness: diag(&[60.0, 60.0, 60.0]),
             damping: diag(&[4.0, 4.0, 4.0]),
             goal: DVector::from_vec(vec![std::f64::consts::PI, 0.0, 0.3]),
         },
         LevelSpec {
             name: "posture".into(),
-            task: TaskSpec::Posture,
+            tasks: vec![TaskSpec::Posture],
             stiffness: diag(&[20.0; 7]),
             damping: diag(&[2.0; 7]),
             goal: DVector::from_vec(vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]),
@@ -126,4 +126,49 @@ pub fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
         .sqrt();
     let nb: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
     a.len() == b.len() && d <= tol * nb.max(1.0)
+}
+
+/// Panda: the 6-D TCP pose (one stacked level) / posture, the two levels of the
+/// common Cartesian impedance controller. `coupled`: a full 6×6 stiffness (position
+/// and orientation rows coupled) instead of a diagonal one.
+pub fn panda_pose_spec(model: &Model, coupled: bool) -> ControllerSpec {
+    let tcp = model.frame_id("panda_hand_tcp").expect("tcp frame");
+    let mut k = diag(&[300.0, 300.0, 300.0, 20.0, 20.0, 20.0]);
+    if coupled {
+        for (a, b, v) in [(0, 4, 15.0), (1, 3, -10.0), (2, 5, 8.0), (3, 4, 3.0)] {
+            k[(a, b)] = v;
+            k[(b, a)] = v;
+        }
+    }
+    ControllerSpec::new(vec![
+        LevelSpec::single(
+            "tcp pose",
+            TaskSpec::Pose { frame: tcp },
+            k,
+            diag(&[35.0, 35.0, 35.0, 9.0, 9.0, 9.0]),
+            DVector::from_vec(vec![0.4, 0.1, 0.5, std::f64::consts::PI, 0.0, 0.3]),
+        ),
+        LevelSpec::single(
+            "posture",
+            TaskSpec::Posture,
+            diag(&[5.0; 7]),
+            diag(&[4.5; 7]),
+            DVector::from_vec(vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]),
+        ),
+    ])
+}
+
+/// The same two levels with the pose as two stacked tasks, position then orientation
+/// (`[[level.task]]` in a scenario file).
+pub fn panda_stacked_spec(model: &Model) -> ControllerSpec {
+    let tcp = model.frame_id("panda_hand_tcp").expect("tcp frame");
+    let mut spec = panda_pose_spec(model, false);
+    spec.levels[0].tasks = vec![
+        TaskSpec::Position {
+            frame: tcp,
+            axes: vec![0, 1, 2],
+        },
+        TaskSpec::Orientation { frame: tcp },
+    ];
+    spec
 }

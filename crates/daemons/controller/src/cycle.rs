@@ -96,7 +96,7 @@ impl CycleSettings {
             period_ns: (1e9 / scenario.simulation.control_rate_hz).round() as u64,
             stale_timeout_ns: (d.stale_timeout_ms * 1e6).round() as u64,
             torque_limits: d.torque_limits.iter().copied().collect(),
-            gravity_compensation: scenario.gravity_compensation,
+            gravity_compensation: scenario.spec.gravity_compensation,
             hybrid_lead_ns: rt::HYBRID_LEAD_NS,
             hybrid_spin_ns: 200_000,
         }

@@ -287,7 +287,7 @@ fn log_start(setup: &Setup, report: &RtReport) {
         "{} ({} joints, {} levels), namespace {:?}, wait {:?}, pinned {}, SCHED_FIFO {}, mlock {}; waiting for the first joint state on {:?}",
         scenario.name,
         scenario.model.nq(),
-        scenario.levels.len(),
+        scenario.levels().len(),
         setup.names.namespace().as_str(),
         setup.settings.wait,
         report.pinned,

@@ -133,7 +133,7 @@ impl SimDriver {
             fallback_timeout_cycles: None,
             wait_for_first_command: true,
             fallback_damping,
-            gravity: if scenario.gravity_compensation {
+            gravity: if scenario.spec.gravity_compensation {
                 Gravity::ControllerSends
             } else {
                 Gravity::DriverAdds

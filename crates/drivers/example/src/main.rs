@@ -266,7 +266,7 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
 
     // The robot: here the stub. The robot compensates gravity itself exactly
     // when the controller is configured not to send g(q).
-    let hw = StubHardware::new(scenario.q0.as_slice(), !scenario.gravity_compensation);
+    let hw = StubHardware::new(scenario.q0.as_slice(), !scenario.spec.gravity_compensation);
     if hw.n_joints() != n {
         return Err(anyhow!(
             "the robot has {} joints but the model of {} has {n}",

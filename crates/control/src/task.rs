@@ -1,0 +1,308 @@
+//! Task terms of one level: the stacked Jacobian J_i and J̇_i (eq. 2), the task
+//! error x̃_i, the potential V_i and its gradient. [`jacobian`] is the one place a
+//! task Jacobian is assembled (the controller, the recorders and the checks use it).
+
+use crate::dense::gemv;
+use crate::spec::TaskSpec;
+use hcc_model::{Data, FrameId, Model};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// Scratch of [`jacobian`]: the 6 × n frame Jacobian and its time variation of the
+/// last frame evaluated. Consecutive tasks on one frame (e.g. TCP position and
+/// orientation) compute them once per cycle; call [`FrameWork::invalidate`] when the
+/// state in `Data` changes.
+#[derive(Clone, Debug)]
+pub struct FrameWork {
+    j: DMatrix<f64>,
+    jdot: DMatrix<f64>,
+    /// The frame the buffers hold, and whether `jdot` is valid for it.
+    cached: Option<(FrameId, bool)>,
+}
+
+impl FrameWork {
+    /// Buffers for a robot with `n` joints.
+    pub fn new(n: usize) -> FrameWork {
+        FrameWork {
+            j: DMatrix::zeros(6, n),
+            jdot: DMatrix::zeros(6, n),
+            cached: None,
+        }
+    }
+
+    /// Forgets the cached frame (the state changed).
+    pub fn invalidate(&mut self) {
+        self.cached = None;
+    }
+
+    fn load(&mut self, model: &Model, data: &Data, frame: FrameId, with_jdot: bool) {
+        if let Some((f, d)) = self.cached
+            && f == frame
+            && (d || !with_jdot)
+        {
+            return;
+        }
+        hcc_model::frame_jacobian(model, data, frame, &mut self.j);
+        if with_jdot {
+            hcc_model::frame_jacobian_time_variation(model, data, frame, &mut self.jdot);
+        }
+        self.cached = Some((frame, with_jdot));
+    }
+}
+
+/// The stacked task Jacobian J_i of the tasks of a level (rows in task order, world
+/// axes at the frame origin for Cartesian rows, angular-velocity rows for orientation)
+/// into `j` (m_i × n), and J̇_i into `jdot` when given. Needs the kinematics of the
+/// state in `data` (and its velocities for J̇). Allocation-free.
+pub fn jacobian(
+    model: &Model,
+    data: &Data,
+    tasks: &[TaskSpec],
+    work: &mut FrameWork,
+    j: &mut DMatrix<f64>,
+    mut jdot: Option<&mut DMatrix<f64>>,
+) {
+    let n = model.nq();
+    let mut o = 0;
+    for task in tasks {
+        let with_jdot = jdot.is_some();
+        // Rows of the frame Jacobian this task takes (Cartesian tasks).
+        let rows: (usize, usize, &[usize]) = match task {
+            TaskSpec::Position { axes, .. } => (0, axes.len(), axes),
+            TaskSpec::Orientation { .. } => (3, 3, &[]),
+            TaskSpec::Pose { .. } => (0, 6, &[]),
+            TaskSpec::PlanarOrientation { axis, .. } => (3 + axis, 1, &[]),
+            _ => (0, 0, &[]),
+        };
+        if let Some(frame) = task.frame() {
+            work.load(model, data, frame, with_jdot);
+            let (first, count, select) = rows;
+            for a in 0..count {
+                let src = if select.is_empty() {
+                    first + a
+                } else {
+                    select[a]
+                };
+                for b in 0..n {
+                    j[(o + a, b)] = work.j[(src, b)];
+                    if let Some(jd) = jdot.as_deref_mut() {
+                        jd[(o + a, b)] = work.jdot[(src, b)];
+                    }
+                }
+            }
+            o += count;
+            continue;
+        }
+        let m = task.dim(n);
+        j.rows_mut(o, m).fill(0.0);
+        if let Some(jd) = jdot.as_deref_mut() {
+            jd.rows_mut(o, m).fill(0.0);
+        }
+        match task {
+            TaskSpec::Joints { indices } => {
+                for (a, &ix) in indices.iter().enumerate() {
+                    j[(o + a, ix)] = 1.0;
+                }
+            }
+            TaskSpec::JointCombination { weights } => j.rows_mut(o, m).copy_from(weights),
+            _ => {
+                for a in 0..m {
+                    j[(o + a, a)] = 1.0;
+                }
+            }
+        }
+        o += m;
+    }
+}
+
+/// Per-level buffers of the potential (preallocated by the controller).
+#[derive(Clone, Debug)]
+pub(crate) struct PotentialWork {
+    /// R_d of each task with quaternion rows (identity for the others).
+    pub goal_rotation: Vec<Rotation3<f64>>,
+    /// (η, ε) of each task with quaternion rows.
+    quat: Vec<(f64, Vector3<f64>)>,
+    /// The stacked coordinate error e (quaternion rows: 2ε, goal axes) and K e.
+    e: DVector<f64>,
+    ke: DVector<f64>,
+}
+
+impl PotentialWork {
+    pub fn new(tasks: &[TaskSpec], goal: &DVector<f64>, n: usize) -> PotentialWork {
+        let m = goal.len();
+        let mut w = PotentialWork {
+            goal_rotation: vec![Rotation3::identity(); tasks.len()],
+            quat: vec![(1.0, Vector3::zeros()); tasks.len()],
+            e: DVector::zeros(m),
+            ke: DVector::zeros(m),
+        };
+        w.set_goal(tasks, goal.as_slice(), n);
+        w
+    }
+
+    /// R_d from the roll-pitch-yaw part of the goal of every quaternion task.
+    pub fn set_goal(&mut self, tasks: &[TaskSpec], goal: &[f64], n: usize) {
+        let mut o = 0;
+        for (t, task) in tasks.iter().enumerate() {
+            if let Some(q) = task.quaternion_rows() {
+                let g = &goal[o + q..o + q + 3];
+                self.goal_rotation[t] = Rotation3::from_euler_angles(g[0], g[1], g[2]);
+            }
+            o += task.dim(n);
+        }
+    }
+}
+
+/// The task error x̃_i (`err`; quaternion rows 2 R_d ε ≈ the rotation vector, world
+/// axes), V_i (returned) and its gradient conjugate to ẋ_i = J_i q̇ (`grad`; for
+/// quaternion rows R_d (ηI + \[ε\]×) (K e)_rows, world axes) of one level at the
+/// state in `data`. V_i = ½ eᵀ K e over the stacked errors e (e = 2ε for quaternion
+/// rows): for a single orientation task V = 2 εᵀ K ε (the spec's potential).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn potential(
+    model: &Model,
+    data: &Data,
+    tasks: &[TaskSpec],
+    q: &DVector<f64>,
+    stiffness: &DMatrix<f64>,
+    goal: &DVector<f64>,
+    w: &mut PotentialWork,
+    err: &mut DVector<f64>,
+    grad: &mut DVector<f64>,
+) -> f64 {
+    let n = model.nq();
+    let mut o = 0;
+    for (t, task) in tasks.iter().enumerate() {
+        let placement: Option<Isometry3<f64>> = task
+            .frame()
+            .map(|f| hcc_model::frame_placement(model, data, f));
+        match task {
+            TaskSpec::Position { axes, .. } => {
+                let p = placement.expect("frame task").translation.vector;
+                for (a, &ax) in axes.iter().enumerate() {
+                    err[o + a] = p[ax] - goal[o + a];
+                }
+            }
+            TaskSpec::Pose { .. } => {
+                let p = placement.expect("frame task").translation.vector;
+                for a in 0..3 {
+                    err[o + a] = p[a] - goal[o + a];
+                }
+            }
+            TaskSpec::PlanarOrientation { axis, .. } => {
+                let rot = placement.expect("frame task").rotation.to_rotation_matrix();
+                let m = rot.matrix();
+                let angle = match axis {
+                    0 => m[(2, 1)].atan2(m[(1, 1)]),
+                    1 => m[(0, 2)].atan2(m[(2, 2)]),
+                    _ => m[(1, 0)].atan2(m[(0, 0)]),
+                };
+                err[o] = wrap_angle(angle - goal[o]);
+            }
+            TaskSpec::Joints { indices } => {
+                for (a, &ix) in indices.iter().enumerate() {
+                    err[o + a] = q[ix] - goal[o + a];
+                }
+            }
+            TaskSpec::JointCombination { weights } => {
+                let m = weights.nrows();
+                for a in 0..m {
+                    let mut s = 0.0;
+                    for b in 0..n {
+                        s += weights[(a, b)] * q[b];
+                    }
+                    err[o + a] = s - goal[o + a];
+                }
+            }
+            TaskSpec::Posture => {
+                for a in 0..n {
+                    err[o + a] = q[a] - goal[o + a];
+                }
+            }
+            TaskSpec::Orientation { .. } => {}
+        }
+        if let Some(qr) = task.quaternion_rows() {
+            let rot = placement.expect("frame task").rotation.to_rotation_matrix();
+            let re = w.goal_rotation[t].inverse() * rot;
+            let quat = UnitQuaternion::from_rotation_matrix(&re);
+            let (mut eta, mut eps) = (quat.w, quat.imag());
+            if eta < 0.0 {
+                eta = -eta;
+                eps = -eps;
+            }
+            w.quat[t] = (eta, eps);
+            let e: Vector3<f64> = w.goal_rotation[t] * (2.0 * eps);
+            for a in 0..3 {
+                err[o + qr + a] = e[a];
+            }
+        }
+        o += task.dim(n);
+    }
+    if let [TaskSpec::Orientation { .. }] = tasks {
+        // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
+        let (eta, eps) = w.quat[0];
+        let k = Matrix3::from_fn(|a, b| stiffness[(a, b)]);
+        let keps = k * eps;
+        let f_goal = 2.0 * (eta * keps + eps.cross(&keps));
+        let g = w.goal_rotation[0] * f_goal;
+        for a in 0..3 {
+            grad[a] = g[a];
+        }
+        return 2.0 * eps.dot(&keps);
+    }
+    if tasks.iter().all(|t| t.quaternion_rows().is_none()) {
+        // V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
+        gemv(grad, 1.0, stiffness, err, 0.0);
+        return 0.5 * err.dot(grad);
+    }
+    stacked_quaternion_potential(tasks, n, stiffness, w, err, grad)
+}
+
+/// V = ½ eᵀ K e of a level with quaternion rows (e = 2ε there, x̃ elsewhere) and its
+/// gradient: (K e) on the other rows, R_d (ηI + \[ε\]×) (K e) on the quaternion rows
+/// (ė = (ηI − \[ε\]×) R_dᵀ ω, so this is the conjugate to the world ω).
+fn stacked_quaternion_potential(
+    tasks: &[TaskSpec],
+    n: usize,
+    stiffness: &DMatrix<f64>,
+    w: &mut PotentialWork,
+    err: &DVector<f64>,
+    grad: &mut DVector<f64>,
+) -> f64 {
+    w.e.copy_from(err);
+    let mut o = 0;
+    for (t, task) in tasks.iter().enumerate() {
+        if let Some(qr) = task.quaternion_rows() {
+            let eps = w.quat[t].1;
+            for a in 0..3 {
+                w.e[o + qr + a] = 2.0 * eps[a];
+            }
+        }
+        o += task.dim(n);
+    }
+    gemv(&mut w.ke, 1.0, stiffness, &w.e, 0.0);
+    grad.copy_from(&w.ke);
+    let mut o = 0;
+    for (t, task) in tasks.iter().enumerate() {
+        if let Some(qr) = task.quaternion_rows() {
+            let (eta, eps) = w.quat[t];
+            let ke = Vector3::new(w.ke[o + qr], w.ke[o + qr + 1], w.ke[o + qr + 2]);
+            let g = w.goal_rotation[t] * (eta * ke + eps.cross(&ke));
+            for a in 0..3 {
+                grad[o + qr + a] = g[a];
+            }
+        }
+        o += task.dim(n);
+    }
+    0.5 * w.e.dot(&w.ke)
+}
+
+fn wrap_angle(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    let mut x = a % two_pi;
+    if x > std::f64::consts::PI {
+        x -= two_pi;
+    } else if x <= -std::f64::consts::PI {
+        x += two_pi;
+    }
+    x
+}
