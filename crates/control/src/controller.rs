@@ -67,6 +67,9 @@ pub struct Output {
     pub fade: Vec<f64>,
     /// The factor τ_μ was scaled by (it fades with the conditioning of every level).
     pub fade_mu: f64,
+    /// Safety layer (crate::safety): its torque (added to τ only when it acts), what
+    /// acted, counters, the fade's energy tank and the total energy E.
+    pub safety: crate::safety::SafetyOutput,
 }
 
 /// Per-level workspace.
@@ -232,6 +235,8 @@ pub struct Controller {
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
+    /// Safety layer workspace and memory (crate::safety).
+    safety: crate::safety::Safety,
     out: Output,
 }
 
@@ -358,7 +363,10 @@ impl Controller {
             conditioning: vec![1.0; r],
             fade: vec![1.0; r],
             fade_mu: 1.0,
+            safety: crate::safety::SafetyOutput::new(n),
         };
+        // Safety layer (crate::safety): limits from the model, workspace.
+        let safety = crate::safety::Safety::new(model, &spec, &dims, ktop)?;
         let mut c = Controller {
             data: Data::new(model),
             model: model.clone(),
@@ -387,10 +395,13 @@ impl Controller {
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
+            safety,
             out,
         };
         c.check_initial(q0)?;
         c.reset();
+        // Safety layer: the checks' cycle counts for nothing.
+        c.out.safety = crate::safety::SafetyOutput::new(n);
         Ok(c)
     }
 
@@ -477,6 +488,8 @@ impl Controller {
     /// e.g. a new robot connection). The next cycle picks a fresh basis.
     pub fn reset(&mut self) {
         self.basis.has_prev = false;
+        // Safety layer: forget the fade memory and empty its energy tank.
+        self.safety.reset();
     }
 
     /// Number of joints.
@@ -694,6 +707,19 @@ impl Controller {
             transpose_into(&mut l.jbar_inv, &l.z);
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
+        // Safety layer: a fade-in is paid from the energy tank (crate::safety).
+        {
+            // Σ β_i ẋ_iᵀ D_i ẋ_i = Σ β_i ẋ_iᵀ (F_i − ∂V_i/∂x_i) (β of the last cycle).
+            let mut p1 = 0.0;
+            for (i, l) in self.levels.iter().enumerate() {
+                let beta = self.safety.last_fade(i);
+                p1 += beta * (l.xdot.dot(&l.f) - l.xdot.dot(&l.grad));
+                self.out.potential[i] = l.potential;
+            }
+            let (fade, pot) = (&mut self.out.fade, &self.out.potential);
+            self.safety
+                .passive_fade(fade, pot, p1, &mut self.out.safety);
+        }
         // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
         self.out.fade_mu = self
             .out
@@ -787,10 +813,28 @@ impl Controller {
         }
         self.out.p_mu = self.out.tau_mu.dot(qd);
 
-        // τ = Σ τ_i + τ_μ + g (eq. 19).
+        // Safety layer: null-space damping of faded levels, joint position and
+        // velocity limits (crate::safety); zero and not added where nothing acts.
+        let terms = crate::safety::CycleTerms {
+            q,
+            qd,
+            m: &self.data.m,
+            chol: &self.chol,
+            jtop: &self.jtop,
+            w: &self.w,
+            fade: &self.out.fade,
+            potential: &self.out.potential,
+            singular_ratio: eps,
+        };
+        self.safety.torque(&terms, &mut self.out.safety);
+
+        // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
         self.out.tau.copy_from(&self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
+        }
+        if self.out.safety.active {
+            self.out.tau += &self.out.safety.tau;
         }
         if self.spec.gravity_compensation {
             self.out.tau += &self.data.g;

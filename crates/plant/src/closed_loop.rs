@@ -365,9 +365,25 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
             .map_err(|e| SimError::Invalid(e.to_string()))?;
         Ok(())
     })?;
+    let mut description = describe(scenario);
+    // What the plant's end stops and velocity monitor counted (only when anything
+    // happened, so that runs within the limits describe themselves as before).
+    let stops = plant.end_stops();
+    for (key, value) in [
+        ("end_stop_contacts", stops.contacts()),
+        ("end_stop_steps", stops.contact_steps()),
+        (
+            "velocity_limit_violation_steps",
+            stops.velocity_violation_steps(),
+        ),
+    ] {
+        if value > 0 {
+            description.settings.insert(key.into(), value.into());
+        }
+    }
     Ok(Run {
         trajectory: traj,
-        description: describe(scenario),
+        description,
     })
 }
 
