@@ -26,6 +26,7 @@ pub struct EndStops {
     velocity_limit: Vec<f64>,
     stiffness: f64,
     damping: f64,
+    enabled: bool,
     in_contact: bool,
     contacts: u64,
     contact_steps: u64,
@@ -43,6 +44,7 @@ impl EndStops {
             velocity_limit: model.joints.iter().map(|j| j.velocity_limit).collect(),
             stiffness: END_STOP_STIFFNESS,
             damping: END_STOP_DAMPING,
+            enabled: true,
             in_contact: false,
             contacts: 0,
             contact_steps: 0,
@@ -55,6 +57,9 @@ impl EndStops {
     /// Adds the contact torque at (`q`, `qd`) to `tau` (nothing where no joint is
     /// beyond a limit).
     pub fn add_torque(&self, q: &DVector<f64>, qd: &DVector<f64>, tau: &mut DVector<f64>) {
+        if !self.enabled {
+            return;
+        }
         for k in 0..q.len() {
             let (up, lo) = (q[k] - self.upper[k], self.lower[k] - q[k]);
             if up > 0.0 {
@@ -86,6 +91,11 @@ impl EndStops {
         self.in_contact = contact;
         self.contact_steps += u64::from(contact);
         self.velocity_steps += u64::from(fast);
+    }
+
+    /// Switches the contact off (a robot without end stops; the counters still count).
+    pub fn set_enabled(&mut self, on: bool) {
+        self.enabled = on;
     }
 
     /// Contact onsets (a joint reaching a stop after none was in contact).
@@ -121,6 +131,7 @@ mod tests {
             velocity_limit: vec![2.0, f64::INFINITY],
             stiffness: 100.0,
             damping: 10.0,
+            enabled: true,
             in_contact: false,
             contacts: 0,
             contact_steps: 0,

@@ -295,6 +295,11 @@ impl Plant {
         &self.end_stops
     }
 
+    /// The end stops, to switch them off (`set_enabled`).
+    pub fn end_stops_mut(&mut self) -> &mut crate::end_stops::EndStops {
+        &mut self.end_stops
+    }
+
     /// Kinetic and potential energy at the current state (does not allocate).
     pub fn energy(&mut self) -> PlantEnergy {
         hcc_model::crba(&self.model, &mut self.data, &self.q);
