@@ -14,7 +14,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
 pub const FADE_RANGE: f64 = crate::dense::EXACT_RATIO_FACTOR;
 
 /// Smoothstep on the log scale: 0 at or below `eps`, 1 at or above `FADE_RANGE × eps`.
-fn fade_factor(ratio: f64, eps: f64) -> f64 {
+pub(crate) fn fade_factor(ratio: f64, eps: f64) -> f64 {
     if ratio.is_nan() || ratio <= eps {
         return 0.0;
     }
@@ -823,6 +823,7 @@ impl Controller {
             jtop: &self.jtop,
             w: &self.w,
             fade: &self.out.fade,
+            conditioning: &self.out.conditioning,
             potential: &self.out.potential,
             singular_ratio: eps,
         };

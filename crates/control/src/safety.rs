@@ -13,7 +13,8 @@
 //! the fade-outs removed and what the damping dissipated (the levels' dampers
 //! Σ β_i ẋ_iᵀ D_i ẋ_i and the null-space damping below), capped at `fade_tank_max`: β_i
 //! rises only as far as T covers, so E + T never grows by a fade. β_i follows a
-//! falling β(q) at once (the protection of the singular region is kept).
+//! falling β(q) at once (the protection of the singular region is kept), and rises
+//! only once β(q) = 1 again (hysteresis), at most at [`FADE_IN_RATE`].
 //!
 //! **Null-space damping of faded levels.** A faded level no longer damps the motion it
 //! controlled (the self-motion the levels above it leave free). In its place, level i
@@ -22,7 +23,11 @@
 //!
 //! τ_N,i = −c_i Nᵀ_i M N_i q̇ = −c_i (M q̇ − J_augᵀ G⁻¹ J_aug q̇),  G = J_aug M⁻¹ J_augᵀ
 //!
-//! (eq. 8; N_i = I − M⁻¹ J_augᵀ G⁻¹ J_aug), with c_i = (1 − β_i) · `null_space_damping`.
+//! (eq. 8; N_i = I − M⁻¹ J_augᵀ G⁻¹ J_aug), with c_i = (1 − min(β_i, β(r_i))) ·
+//! `null_space_damping`, where β(r_i) is the fade function of the level's own
+//! conditioning r_i (`Output::conditioning`): a level in an algorithmic singularity
+//! (Λ_i = Z_i M Z_iᵀ singular) keeps its torque but no longer controls the
+//! direction it lost, which is damped in its place.
 //! J_aug M⁻¹ τ_N,i = 0: the levels above are not disturbed, and its power
 //! −c_i (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≤ 0 — also with the damped inverse (G + δI)⁻¹ ≤ G⁺
 //! that is used where G is singular, since ẋᵀ G⁺ ẋ ≤ q̇ᵀ M q̇ for ẋ = J_aug q̇.
@@ -185,6 +190,8 @@ pub(crate) struct CycleTerms<'a> {
     pub w: &'a DMatrix<f64>,
     /// The effective fade β_i per level.
     pub fade: &'a [f64],
+    /// The smallest eigenvalue ratio of each level's inversions (`Output::conditioning`).
+    pub conditioning: &'a [f64],
     /// V_i per level.
     pub potential: &'a [f64],
     pub singular_ratio: f64,
@@ -313,9 +320,14 @@ impl Safety {
         let mut limited = false;
         for i in 1..fade.len() {
             let (prev, v) = (self.beta_prev[i], potential[i].max(0.0));
-            // A fade-in takes at least 1 / FADE_IN_RATE s (no chattering at the edge
-            // of the fade region).
-            let want = fade[i].min(prev + FADE_IN_RATE * self.spec.control_period_s);
+            // Hysteresis: a faded level comes back only once it has left the fade
+            // region (β(q) = 1), and then in at least 1 / FADE_IN_RATE s — no
+            // relaxation cycles at the edge of the fade region.
+            let want = if fade[i] < 1.0 {
+                fade[i].min(prev)
+            } else {
+                (prev + FADE_IN_RATE * self.spec.control_period_s).min(1.0)
+            };
             let beta = if want <= prev {
                 // Fade-out: the spring energy (β_prev − β) V_i leaves E for the tank.
                 tank += (prev - want) * v;
@@ -377,7 +389,10 @@ impl Safety {
         let ktop = c.jtop.nrows();
         let mut xdot_done = false;
         for i in 1..c.fade.len() {
-            if c.fade[i] >= 1.0 {
+            // Faded, or singular itself (Λ_i, eq. 18): the motion it no longer controls.
+            let own = crate::controller::fade_factor(c.conditioning[i], c.singular_ratio);
+            let beta = c.fade[i].min(own);
+            if beta >= 1.0 {
                 continue;
             }
             if !xdot_done {
@@ -405,7 +420,7 @@ impl Safety {
                 }
                 self.y[a] = s;
             }
-            let ci = (1.0 - c.fade[i]) * self.spec.null_space_damping;
+            let ci = (1.0 - beta) * self.spec.null_space_damping;
             let mut p = 0.0;
             for col in 0..n {
                 let mut jty = 0.0;

@@ -187,7 +187,7 @@ fn limit_figures(scenario: &Scenario, log: &[Sample]) -> (f64, f64) {
 }
 
 #[test]
-fn panda_out_of_reach_and_posture_beyond_limits_stays_inside_the_limits() {
+fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits() {
     // 1.3 m from the base; joints 4 and 6 asked beyond their upper limits
     // (−0.0698 and 3.7525 rad).
     let tcp = [1.2, 0.3, 0.4];
@@ -206,9 +206,7 @@ fn panda_out_of_reach_and_posture_beyond_limits_stays_inside_the_limits() {
         last.errors[0]
     );
     assert!(log.iter().all(|s| s.finite));
-    // Not yet at rest by 4 s (the orientation level hovers at the edge of its
-    // fade region): the figure is printed, not asserted; see
-    // docs/limits-and-singularities.md, "Open".
+    assert!(max_speed(&log, 4.0) < 0.01);
     assert!(beyond <= 0.0, "a joint beyond its limit by {beyond} rad");
     // The speed is reported, not bounded: the scenario's stiff TCP spring pulls the
     // arm through its velocity limits in the first 0.2 s (the plant counts it).
