@@ -68,7 +68,8 @@ pub struct SafetySpec {
     pub joint_limit_damping_ratio: f64,
     /// Fraction f of the URDF velocity limit above which a joint is damped, in (0, 1).
     pub velocity_limit_fraction: f64,
-    /// Velocity-limit damping rate (1/s; the torque is this times m_k q̇_k), ≥ 0.
+    /// Velocity-limit damping rate (1/s; the torque is this times m_k q̇_k; default 500,
+    /// half the 1 kHz control rate), ≥ 0.
     pub velocity_damping: f64,
     /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
     pub null_space_damping: f64,
@@ -86,7 +87,7 @@ impl Default for SafetySpec {
             joint_limit_torque: None,
             joint_limit_damping_ratio: 1.0,
             velocity_limit_fraction: 0.8,
-            velocity_damping: 100.0,
+            velocity_damping: 500.0,
             null_space_damping: 20.0,
             fade_tank_max: 5.0,
             control_period_s: 1e-3,

@@ -209,8 +209,8 @@ fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits(
     assert!(max_speed(&log, 4.0) < 0.01);
     assert!(beyond <= 0.0, "a joint beyond its limit by {beyond} rad");
     // The speed is reported, not bounded: the scenario's stiff TCP spring pulls the
-    // arm through its velocity limits in the first 0.2 s (the plant counts it).
-    assert!(speed < 3.0, "a joint at {speed} × its velocity limit");
+    // arm up to 1.23 × its velocity limits in the first 0.2 s (the plant counts it).
+    assert!(speed < 1.5, "a joint at {speed} × its velocity limit");
 }
 
 /// A small deterministic generator (xorshift64*), uniform in [0, 1).
