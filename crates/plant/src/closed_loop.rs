@@ -480,5 +480,15 @@ pub fn simulate(scenario: &Scenario) -> Result<Run, SimError> {
         "saturated_cycles".into(),
         serde_json::json!(law.saturated_cycles()),
     );
+    // What the controller's safety layer did (only when it acted).
+    let safety = &law.controller().output().safety;
+    for (key, value) in [
+        ("joint_limit_guard_cycles", safety.joint_limit_cycles),
+        ("velocity_damping_cycles", safety.velocity_limit_cycles),
+    ] {
+        if value > 0 {
+            run.description.settings.insert(key.into(), value.into());
+        }
+    }
     Ok(run)
 }

@@ -30,6 +30,8 @@ struct Sample {
     guard: bool,
     velocity: bool,
     max_tau_rate: f64,
+    /// A level faded, or the null-space damping acted.
+    faded: bool,
 }
 
 /// The scenario's law (saturated as the daemon saturates it), logged per cycle.
@@ -59,6 +61,7 @@ impl ControlLaw for Logged {
             guard: out.safety.joint_limit_active,
             velocity: out.safety.velocity_limit_active,
             max_tau_rate: rate,
+            faded: out.safety.null_space_damping_active || out.fade.iter().any(|&b| b < 1.0),
         });
         Ok(())
     }
@@ -279,4 +282,42 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         "sweep: {goals} goals, {settled} at rest or converged by 3 s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, max |q̇| over the last 0.1 s): {unsettled:.3?}",
         100.0 * settled as f64 / goals as f64
     );
+}
+
+/// The paper's scenarios never reach a limit or a singularity: the safety layer never
+/// acts there (their torques are the paper's law bit for bit) and the plant's end stops
+/// are never touched. The Panda scenario as shipped reaches no position limit and no
+/// singularity either, but its wrist passes 0.8 × the URDF velocity limit (it reached
+/// 1.04 × before the velocity damping): there, and only there, the velocity damping acts.
+#[test]
+fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
+    for name in [
+        "paper-sim1.toml",
+        "paper-sim2.toml",
+        "panda-pose-posture.toml",
+    ] {
+        let scenario = load(name);
+        let duration = scenario.simulation.duration_s;
+        let log = run(scenario.clone(), duration);
+        let faded = log.iter().filter(|s| s.faded).count();
+        let guard = log.iter().filter(|s| s.guard).count();
+        let vel = log.iter().filter(|s| s.velocity).count();
+        let (beyond, speed) = limit_figures(&scenario, &log);
+        println!(
+            "{name}: fade / null-space damping in {faded} cycles, guard in {guard}, velocity damping in {vel}; largest |q̇|/limit {speed:.3}"
+        );
+        assert_eq!(faded + guard, 0, "{name}: the safety layer acted");
+        if name.starts_with("paper") {
+            assert_eq!(vel, 0, "{name}: the velocity damping acted");
+        }
+        assert!(beyond <= 0.0);
+        let run = hcc_plant::closed_loop::simulate(&scenario).unwrap();
+        for key in [
+            "end_stop_contacts",
+            "velocity_limit_violation_steps",
+            "joint_limit_guard_cycles",
+        ] {
+            assert!(!run.description.settings.contains_key(key), "{name}: {key}");
+        }
+    }
 }
