@@ -321,3 +321,43 @@ fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
         }
     }
 }
+
+/// The guard comes in without a torque jump: joint 4 of the Panda driven into the
+/// margin of its upper limit (−0.0698 rad, margin 0.1 rad) at 0.5 rad/s.
+#[test]
+fn the_joint_limit_guard_comes_in_without_a_torque_jump() {
+    let scenario = load("panda-pose-posture.toml");
+    let mut c =
+        hcc_control::Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    let (speed, dt) = (0.5, 1e-3);
+    let mut q: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut qd = vec![0.0; q.len()];
+    qd[3] = speed;
+    q[3] = -0.3;
+    let mut prev = 0.0;
+    let mut first: Option<usize> = None;
+    let mut rates = Vec::new();
+    for k in 0..400 {
+        let out = c.step(&q, &qd).unwrap();
+        let tau = out.safety.tau[3];
+        if out.safety.joint_limit_active && first.is_none() {
+            first = Some(k);
+        }
+        if first.is_some() {
+            rates.push((tau - prev).abs() / dt);
+        }
+        prev = tau;
+        q[3] += speed * dt;
+        if q[3] > -0.0698 {
+            break;
+        }
+    }
+    let max_rate = rates.iter().copied().fold(0.0, f64::max);
+    println!(
+        "guard onset: |dτ/dt| in the first 5 cycles {:.3?} N·m/s; largest over the margin {max_rate:.0} N·m/s (joint at {speed} rad/s)",
+        &rates[..5]
+    );
+    assert!(first.is_some(), "the guard never acted");
+    // The rate grows from ~0 with the penetration (k p² and smoothstep(p/margin)).
+    assert!(rates[0] < 1e-2 * max_rate, "a torque jump at activation");
+}
