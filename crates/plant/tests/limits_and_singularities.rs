@@ -135,12 +135,13 @@ fn report_singular(name: &str, log: &[Sample], reach_gap: f64) {
         .collect();
     let last = log.last().unwrap();
     println!(
-        "{name}: max |q̇| at 1/2/4/6/8 s: {}; max |q̇| from 4 s {:.2e} rad/s; E at 1/8 s {:.4}/{:.4} J, largest rise of E after 2 s {:.2e} J; level-1 error at 8 s {:.5} m (closest reachable {reach_gap:.5} m)",
+        "{name}: max |q̇| at 1/2/4/6/8 s: {}; max |q̇| from 4 s {:.2e} rad/s; E at 1/8 s {:.4}/{:.4} J, largest rise of E after 2 s {:.2e} J (after 1 s {:.2e} J); level-1 error at 8 s {:.5} m (closest reachable {reach_gap:.5} m)",
         speeds.join(" / "),
         max_speed(log, 4.0),
         log.iter().find(|s| s.t >= 1.0).unwrap().energy,
         last.energy,
         energy_rise(log, 2.0),
+        energy_rise(log, 1.0),
         last.errors[0],
     );
 }
@@ -275,11 +276,17 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         if rest || converged {
             settled += 1;
         } else {
-            unsettled.push((g, max_speed(&log, 2.9)));
+            unsettled.push((
+                g,
+                max_speed(&log, 2.9),
+                last.errors[0],
+                last.errors[1],
+                radius,
+            ));
         }
     }
     println!(
-        "sweep: {goals} goals, {settled} at rest or converged by 3 s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, max |q̇| over the last 0.1 s): {unsettled:.3?}",
+        "sweep: {goals} goals, {settled} at rest or converged by 3 s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, max |q̇| over the last 0.1 s, TCP and orientation errors, TCP goal radius): {unsettled:.3?}",
         100.0 * settled as f64 / goals as f64
     );
 }
