@@ -595,3 +595,22 @@ fn cpu_cores_are_checked_against_the_available_ones() {
     let slow = load(&edit("control_rate_hz = 1000.0", "control_rate_hz = 500.0")).unwrap();
     assert_eq!(slow.controller_daemon.stale_timeout_ms, 6.0);
 }
+
+/// `[safety]`: every field optional, the defaults of `hcc_control::SafetySpec` (the
+/// control period from the control rate), bad values named.
+#[test]
+fn safety_section() {
+    let s = load(BASE).unwrap();
+    let d = hcc_control::SafetySpec::default();
+    assert_eq!(s.spec.safety, d);
+    let text = format!("{BASE}\n[safety]\njoint_limit_margin = 0.05\nnull_space_damping = 10.0\n");
+    let s = load(&text).unwrap();
+    assert_eq!(s.spec.safety.joint_limit_margin, 0.05);
+    assert_eq!(s.spec.safety.null_space_damping, 10.0);
+    assert_eq!(s.spec.safety.velocity_damping, d.velocity_damping);
+    let bad = format!("{BASE}\n[safety]\njoint_limit_margin = -1.0\n");
+    let e = load(&bad).unwrap_err().to_string();
+    assert!(e.contains("safety.joint_limit_margin"), "{e}");
+    let unknown = format!("{BASE}\n[safety]\nmargin = 1.0\n");
+    assert!(load(&unknown).is_err());
+}
