@@ -307,6 +307,7 @@ impl Scenario {
             coriolis_cancellation: file.controller.coriolis_cancellation,
             form: file.controller.form,
             singular_ratio: ratio,
+            safety: safety_spec(&cx, &file.safety, simulation.control_rate_hz)?,
         };
         check_with_controller(&cx, &model, &spec, &q0)?;
 
@@ -1061,4 +1062,39 @@ fn resolve_sim_daemon(cx: &Ctx, n: usize, d: &SimDaemonSection) -> Result<SimDae
         hold_cycles: d.hold_cycles.unwrap_or(3),
         fallback_damping,
     })
+}
+
+/// `[safety]` over the defaults of `hcc_control::SafetySpec`, the control period from
+/// the control rate.
+fn safety_spec(
+    cx: &Ctx,
+    s: &schema::SafetySection,
+    control_rate_hz: f64,
+) -> Result<hcc_control::SafetySpec, ConfigError> {
+    let d = hcc_control::SafetySpec::default();
+    let spec = hcc_control::SafetySpec {
+        enabled: s.enabled.unwrap_or(d.enabled),
+        joint_limit_margin: s.joint_limit_margin.unwrap_or(d.joint_limit_margin),
+        joint_limit_torque: s.joint_limit_torque.or(d.joint_limit_torque),
+        joint_limit_damping_ratio: s
+            .joint_limit_damping_ratio
+            .unwrap_or(d.joint_limit_damping_ratio),
+        velocity_limit_fraction: s
+            .velocity_limit_fraction
+            .unwrap_or(d.velocity_limit_fraction),
+        velocity_damping: s.velocity_damping.unwrap_or(d.velocity_damping),
+        null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
+        fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),
+        control_period_s: 1.0 / control_rate_hz,
+    };
+    spec.validate().map_err(|e| {
+        let msg = e.to_string();
+        let field = msg
+            .split_whitespace()
+            .next()
+            .unwrap_or("safety")
+            .to_string();
+        cx.err(&field, msg)
+    })?;
+    Ok(spec)
 }

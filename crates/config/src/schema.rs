@@ -28,6 +28,9 @@ pub struct ScenarioFile {
     pub controller_daemon: ControllerDaemonSection,
     #[serde(default)]
     pub sim_daemon: SimDaemonSection,
+    /// `[safety]`: the controller's safety layer (every field optional).
+    #[serde(default)]
+    pub safety: SafetySection,
 }
 
 /// `[robot]`
@@ -357,4 +360,29 @@ pub struct SimDaemonSection {
     pub hold_cycles: Option<u32>,
     /// After that, τ = g(q) − D q̇ with this damping, Nms/rad (scalar or per joint, default 2).
     pub fallback_damping: Option<PerJoint>,
+}
+
+/// `[safety]`: the controller's safety layer (passive fade, null-space damping of
+/// faded levels, joint position and velocity limits from the URDF). Every field is
+/// optional; the defaults are those of `hcc_control::SafetySpec` and act only near
+/// singularities and limits.
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SafetySection {
+    /// Switch the safety layer off (default on).
+    pub enabled: Option<bool>,
+    /// Distance from a URDF position limit at which the guard starts (rad or m).
+    pub joint_limit_margin: Option<f64>,
+    /// Guard spring torque at half the margin (default: the URDF effort limit).
+    pub joint_limit_torque: Option<f64>,
+    /// Damping ratio of the guard at full penetration.
+    pub joint_limit_damping_ratio: Option<f64>,
+    /// Fraction of the URDF velocity limit above which a joint is damped.
+    pub velocity_limit_fraction: Option<f64>,
+    /// Velocity-limit damping rate, 1/s.
+    pub velocity_damping: Option<f64>,
+    /// Null-space damping rate of faded levels, 1/s.
+    pub null_space_damping: Option<f64>,
+    /// Capacity of the energy tank that pays fade-ins, J.
+    pub fade_tank_max: Option<f64>,
 }

@@ -767,3 +767,22 @@ fn malformed_stacked_levels_name_the_field() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// `[safety]`: every field optional, the defaults of `hcc_control::SafetySpec` (the
+/// control period from the control rate), bad values named.
+#[test]
+fn safety_section() {
+    let s = load(BASE).unwrap();
+    let d = hcc_control::SafetySpec::default();
+    assert_eq!(s.spec.safety, d);
+    let text = format!("{BASE}\n[safety]\njoint_limit_margin = 0.05\nnull_space_damping = 10.0\n");
+    let s = load(&text).unwrap();
+    assert_eq!(s.spec.safety.joint_limit_margin, 0.05);
+    assert_eq!(s.spec.safety.null_space_damping, 10.0);
+    assert_eq!(s.spec.safety.velocity_damping, d.velocity_damping);
+    let bad = format!("{BASE}\n[safety]\njoint_limit_margin = -1.0\n");
+    let e = load(&bad).unwrap_err().to_string();
+    assert!(e.contains("safety.joint_limit_margin"), "{e}");
+    let unknown = format!("{BASE}\n[safety]\nmargin = 1.0\n");
+    assert!(load(&unknown).is_err());
+}

@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector};
 pub const FADE_RANGE: f64 = crate::dense::EXACT_RATIO_FACTOR;
 
 /// Smoothstep on the log scale: 0 at or below `eps`, 1 at or above `FADE_RANGE × eps`.
-fn fade_factor(ratio: f64, eps: f64) -> f64 {
+pub(crate) fn fade_factor(ratio: f64, eps: f64) -> f64 {
     if ratio.is_nan() || ratio <= eps {
         return 0.0;
     }
@@ -70,6 +70,9 @@ pub struct Output {
     pub fade_mu: f64,
     /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`] only (zero otherwise).
     pub coriolis: DVector<f64>,
+    /// Safety layer (crate::safety): its torque (added to τ only when it acts), what
+    /// acted, counters, the fade's energy tank and the total energy E.
+    pub safety: crate::safety::SafetyOutput,
 }
 
 impl Output {
@@ -91,6 +94,7 @@ impl Output {
             fade: vec![1.0; r],
             fade_mu: 1.0,
             coriolis: DVector::zeros(n),
+            safety: crate::safety::SafetyOutput::new(n),
         }
     }
 }
@@ -347,6 +351,8 @@ pub struct Controller {
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
+    /// Safety layer workspace and memory (crate::safety).
+    safety: crate::safety::Safety,
     out: Output,
 }
 
@@ -388,6 +394,8 @@ impl Controller {
         let kd = if middle { ktop } else { 0 };
         let v_dims: Vec<usize> = levels.iter().map(|l| l.d).collect();
         let out = Output::new(n, &dims, &v_dims);
+        // Safety layer (crate::safety): limits from the model, workspace.
+        let safety = crate::safety::Safety::new(model, &spec, &dims, ktop)?;
         let mut c = Controller {
             data: Data::new(model),
             model: model.clone(),
@@ -414,10 +422,13 @@ impl Controller {
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
+            safety,
             out,
         };
         c.check_initial(q0)?;
         c.reset();
+        // Safety layer: the checks' cycle counts for nothing.
+        c.out.safety = crate::safety::SafetyOutput::new(n);
         Ok(c)
     }
 
@@ -504,6 +515,8 @@ impl Controller {
     /// e.g. a new robot connection). The next cycle picks a fresh basis.
     pub fn reset(&mut self) {
         self.basis.has_prev = false;
+        // Safety layer: forget the fade memory and empty its energy tank.
+        self.safety.reset();
     }
 
     /// Number of joints.
@@ -627,6 +640,8 @@ impl Controller {
             self.null_space_level(i)?;
         }
         self.out.any_singular = self.out.singular.iter().any(|&s| s);
+        // Safety layer: a fade-in is paid from the energy tank (crate::safety).
+        self.passive_fade();
         // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
         self.out.fade_mu = self
             .out
@@ -637,10 +652,16 @@ impl Controller {
 
         self.level_torques(qd);
         self.coriolis_cancellation(qd)?;
-        // τ = Σ τ_i + τ_μ + g (eq. 19).
+        // Safety layer: null-space damping of faded levels, joint position and
+        // velocity limits (crate::safety); zero and not added where nothing acts.
+        self.safety_torque(q, qd);
+        // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
         self.out.tau.copy_from(&self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
+        }
+        if self.out.safety.active {
+            self.out.tau += &self.out.safety.tau;
         }
         if self.spec.form == Form::KinematicProjector {
             // The comparison law adds C q̇ instead of τ_μ.
@@ -654,6 +675,38 @@ impl Controller {
             return Err(ControlError::Numerical("non-finite torque"));
         }
         Ok(())
+    }
+
+    /// The passive fade of the safety layer (crate::safety): the fade factors of
+    /// this cycle may only remove energy; a fade-in is paid from the energy tank.
+    fn passive_fade(&mut self) {
+        // Σ β_i ẋ_iᵀ D_i ẋ_i = Σ β_i ẋ_iᵀ (F_i − ∂V_i/∂x_i) (β of the last cycle).
+        let mut p1 = 0.0;
+        for (i, l) in self.levels.iter().enumerate() {
+            let beta = self.safety.last_fade(i);
+            p1 += beta * (l.xdot.dot(&l.f) - l.xdot.dot(&l.grad));
+            self.out.potential[i] = l.potential;
+        }
+        let (fade, pot) = (&mut self.out.fade, &self.out.potential);
+        self.safety
+            .passive_fade(fade, pot, p1, &mut self.out.safety);
+    }
+
+    /// The torque of the safety layer (crate::safety) into `out.safety`.
+    fn safety_torque(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
+        let terms = crate::safety::CycleTerms {
+            q,
+            qd,
+            m: &self.data.m,
+            chol: &self.chol,
+            jtop: &self.jtop,
+            w: &self.w,
+            fade: &self.out.fade,
+            conditioning: &self.out.conditioning,
+            potential: &self.out.potential,
+            singular_ratio: self.spec.singular_ratio,
+        };
+        self.safety.torque(&terms, &mut self.out.safety);
     }
 
     /// The levels above the lowest, stacked (see the comment in [`Controller::compute`]).

@@ -69,11 +69,13 @@
 
 pub mod controller;
 pub mod dense;
+pub mod safety;
 pub mod saturation;
 pub mod spec;
 pub mod task;
 
 pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
+pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 

@@ -221,6 +221,9 @@ pub struct ControllerSpec {
     /// Eigenvalue ratio of a Gram matrix (J M⁻¹ Jᵀ, J Jᵀ, Z M Zᵀ) below which the
     /// inversion is damped and the level flagged singular.
     pub singular_ratio: f64,
+    /// The safety layer: passive fade, null-space damping of faded levels, joint
+    /// position and velocity limits ([`crate::safety`]).
+    pub safety: crate::safety::SafetySpec,
 }
 
 impl ControllerSpec {
@@ -232,6 +235,7 @@ impl ControllerSpec {
             coriolis_cancellation: true,
             form: Form::Extended,
             singular_ratio: 1e-6,
+            safety: crate::safety::SafetySpec::default(),
         }
     }
 

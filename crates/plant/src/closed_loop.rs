@@ -173,9 +173,25 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
         };
         recorder.record(&cycle, &mut traj).map_err(record_err)
     })?;
+    let mut description = describe(scenario);
+    // What the plant's end stops and velocity monitor counted (only when anything
+    // happened, so that runs within the limits describe themselves as before).
+    let stops = plant.end_stops();
+    for (key, value) in [
+        ("end_stop_contacts", stops.contacts()),
+        ("end_stop_steps", stops.contact_steps()),
+        (
+            "velocity_limit_violation_steps",
+            stops.velocity_violation_steps(),
+        ),
+    ] {
+        if value > 0 {
+            description.settings.insert(key.into(), value.into());
+        }
+    }
     Ok(Run {
         trajectory: traj,
-        description: describe(scenario),
+        description,
     })
 }
 
@@ -275,5 +291,15 @@ pub fn simulate(scenario: &Scenario) -> Result<Run, SimError> {
         "saturated_cycles".into(),
         serde_json::json!(law.saturated_cycles()),
     );
+    // What the controller's safety layer did (only when it acted).
+    let safety = &law.controller().output().safety;
+    for (key, value) in [
+        ("joint_limit_guard_cycles", safety.joint_limit_cycles),
+        ("velocity_damping_cycles", safety.velocity_limit_cycles),
+    ] {
+        if value > 0 {
+            run.description.settings.insert(key.into(), value.into());
+        }
+    }
     Ok(run)
 }

@@ -5,9 +5,11 @@
 //! ([`closed_loop`]).
 
 pub mod closed_loop;
+pub mod end_stops;
 pub mod plant;
 pub mod zoh;
 
+pub use end_stops::EndStops;
 pub use plant::{ExternalWrench, Plant, PlantEnergy};
 pub use zoh::{LoopTiming, PeriodStep, run_zoh};
 

@@ -71,6 +71,8 @@ pub struct Plant {
     tau_total: DVector<f64>,
     tau_ext: DVector<f64>,
     jac: DMatrix<f64>,
+    /// Joint end stops at the URDF limits and the violation counters (crate::end_stops).
+    end_stops: crate::end_stops::EndStops,
 }
 
 impl Plant {
@@ -117,6 +119,7 @@ impl Plant {
             tau_total: z.clone(),
             tau_ext: z,
             jac: DMatrix::zeros(6, n),
+            end_stops: crate::end_stops::EndStops::new(&model),
             model,
         })
     }
@@ -220,6 +223,9 @@ impl Plant {
         for k in 0..self.tau_total.len() {
             self.tau_total[k] -= self.friction[k] * self.qd_stage[k];
         }
+        // End stops: nothing is added where no joint is beyond a limit.
+        self.end_stops
+            .add_torque(&self.q_stage, &self.qd_stage, &mut self.tau_total);
         hcc_model::forward_dynamics(
             &self.model,
             &mut self.data,
@@ -279,7 +285,19 @@ impl Plant {
                     + self.k_qd[3][k]);
         }
         self.t += dt;
+        self.end_stops.record(&self.q, &self.qd);
         Ok(())
+    }
+
+    /// The end stops and what they counted (contacts, steps beyond a position
+    /// limit, steps faster than a velocity limit).
+    pub fn end_stops(&self) -> &crate::end_stops::EndStops {
+        &self.end_stops
+    }
+
+    /// The end stops, to switch them off (`set_enabled`).
+    pub fn end_stops_mut(&mut self) -> &mut crate::end_stops::EndStops {
+        &mut self.end_stops
     }
 
     /// Kinetic and potential energy at the current state (does not allocate).

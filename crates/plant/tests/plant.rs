@@ -39,6 +39,9 @@ fn check_energy_conservation(model: Model, q0: &[f64], scale: f64) {
     let q0 = DVector::from_column_slice(q0);
     let z = DVector::zeros(n);
     let mut plant = Plant::new(model, &q0, &z, &z).unwrap();
+    // The integrator alone: the Panda's free swing reaches its joint limits, whose
+    // damped end stops would dissipate energy.
+    plant.end_stops_mut().set_enabled(false);
     let e0 = plant.energy().total();
     let mut max_drift: f64 = 0.0;
     let mut max_kinetic: f64 = 0.0;

@@ -1,0 +1,532 @@
+//! The safety layer: passive singularity handling, joint position and velocity
+//! limits. Everything here only ever removes energy (or, for the joint-limit
+//! spring, stores it in a potential of its own), and nothing acts away from
+//! singularities and limits: there the torque is bit-identical to the paper's law.
+//!
+//! **Passive fade.** Near a singularity the torque of a level i ≥ 2 is scaled by
+//! β_i ∈ [0, 1] (crate docs, "Singularities"). With the storage of the whole system
+//!
+//! E = ½ q̇ᵀ M q̇ + V_1 + Σ_{i≥2} β_i V_i  (= Σ_i S_i of eqs. 26, 28 when every β_i = 1),
+//!
+//! a fade-out (β̇_i < 0) removes the energy −β̇_i V_i ≥ 0 from E, a fade-in would add
+//! β̇_i V_i. A fade-in is therefore paid from an energy tank T ≥ 0 that collects what
+//! the fade-outs removed and what the damping dissipated (the levels' dampers
+//! Σ β_i ẋ_iᵀ D_i ẋ_i and the null-space damping below), capped at `fade_tank_max`: β_i
+//! rises only as far as T covers, so E + T never grows by a fade. β_i follows a
+//! falling β(q) at once (the protection of the singular region is kept), and rises
+//! only once β(q) = 1 again (hysteresis), at most at [`FADE_IN_RATE`].
+//!
+//! **Null-space damping of faded levels.** A faded level no longer damps the motion it
+//! controlled (the self-motion the levels above it leave free). In its place, level i
+//! adds the joint damping c_i M q̇ projected into the null space of the levels above
+//! it with the dynamically consistent projector,
+//!
+//! τ_N,i = −c_i Nᵀ_i M N_i q̇ = −c_i (M q̇ − J_augᵀ G⁻¹ J_aug q̇),  G = J_aug M⁻¹ J_augᵀ
+//!
+//! (eq. 8; N_i = I − M⁻¹ J_augᵀ G⁻¹ J_aug), with c_i = (1 − min(β_i, β(r_i))) ·
+//! `null_space_damping`, where β(r_i) is the fade function of the level's own
+//! conditioning r_i (`Output::conditioning`): a level in an algorithmic singularity
+//! (Λ_i = Z_i M Z_iᵀ singular) keeps its torque but no longer controls the
+//! direction it lost, which is damped in its place.
+//! J_aug M⁻¹ τ_N,i = 0: the levels above are not disturbed, and its power
+//! −c_i (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≤ 0 — also with the damped inverse (G + δI)⁻¹ ≤ G⁺
+//! that is used where G is singular, since ẋᵀ G⁺ ẋ ≤ q̇ᵀ M q̇ for ẋ = J_aug q̇.
+//!
+//! **Joint-limit guard.** A dissipative safety layer below the hierarchy (not a task of
+//! it): within `joint_limit_margin` of a URDF position limit, with penetration
+//! p = q − (upper − margin) (resp. (lower + margin) − q) ≥ 0, the joint gets the
+//! spring torque k p² (k = torque / (margin/2)², `torque` = `joint_limit_torque` or the
+//! URDF effort limit, i.e. the effort limit at half the margin and four times it at the
+//! limit) and the damping −s(p/margin) · 2ζ √(2 k margin · m_k) q̇ with s the
+//! smoothstep and m_k = 1/(M⁻¹)_kk the joint's effective inertia. Both vanish with
+//! their first derivative at p = 0: no torque jump and no torque-rate jump at
+//! activation. The spring has the potential k p³/3 (in [`SafetyOutput::guard_potential`]).
+//!
+//! **Velocity limits.** Above `velocity_limit_fraction` of a joint's URDF velocity
+//! limit the joint is damped, −s(x) · `velocity_damping` · m_k q̇_k with
+//! x = (|q̇_k| − f v_max) / ((1 − f) v_max) clamped to [0, 1]: dissipative and continuous.
+//!
+//! Allocation-free after [`Safety::new`].
+
+use crate::ControlError;
+use crate::dense::{SpdWork, damped_spd_inverse};
+use hcc_model::Model;
+use nalgebra::{DMatrix, DVector};
+
+/// Configuration of the safety layer (see the module docs). The defaults are on and
+/// act only near singularities and limits.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SafetySpec {
+    /// Master switch (off: the paper's law alone, with the plain fade).
+    pub enabled: bool,
+    /// Distance from a URDF position limit at which the guard starts (rad or m), > 0.
+    pub joint_limit_margin: f64,
+    /// Guard spring torque at half the margin (N·m or N); `None`: the URDF effort
+    /// limit, or 100 where the URDF gives none.
+    pub joint_limit_torque: Option<f64>,
+    /// Damping ratio ζ of the guard at full penetration, ≥ 0.
+    pub joint_limit_damping_ratio: f64,
+    /// Fraction f of the URDF velocity limit above which a joint is damped, in (0, 1).
+    pub velocity_limit_fraction: f64,
+    /// Velocity-limit damping rate (1/s; the torque is this times m_k q̇_k; default 500,
+    /// half the 1 kHz control rate), ≥ 0.
+    pub velocity_damping: f64,
+    /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
+    pub null_space_damping: f64,
+    /// Capacity of the energy tank that pays fade-ins (J), ≥ 0.
+    pub fade_tank_max: f64,
+    /// Control period (s), for the energy the tank collects per cycle, > 0.
+    pub control_period_s: f64,
+}
+
+impl Default for SafetySpec {
+    fn default() -> Self {
+        SafetySpec {
+            enabled: true,
+            joint_limit_margin: 0.1,
+            joint_limit_torque: None,
+            joint_limit_damping_ratio: 1.0,
+            velocity_limit_fraction: 0.8,
+            velocity_damping: 500.0,
+            null_space_damping: 20.0,
+            fade_tank_max: 5.0,
+            control_period_s: 1e-3,
+        }
+    }
+}
+
+impl SafetySpec {
+    /// Checks the ranges (errors name the field).
+    pub fn validate(&self) -> Result<(), ControlError> {
+        let bad = |f: &str, why: &str| Err(ControlError::Spec(format!("safety.{f} {why}")));
+        let pos = |x: f64| x > 0.0 && x.is_finite();
+        let nonneg = |x: f64| x >= 0.0 && x.is_finite();
+        if !pos(self.joint_limit_margin) {
+            return bad("joint_limit_margin", "must be positive");
+        }
+        if let Some(t) = self.joint_limit_torque
+            && !pos(t)
+        {
+            return bad("joint_limit_torque", "must be positive");
+        }
+        if !nonneg(self.joint_limit_damping_ratio) {
+            return bad("joint_limit_damping_ratio", "must be non-negative");
+        }
+        if !(self.velocity_limit_fraction > 0.0 && self.velocity_limit_fraction < 1.0) {
+            return bad("velocity_limit_fraction", "must be in (0, 1)");
+        }
+        if !nonneg(self.velocity_damping) {
+            return bad("velocity_damping", "must be non-negative");
+        }
+        if !nonneg(self.null_space_damping) {
+            return bad("null_space_damping", "must be non-negative");
+        }
+        if !nonneg(self.fade_tank_max) {
+            return bad("fade_tank_max", "must be non-negative");
+        }
+        if !pos(self.control_period_s) {
+            return bad("control_period_s", "must be positive");
+        }
+        Ok(())
+    }
+}
+
+/// What the safety layer did in the last cycle (part of [`crate::Output`]).
+#[derive(Clone, Debug)]
+pub struct SafetyOutput {
+    /// τ_safety: null-space damping + joint-limit guard + velocity damping, added to τ.
+    pub tau: DVector<f64>,
+    /// Any of its parts acted in this cycle (else `tau` is zero and τ untouched).
+    pub active: bool,
+    /// The joint-limit guard acted (a joint within the margin of a limit).
+    pub joint_limit_active: bool,
+    /// The velocity damping acted (a joint above the fraction of its velocity limit).
+    pub velocity_limit_active: bool,
+    /// A faded level's null-space damping acted.
+    pub null_space_damping_active: bool,
+    /// Cycles in which the guard acted, since construction.
+    pub joint_limit_cycles: u64,
+    /// Cycles in which the velocity damping acted, since construction.
+    pub velocity_limit_cycles: u64,
+    /// Cycles in which a fade-in was held back by an empty tank, since construction.
+    pub fade_in_limited_cycles: u64,
+    /// Energy in the tank that pays fade-ins (J).
+    pub tank: f64,
+    /// Potential of the guard springs, Σ k p³/3 (J).
+    pub guard_potential: f64,
+    /// E = ½ q̇ᵀ M q̇ + V_1 + Σ β_i V_i + guard potential (J; module docs).
+    pub energy: f64,
+    /// q̇ᵀ τ_safety (W): ≤ 0 but for the guard spring's exchange with its potential.
+    pub power: f64,
+}
+
+impl SafetyOutput {
+    pub(crate) fn new(n: usize) -> SafetyOutput {
+        SafetyOutput {
+            tau: DVector::zeros(n),
+            active: false,
+            joint_limit_active: false,
+            velocity_limit_active: false,
+            null_space_damping_active: false,
+            joint_limit_cycles: 0,
+            velocity_limit_cycles: 0,
+            fade_in_limited_cycles: 0,
+            tank: 0.0,
+            guard_potential: 0.0,
+            energy: 0.0,
+            power: 0.0,
+        }
+    }
+}
+
+/// The state the controller hands the safety layer each cycle.
+pub(crate) struct CycleTerms<'a> {
+    pub q: &'a DVector<f64>,
+    pub qd: &'a DVector<f64>,
+    /// M and its Cholesky factor.
+    pub m: &'a DMatrix<f64>,
+    pub chol: &'a DMatrix<f64>,
+    /// The stacked Jacobians of the levels above the lowest and W = J M⁻¹ Jᵀ.
+    pub jtop: &'a DMatrix<f64>,
+    pub w: &'a DMatrix<f64>,
+    /// The effective fade β_i per level.
+    pub fade: &'a [f64],
+    /// The smallest eigenvalue ratio of each level's inversions (`Output::conditioning`).
+    pub conditioning: &'a [f64],
+    /// V_i per level.
+    pub potential: &'a [f64],
+    pub singular_ratio: f64,
+}
+
+/// Workspace and memory of the safety layer.
+#[derive(Clone, Debug)]
+pub(crate) struct Safety {
+    spec: SafetySpec,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    velocity_limit: Vec<f64>,
+    /// Guard spring constant per joint.
+    k_guard: Vec<f64>,
+    /// Rows of J_aug above each level (Σ_{j<i} m_j; only i ≥ 1 is used).
+    k_above: Vec<usize>,
+    /// G, its damped inverse and workspace per level (k_i × k_i).
+    g: Vec<DMatrix<f64>>,
+    g_inv: Vec<DMatrix<f64>>,
+    spd: Vec<SpdWork>,
+    beta_prev: Vec<f64>,
+    has_prev: bool,
+    tank: f64,
+    /// Power dissipated in the last cycle that goes to the tank (W).
+    fill_power: f64,
+    xdot: DVector<f64>,
+    y: DVector<f64>,
+    mqd: DVector<f64>,
+    e: DVector<f64>,
+}
+
+/// Fastest rise of an effective fade β_i (1/s).
+pub const FADE_IN_RATE: f64 = 1.0;
+
+/// Smoothstep 3x² − 2x³ on [0, 1] (0 below, 1 above).
+fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+impl Safety {
+    /// `dims`: task dimensions m_i; `ktop`: rows of the stacked `jtop`.
+    pub(crate) fn new(
+        model: &Model,
+        spec: &crate::ControllerSpec,
+        dims: &[usize],
+        ktop: usize,
+    ) -> Result<Safety, ControlError> {
+        let s = spec.safety.clone();
+        s.validate()?;
+        let half = 0.5 * s.joint_limit_margin;
+        let k_guard = model
+            .joints
+            .iter()
+            .map(|j| {
+                let t = s
+                    .joint_limit_torque
+                    .unwrap_or(if j.effort_limit.is_finite() {
+                        j.effort_limit
+                    } else {
+                        100.0
+                    });
+                t / (half * half)
+            })
+            .collect();
+        let r = dims.len();
+        let mut k_above = vec![0; r];
+        for i in 1..r {
+            k_above[i] = (k_above[i - 1] + dims[i - 1]).min(ktop);
+        }
+        Ok(Safety {
+            lower: model.joints.iter().map(|j| j.lower).collect(),
+            upper: model.joints.iter().map(|j| j.upper).collect(),
+            velocity_limit: model.joints.iter().map(|j| j.velocity_limit).collect(),
+            k_guard,
+            g: k_above.iter().map(|&k| DMatrix::zeros(k, k)).collect(),
+            g_inv: k_above.iter().map(|&k| DMatrix::zeros(k, k)).collect(),
+            spd: k_above.iter().map(|&k| SpdWork::new(k)).collect(),
+            k_above,
+            beta_prev: vec![1.0; r],
+            has_prev: false,
+            tank: 0.0,
+            fill_power: 0.0,
+            xdot: DVector::zeros(ktop),
+            y: DVector::zeros(ktop),
+            mqd: DVector::zeros(model.nq()),
+            e: DVector::zeros(model.nq()),
+            spec: s,
+        })
+    }
+
+    /// Forgets the fade memory (the next cycle takes β(q) as it is) and empties the tank.
+    pub(crate) fn reset(&mut self) {
+        self.has_prev = false;
+        self.tank = 0.0;
+        self.fill_power = 0.0;
+    }
+
+    /// The effective β_i of the last cycle (1 before the first).
+    pub(crate) fn last_fade(&self, i: usize) -> f64 {
+        if self.has_prev {
+            self.beta_prev[i]
+        } else {
+            1.0
+        }
+    }
+
+    /// The passive fade (module docs): `fade` holds β_i(q) on entry and the effective
+    /// β_i on return; `potential` V_i; `damper_dissipation` Σ β_i ẋ_iᵀ D_i ẋ_i (W).
+    pub(crate) fn passive_fade(
+        &mut self,
+        fade: &mut [f64],
+        potential: &[f64],
+        damper_dissipation: f64,
+        out: &mut SafetyOutput,
+    ) {
+        if !self.spec.enabled {
+            return;
+        }
+        if !self.has_prev {
+            self.beta_prev.copy_from_slice(fade);
+            self.has_prev = true;
+        }
+        let fill = (self.fill_power + damper_dissipation.max(0.0)) * self.spec.control_period_s;
+        let mut tank = self.tank + fill.max(0.0);
+        let mut limited = false;
+        for i in 1..fade.len() {
+            let (prev, v) = (self.beta_prev[i], potential[i].max(0.0));
+            // Hysteresis: a faded level comes back only once it has left the fade
+            // region (β(q) = 1), and then in at least 1 / FADE_IN_RATE s — no
+            // relaxation cycles at the edge of the fade region.
+            let want = if fade[i] < 1.0 {
+                fade[i].min(prev)
+            } else {
+                (prev + FADE_IN_RATE * self.spec.control_period_s).min(1.0)
+            };
+            let beta = if want <= prev {
+                // Fade-out: the spring energy (β_prev − β) V_i leaves E for the tank.
+                tank += (prev - want) * v;
+                want
+            } else if (want - prev) * v <= tank {
+                tank -= (want - prev) * v;
+                want
+            } else {
+                // Fade-in as far as the tank pays.
+                limited = true;
+                let b = prev + tank / v;
+                tank = 0.0;
+                b
+            };
+            fade[i] = beta;
+            self.beta_prev[i] = beta;
+        }
+        self.tank = tank.min(self.spec.fade_tank_max);
+        out.tank = self.tank;
+        out.fade_in_limited_cycles += u64::from(limited);
+    }
+
+    /// τ_safety of this cycle into `out` (module docs); `out.active` says whether it
+    /// is to be added to τ. Also E and the power of τ_safety.
+    pub(crate) fn torque(&mut self, c: &CycleTerms, out: &mut SafetyOutput) {
+        out.tau.fill(0.0);
+        out.active = false;
+        out.joint_limit_active = false;
+        out.velocity_limit_active = false;
+        out.null_space_damping_active = false;
+        out.guard_potential = 0.0;
+        out.power = 0.0;
+        self.fill_power = 0.0;
+        crate::dense::gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
+        let kinetic = 0.5 * c.qd.dot(&self.mqd);
+        let mut potential = c.potential.first().copied().unwrap_or(0.0);
+        for i in 1..c.potential.len() {
+            potential += c.fade[i] * c.potential[i];
+        }
+        if self.spec.enabled {
+            self.null_space_damping(c, out);
+            self.joint_limits(c, out);
+            out.active = out.null_space_damping_active
+                || out.joint_limit_active
+                || out.velocity_limit_active;
+            out.power = out.tau.dot(c.qd);
+        }
+        out.joint_limit_cycles += u64::from(out.joint_limit_active);
+        out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
+        out.energy = kinetic + potential + out.guard_potential;
+    }
+
+    /// τ_N,i = −c_i (M q̇ − J_augᵀ G⁻¹ J_aug q̇) for every faded level i ≥ 2.
+    fn null_space_damping(&mut self, c: &CycleTerms, out: &mut SafetyOutput) {
+        let n = c.qd.len();
+        if self.spec.null_space_damping == 0.0 {
+            return;
+        }
+        let ktop = c.jtop.nrows();
+        let mut xdot_done = false;
+        for i in 1..c.fade.len() {
+            // Faded, or singular itself (Λ_i, eq. 18): the motion it no longer controls.
+            let own = crate::controller::fade_factor(c.conditioning[i], c.singular_ratio);
+            let beta = c.fade[i].min(own);
+            if beta >= 1.0 {
+                continue;
+            }
+            if !xdot_done {
+                crate::dense::gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+                xdot_done = true;
+            }
+            let k = self.k_above[i].min(ktop);
+            let g = &mut self.g[i];
+            for a in 0..k {
+                for b in 0..k {
+                    g[(a, b)] = c.w[(a, b)];
+                }
+            }
+            damped_spd_inverse(
+                g,
+                &mut self.g_inv[i],
+                &mut self.spd[i],
+                c.singular_ratio,
+                1e-12,
+            );
+            for a in 0..k {
+                let mut s = 0.0;
+                for b in 0..k {
+                    s += self.g_inv[i][(a, b)] * self.xdot[b];
+                }
+                self.y[a] = s;
+            }
+            let ci = (1.0 - beta) * self.spec.null_space_damping;
+            let mut p = 0.0;
+            for col in 0..n {
+                let mut jty = 0.0;
+                for a in 0..k {
+                    jty += c.jtop[(a, col)] * self.y[a];
+                }
+                let t = -ci * (self.mqd[col] - jty);
+                out.tau[col] += t;
+                p -= t * c.qd[col];
+            }
+            self.fill_power += p.max(0.0);
+            out.null_space_damping_active = true;
+        }
+    }
+
+    /// Effective inertia 1/(M⁻¹)_kk of joint k.
+    fn effective_inertia(&mut self, chol: &DMatrix<f64>, k: usize) -> f64 {
+        self.e.fill(0.0);
+        self.e[k] = 1.0;
+        if hcc_model::linalg::cholesky_solve_in_place(chol, &mut self.e).is_err()
+            || self.e[k] <= 0.0
+        {
+            return 0.0;
+        }
+        1.0 / self.e[k]
+    }
+
+    /// The joint-limit guard and the velocity damping.
+    fn joint_limits(&mut self, c: &CycleTerms, out: &mut SafetyOutput) {
+        let margin = self.spec.joint_limit_margin;
+        let f = self.spec.velocity_limit_fraction;
+        for k in 0..c.q.len() {
+            let (q, qd) = (c.q[k], c.qd[k]);
+            // Penetration into the margin (positive: towards the upper limit).
+            let up = q - (self.upper[k] - margin);
+            let lo = (self.lower[k] + margin) - q;
+            let (p, sign) = if up > 0.0 {
+                (up, 1.0)
+            } else if lo > 0.0 {
+                (lo, -1.0)
+            } else {
+                (0.0, 0.0)
+            };
+            let vmax = self.velocity_limit[k];
+            let x = if vmax.is_finite() {
+                (qd.abs() - f * vmax) / ((1.0 - f) * vmax)
+            } else {
+                0.0
+            };
+            if p <= 0.0 && x <= 0.0 {
+                continue;
+            }
+            let m_k = self.effective_inertia(c.chol, k);
+            if p > 0.0 {
+                let kg = self.k_guard[k];
+                let d =
+                    self.spec.joint_limit_damping_ratio * 2.0 * (2.0 * kg * margin * m_k).sqrt();
+                out.tau[k] += -sign * kg * p * p - smoothstep(p / margin) * d * qd;
+                out.guard_potential += kg * p * p * p / 3.0;
+                out.joint_limit_active = true;
+            }
+            if x > 0.0 {
+                out.tau[k] -= smoothstep(x) * self.spec.velocity_damping * m_k * qd;
+                out.velocity_limit_active = true;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothstep_is_c1_at_its_ends() {
+        assert_eq!(smoothstep(-1.0), 0.0);
+        assert_eq!(smoothstep(0.0), 0.0);
+        assert_eq!(smoothstep(1.0), 1.0);
+        assert_eq!(smoothstep(2.0), 1.0);
+        let h = 1e-6;
+        assert!(smoothstep(h) / h < 1e-5);
+        assert!((1.0 - smoothstep(1.0 - h)) / h < 1e-5);
+    }
+
+    #[test]
+    fn bad_values_are_refused_with_the_field() {
+        let mut s = SafetySpec::default();
+        assert!(s.validate().is_ok());
+        s.joint_limit_margin = 0.0;
+        let e = s.validate().unwrap_err().to_string();
+        assert!(e.contains("joint_limit_margin"), "{e}");
+        let s = SafetySpec {
+            velocity_limit_fraction: 1.0,
+            ..Default::default()
+        };
+        assert!(
+            s.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("velocity_limit_fraction")
+        );
+        let s = SafetySpec {
+            joint_limit_torque: Some(f64::NAN),
+            ..Default::default()
+        };
+        assert!(s.validate().is_err());
+    }
+}

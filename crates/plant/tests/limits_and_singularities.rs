@@ -1,0 +1,373 @@
+//! At the edge of the workspace and in conflicting hierarchies the arm comes to
+//! rest (the safety layer of hcc-control, hcc_control::safety, and the plant's end
+//! stops): the shipped singular scenarios run for 8 s, the Panda with a TCP goal
+//! out of reach and a posture beyond its limits, and a seeded sweep of Panda goals.
+//! The figures are printed (`--nocapture`) and quoted in docs/limits-and-singularities.md.
+
+use std::path::PathBuf;
+
+use hcc_config::Scenario;
+use hcc_plant::SimError;
+use hcc_plant::closed_loop::{ControlLaw, HierarchicalLaw, simulate_with};
+use nalgebra::{DMatrix, DVector};
+
+fn load(name: &str) -> Scenario {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(name);
+    Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// One cycle of a run.
+#[derive(Clone, Debug)]
+struct Sample {
+    t: f64,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    energy: f64,
+    errors: Vec<f64>,
+    finite: bool,
+    guard: bool,
+    velocity: bool,
+    max_tau_rate: f64,
+    /// A level faded, or the null-space damping acted.
+    faded: bool,
+}
+
+/// The scenario's law (saturated as the daemon saturates it), logged per cycle.
+struct Logged {
+    law: HierarchicalLaw,
+    period_s: f64,
+    k: u64,
+    prev_safety: DVector<f64>,
+    log: Vec<Sample>,
+}
+
+impl ControlLaw for Logged {
+    fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), SimError> {
+        let t = self.k as f64 * self.period_s;
+        self.k += 1;
+        self.law.compute(q, qd)?;
+        let out = self.law.controller().output();
+        let rate = (&out.safety.tau - &self.prev_safety).amax() / self.period_s;
+        self.prev_safety.copy_from(&out.safety.tau);
+        self.log.push(Sample {
+            t,
+            q: q.iter().copied().collect(),
+            qd: qd.iter().copied().collect(),
+            energy: out.safety.energy,
+            errors: out.task_error.iter().map(|e| e.norm()).collect(),
+            finite: out.tau.iter().all(|x| x.is_finite()),
+            guard: out.safety.joint_limit_active,
+            velocity: out.safety.velocity_limit_active,
+            max_tau_rate: rate,
+            faded: out.safety.null_space_damping_active || out.fade.iter().any(|&b| b < 1.0),
+        });
+        Ok(())
+    }
+    fn tau(&self) -> &DVector<f64> {
+        self.law.tau()
+    }
+    fn level_torque(&self, i: usize) -> &DVector<f64> {
+        self.law.level_torque(i)
+    }
+    fn tau_mu(&self) -> &DVector<f64> {
+        self.law.tau_mu()
+    }
+    fn task_error(&self, i: usize) -> &DVector<f64> {
+        self.law.task_error(i)
+    }
+    fn level_energy(&self, i: usize) -> f64 {
+        self.law.level_energy(i)
+    }
+    fn level_potential(&self, i: usize) -> f64 {
+        self.law.level_potential(i)
+    }
+    fn p_mu(&self) -> f64 {
+        self.law.p_mu()
+    }
+    fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        self.law.task_jacobian(i)
+    }
+    fn extended_jacobian(&self) -> Option<(Vec<usize>, DMatrix<f64>)> {
+        None
+    }
+}
+
+fn run(mut scenario: Scenario, duration_s: f64) -> Vec<Sample> {
+    scenario.set_duration(duration_s).unwrap();
+    let mut law = Logged {
+        law: HierarchicalLaw::new(&scenario).unwrap(),
+        period_s: 1.0 / scenario.simulation.control_rate_hz,
+        k: 0,
+        prev_safety: DVector::zeros(scenario.model.nq()),
+        log: Vec::new(),
+    };
+    simulate_with(&scenario, &mut law).unwrap_or_else(|e| panic!("closed loop: {e}"));
+    law.log
+}
+
+fn max_speed(log: &[Sample], from: f64) -> f64 {
+    log.iter()
+        .filter(|s| s.t >= from)
+        .flat_map(|s| s.qd.iter().map(|x| x.abs()))
+        .fold(0.0, f64::max)
+}
+
+/// Largest rise of E over any window after `from` (0 if E never grows).
+fn energy_rise(log: &[Sample], from: f64) -> f64 {
+    let mut low = f64::INFINITY;
+    let mut rise: f64 = 0.0;
+    for s in log.iter().filter(|s| s.t >= from) {
+        low = low.min(s.energy);
+        rise = rise.max(s.energy - low);
+    }
+    rise
+}
+
+fn report_singular(name: &str, log: &[Sample], reach_gap: f64) {
+    let speeds: Vec<String> = [1.0, 2.0, 4.0, 6.0, 8.0]
+        .iter()
+        .map(|&t| {
+            let s = log
+                .iter()
+                .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
+                .unwrap();
+            format!("{:.2e}", s.qd.iter().map(|x| x.abs()).fold(0.0, f64::max))
+        })
+        .collect();
+    let last = log.last().unwrap();
+    println!(
+        "{name}: max |q̇| at 1/2/4/6/8 s: {}; max |q̇| from 4 s {:.2e} rad/s; E at 1/8 s {:.4}/{:.4} J, largest rise of E after 2 s {:.2e} J (after 1 s {:.2e} J); level-1 error at 8 s {:.5} m (closest reachable {reach_gap:.5} m)",
+        speeds.join(" / "),
+        max_speed(log, 4.0),
+        log.iter().find(|s| s.t >= 1.0).unwrap().energy,
+        last.energy,
+        energy_rise(log, 2.0),
+        energy_rise(log, 1.0),
+        last.errors[0],
+    );
+}
+
+#[test]
+fn stretched_out_towards_a_goal_out_of_reach_the_arm_comes_to_rest() {
+    let log = run(load("planar-singular-stretch.toml"), 8.0);
+    // The goal (1.25, 1.625) is 2.0500 m from the base, the arm 2.0 m long.
+    let gap = (1.25f64.hypot(1.625)) - 2.0;
+    report_singular("stretch", &log, gap);
+    assert!(log.iter().all(|s| s.finite));
+    assert!(max_speed(&log, 4.0) < 0.01);
+    assert!((log.last().unwrap().errors[0] - gap).abs() < 1e-3);
+    assert!(energy_rise(&log, 2.0) < 1e-3);
+}
+
+#[test]
+fn conflicting_levels_the_arm_comes_to_rest() {
+    let log = run(load("planar-algorithmic-singularity.toml"), 8.0);
+    report_singular("algorithmic", &log, 0.0);
+    assert!(log.iter().all(|s| s.finite));
+    assert!(max_speed(&log, 4.0) < 0.01);
+    assert!(log.last().unwrap().errors[0] < 1e-3);
+    assert!(energy_rise(&log, 2.0) < 1e-3);
+}
+
+/// The Panda scenario with the TCP goal `tcp` and the posture goal `posture`.
+fn panda(tcp: [f64; 3], posture: &[f64]) -> Scenario {
+    let mut s = load("panda-pose-posture.toml");
+    s.spec.levels[0].goal = DVector::from_row_slice(&tcp);
+    s.spec.levels[2].goal = DVector::from_row_slice(posture);
+    s
+}
+
+/// Joint limit violations and the largest |q̇_k| / velocity limit of a run.
+fn limit_figures(scenario: &Scenario, log: &[Sample]) -> (f64, f64) {
+    let joints = &scenario.model.joints;
+    let mut beyond: f64 = 0.0;
+    let mut speed: f64 = 0.0;
+    for s in log {
+        for (k, j) in joints.iter().enumerate() {
+            beyond = beyond.max(s.q[k] - j.upper).max(j.lower - s.q[k]);
+            speed = speed.max(s.qd[k].abs() / j.velocity_limit);
+        }
+    }
+    (beyond, speed)
+}
+
+#[test]
+fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits() {
+    // 1.3 m from the base; joints 4 and 6 asked beyond their upper limits
+    // (−0.0698 and 3.7525 rad).
+    let tcp = [1.2, 0.3, 0.4];
+    let posture = [0.0, -0.3, 0.0, 0.3, 0.0, 4.0, 0.8];
+    let scenario = panda(tcp, &posture);
+    let log = run(scenario.clone(), 6.0);
+    let (beyond, speed) = limit_figures(&scenario, &log);
+    let guard = log.iter().filter(|s| s.guard).count();
+    let vel = log.iter().filter(|s| s.velocity).count();
+    let rate = log.iter().map(|s| s.max_tau_rate).fold(0.0, f64::max);
+    let last = log.last().unwrap();
+    println!(
+        "panda 1.3 m: max |q̇| from 4 s {:.2e} rad/s; deepest beyond a limit {beyond:.2e} rad; largest |q̇|/limit {speed:.3}; guard cycles {guard}, velocity-damping cycles {vel}; largest |dτ_safety/dt| {rate:.0} N·m/s; final q {:.3?}; final TCP error {:.3} m",
+        max_speed(&log, 4.0),
+        last.q,
+        last.errors[0]
+    );
+    assert!(log.iter().all(|s| s.finite));
+    assert!(max_speed(&log, 4.0) < 0.01);
+    assert!(beyond <= 0.0, "a joint beyond its limit by {beyond} rad");
+    // The speed is reported, not bounded: the scenario's stiff TCP spring pulls the
+    // arm up to 1.23 × its velocity limits in the first 0.2 s (the plant counts it).
+    assert!(speed < 1.5, "a joint at {speed} × its velocity limit");
+}
+
+/// A small deterministic generator (xorshift64*), uniform in [0, 1).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+/// Seeded random Panda goals, 3 s each from the scenario's start: TCP goals from
+/// 0.3 m to 1.4 m from the shoulder (within and beyond reach), posture goals up
+/// to 0.5 rad beyond the limits of every joint. `SWEEP_GOALS` goals (default 100
+/// here; `SWEEP_GOALS=500 cargo test --release -p hcc-plant --test
+/// limits_and_singularities sweep -- --nocapture` runs the full sweep).
+#[test]
+fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
+    let goals: usize = std::env::var("SWEEP_GOALS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(100);
+    let base = load("panda-pose-posture.toml");
+    let joints = base.model.joints.clone();
+    let mut rng = Rng(0x5eed_1234_abcd_0001);
+    let (mut settled, mut worst_beyond, mut worst_speed) = (0, f64::NEG_INFINITY, 0.0f64);
+    let mut unsettled = Vec::new();
+    for g in 0..goals {
+        let radius = rng.range(0.3, 1.4);
+        let (az, el) = (rng.range(-3.1, 3.1), rng.range(-0.8, 1.2));
+        let tcp = [
+            radius * el.cos() * az.cos(),
+            radius * el.cos() * az.sin(),
+            0.333 + radius * el.sin(),
+        ];
+        let posture: Vec<f64> = joints
+            .iter()
+            .map(|j| rng.range(j.lower - 0.5, j.upper + 0.5))
+            .collect();
+        let scenario = panda(tcp, &posture);
+        let log = run(scenario.clone(), 3.0);
+        assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
+        let (beyond, speed) = limit_figures(&scenario, &log);
+        worst_beyond = worst_beyond.max(beyond);
+        worst_speed = worst_speed.max(speed);
+        assert!(
+            beyond <= 0.0,
+            "goal {g}: a joint {beyond} rad beyond its limit"
+        );
+        let rest = max_speed(&log, 2.9) < 0.01;
+        let last = log.last().unwrap();
+        let converged = last.errors[0] < 1e-3 && last.errors[1] < 1e-2;
+        if rest || converged {
+            settled += 1;
+        } else {
+            unsettled.push((
+                g,
+                max_speed(&log, 2.9),
+                last.errors[0],
+                last.errors[1],
+                radius,
+            ));
+        }
+    }
+    println!(
+        "sweep: {goals} goals, {settled} at rest or converged by 3 s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, max |q̇| over the last 0.1 s, TCP and orientation errors, TCP goal radius): {unsettled:.3?}",
+        100.0 * settled as f64 / goals as f64
+    );
+}
+
+/// The paper's scenarios never reach a limit or a singularity: the safety layer never
+/// acts there (their torques are the paper's law bit for bit) and the plant's end stops
+/// are never touched. The Panda scenario as shipped reaches no position limit and no
+/// singularity either, but its wrist passes 0.8 × the URDF velocity limit (it reached
+/// 1.04 × before the velocity damping): there, and only there, the velocity damping acts.
+#[test]
+fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
+    for name in [
+        "paper-sim1.toml",
+        "paper-sim2.toml",
+        "panda-pose-posture.toml",
+    ] {
+        let scenario = load(name);
+        let duration = scenario.simulation.duration_s;
+        let log = run(scenario.clone(), duration);
+        let faded = log.iter().filter(|s| s.faded).count();
+        let guard = log.iter().filter(|s| s.guard).count();
+        let vel = log.iter().filter(|s| s.velocity).count();
+        let (beyond, speed) = limit_figures(&scenario, &log);
+        println!(
+            "{name}: fade / null-space damping in {faded} cycles, guard in {guard}, velocity damping in {vel}; largest |q̇|/limit {speed:.3}"
+        );
+        assert_eq!(faded + guard, 0, "{name}: the safety layer acted");
+        if name.starts_with("paper") {
+            assert_eq!(vel, 0, "{name}: the velocity damping acted");
+        }
+        assert!(beyond <= 0.0);
+        let run = hcc_plant::closed_loop::simulate(&scenario).unwrap();
+        for key in [
+            "end_stop_contacts",
+            "velocity_limit_violation_steps",
+            "joint_limit_guard_cycles",
+        ] {
+            assert!(!run.description.settings.contains_key(key), "{name}: {key}");
+        }
+    }
+}
+
+/// The guard comes in without a torque jump: joint 4 of the Panda driven into the
+/// margin of its upper limit (−0.0698 rad, margin 0.1 rad) at 0.5 rad/s.
+#[test]
+fn the_joint_limit_guard_comes_in_without_a_torque_jump() {
+    let scenario = load("panda-pose-posture.toml");
+    let mut c =
+        hcc_control::Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    let (speed, dt) = (0.5, 1e-3);
+    let mut q: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut qd = vec![0.0; q.len()];
+    qd[3] = speed;
+    q[3] = -0.3;
+    let mut prev = 0.0;
+    let mut first: Option<usize> = None;
+    let mut rates = Vec::new();
+    for k in 0..400 {
+        let out = c.step(&q, &qd).unwrap();
+        let tau = out.safety.tau[3];
+        if out.safety.joint_limit_active && first.is_none() {
+            first = Some(k);
+        }
+        if first.is_some() {
+            rates.push((tau - prev).abs() / dt);
+        }
+        prev = tau;
+        q[3] += speed * dt;
+        if q[3] > -0.0698 {
+            break;
+        }
+    }
+    let max_rate = rates.iter().copied().fold(0.0, f64::max);
+    println!(
+        "guard onset: |dτ/dt| in the first 5 cycles {:.3?} N·m/s; largest over the margin {max_rate:.0} N·m/s (joint at {speed} rad/s)",
+        &rates[..5]
+    );
+    assert!(first.is_some(), "the guard never acted");
+    // The rate grows from ~0 with the penetration (k p² and smoothstep(p/margin)).
+    assert!(rates[0] < 1e-2 * max_rate, "a torque jump at activation");
+}
