@@ -19,8 +19,20 @@ import pytest
 from conftest import ROOT, binary, unique
 from procs import read_csv, remove_ipc_files, run_pair
 
-#: Largest joint difference accepted, rad (measured: about 1e-11).
+#: Largest joint difference accepted, rad, where the loop is smooth (measured:
+#: about 1e-11).
 TOLERANCE_RAD = 1e-9
+
+#: Largest joint difference accepted, rad, where the controller's velocity-limit
+#: damping acts (the shipped Panda scenario: its wrist passes 0.8 × the URDF
+#: velocity limit, where a damping of 500 1/s comes in over a narrow band of
+#: speeds); it amplifies the plants' round-off differences (measured: 3e-8).
+TOLERANCE_VELOCITY_DAMPING_RAD = 1e-7
+
+SAFETY_OFF = """
+[safety]
+enabled = false
+"""
 
 PUSH = """
 [[simulation.wrench]]
@@ -68,11 +80,18 @@ def largest_joint_difference(mujoco_csv: pathlib.Path, sim_csv: pathlib.Path) ->
 
 
 @pytest.mark.parametrize(
-    "name,extra",
-    [("paper-sim1.toml", ""), ("panda-pose-posture.toml", ""), ("paper-sim1.toml", PUSH)],
-    ids=["paper-sim1", "panda", "paper-sim1-push"],
+    "name,extra,tolerance",
+    [
+        ("paper-sim1.toml", "", TOLERANCE_RAD),
+        ("panda-pose-posture.toml", SAFETY_OFF, TOLERANCE_RAD),
+        ("panda-pose-posture.toml", "", TOLERANCE_VELOCITY_DAMPING_RAD),
+        ("paper-sim1.toml", PUSH, TOLERANCE_RAD),
+    ],
+    ids=["paper-sim1", "panda-no-safety-layer", "panda", "paper-sim1-push"],
 )
-def test_lockstep_matches_hcc_sim(name: str, extra: str, tmp_path: pathlib.Path) -> None:
+def test_lockstep_matches_hcc_sim(
+    name: str, extra: str, tolerance: float, tmp_path: pathlib.Path
+) -> None:
     scenario = ROOT / "config" / name
     if extra:
         text = scenario.read_text().replace(
@@ -83,7 +102,7 @@ def test_lockstep_matches_hcc_sim(name: str, extra: str, tmp_path: pathlib.Path)
     sim_csv = hcc_sim_trajectory(scenario, tmp_path / "hcc-sim")
     paths = run_pair(scenario, tmp_path, lockstep=True, duration=3.0)
     worst, common = largest_joint_difference(paths["record"], sim_csv)
-    print(f"{scenario.stem}{' with a push' if extra else ''}: largest joint difference "
-          f"MuJoCo vs hcc-sim over {common} states: {worst:.3e} rad")
+    print(f"{scenario.stem}{' + ' + extra.split()[0] if extra else ''}: largest joint "
+          f"difference MuJoCo vs hcc-sim over {common} states: {worst:.3e} rad")
     assert common == 3001
-    assert worst < TOLERANCE_RAD
+    assert worst < tolerance
