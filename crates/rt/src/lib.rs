@@ -26,11 +26,13 @@
 //! real-time path: the sleeps, the waits and the stop flag are system calls
 //! and atomics only.
 
+pub mod args;
 pub mod sleep;
 pub mod stop;
 pub mod thread;
 mod wait;
 
+pub use args::{IpcArgs, parse_args};
 pub use sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns, wait_for_event_until};
 pub use stop::{install_stop_handler, stop_requested};
 pub use thread::{

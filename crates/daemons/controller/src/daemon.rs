@@ -58,13 +58,9 @@ const NOT_LOGGED: [&str; 2] = ["cycles", "stale_events"];
 pub struct Args {
     /// Scenario TOML (robot, hierarchy, gains, goals, [ipc], [controller_daemon]).
     pub config: PathBuf,
-    /// IPC namespace (overrides [ipc].namespace).
-    #[arg(long)]
-    pub namespace: Option<String>,
-    /// Prefix of the shared-memory files (default: the HCC_IPC_FILE_PREFIX
-    /// environment variable, else iceoryx2's default). All peers must agree.
-    #[arg(long)]
-    pub file_prefix: Option<String>,
+    /// IPC namespace and file prefix.
+    #[command(flatten)]
+    pub ipc: hcc_rt::IpcArgs,
     /// Wait strategy (overrides [controller_daemon].wait_strategy).
     #[arg(long, value_enum)]
     pub wait: Option<WaitStrategy>,
@@ -92,16 +88,9 @@ where
     T: Into<OsString> + Clone,
 {
     init_logging();
-    let args = match Args::try_parse_from(args) {
+    let args = match hcc_rt::parse_args::<Args, _, _>(args) {
         Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return if e.use_stderr() {
-                ExitCode::from(2)
-            } else {
-                ExitCode::SUCCESS
-            };
-        }
+        Err(code) => return code,
     };
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
@@ -162,12 +151,9 @@ struct Setup {
 fn load(args: &Args) -> Result<Setup> {
     let scenario = Scenario::load(&args.config)?;
     scenario.check_cpu_core("controller_daemon", &rt::available_cores())?;
-    let namespace = args
-        .namespace
-        .clone()
-        .unwrap_or_else(|| scenario.ipc.namespace.clone());
-    let names = ServiceNames::new(&namespace).context("--namespace")?;
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    let names =
+        ServiceNames::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("--namespace")?;
+    let file_prefix = args.ipc.file_prefix();
     let mut settings = CycleSettings::from_scenario(&scenario);
     if let Some(w) = args.wait {
         settings.wait = w;

@@ -67,13 +67,9 @@ const HYBRID_POLL_NS: u64 = 100_000;
 pub struct Args {
     /// Scenario TOML (robot, initial state, [simulation], [ipc], [sim_daemon]).
     pub config: PathBuf,
-    /// IPC namespace (overrides [ipc].namespace).
-    #[arg(long)]
-    pub namespace: Option<String>,
-    /// Prefix of the shared-memory files (default: the HCC_IPC_FILE_PREFIX
-    /// environment variable, else iceoryx2's default). All peers must agree.
-    #[arg(long)]
-    pub file_prefix: Option<String>,
+    /// IPC namespace and file prefix.
+    #[command(flatten)]
+    pub ipc: hcc_rt::IpcArgs,
     /// Lockstep mode (overrides [sim_daemon].mode).
     #[arg(long, conflicts_with = "realtime")]
     pub lockstep: bool,
@@ -116,16 +112,9 @@ where
     T: Into<OsString> + Clone,
 {
     rt::init_logging();
-    let args = match Args::try_parse_from(args) {
+    let args = match hcc_rt::parse_args::<Args, _, _>(args) {
         Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return if e.use_stderr() {
-                ExitCode::from(2)
-            } else {
-                ExitCode::SUCCESS
-            };
-        }
+        Err(code) => return code,
     };
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
@@ -472,11 +461,10 @@ fn check_args(args: &Args) -> Result<()> {
 pub fn run(args: Args) -> Result<()> {
     let scenario = Scenario::load(&args.config)?;
     scenario.check_cpu_core("sim_daemon", &rt::available_cores())?;
-    let namespace = args.namespace.as_deref();
     let names =
-        ServiceNames::new(namespace.unwrap_or(&scenario.ipc.namespace)).context("--namespace")?;
+        ServiceNames::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("--namespace")?;
     let mode = mode(&args, &scenario);
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    let file_prefix = args.ipc.file_prefix();
     check_args(&args)?;
     let mut driver = SimDriver::new(&scenario)
         .map_err(|e| anyhow::anyhow!("{}: {e}", scenario.path.display()))?;

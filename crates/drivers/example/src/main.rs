@@ -49,12 +49,9 @@ static ALLOCATOR: hcc_rtalloc::RtAllocator = hcc_rtalloc::RtAllocator::new();
 struct Args {
     /// Scenario TOML file (robot model, gravity handling, miss policy, rate).
     config: PathBuf,
-    /// IPC namespace (default: [ipc] namespace of the scenario).
-    #[arg(long)]
-    namespace: Option<String>,
-    /// iceoryx2 file prefix (default: HCC_IPC_FILE_PREFIX, else iceoryx2's default).
-    #[arg(long)]
-    file_prefix: Option<String>,
+    /// IPC namespace and file prefix.
+    #[command(flatten)]
+    ipc: hcc_rt::IpcArgs,
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
@@ -254,9 +251,9 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     let scenario = hcc_config::Scenario::load(&args.config)?;
     let model = &scenario.model;
     let n = model.nq();
-    let namespace = Namespace::new(args.namespace.as_deref().unwrap_or(&scenario.ipc.namespace))
-        .context("namespace")?;
-    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    let namespace =
+        Namespace::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("namespace")?;
+    let file_prefix = args.ipc.file_prefix();
     let rate = scenario.simulation.control_rate_hz;
     let period_ns = (1e9 / rate).round() as u64;
     let window_ns = (args.command_window_us * 1000).min(period_ns * 9 / 10);
