@@ -52,6 +52,32 @@ where
     })
 }
 
+/// The `main` of a process: parses `args` ([`parse_args`]), calls `run` with
+/// them and maps its result to the exit code — 0 after a clean stop, 2 for an
+/// error, which `log_error` reports first.
+pub fn run_main<A, I, T, E>(
+    args: I,
+    run: impl FnOnce(A) -> Result<(), E>,
+    log_error: impl FnOnce(&E),
+) -> ExitCode
+where
+    A: clap::Parser,
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let args = match parse_args::<A, _, _>(args) {
+        Ok(a) => a,
+        Err(code) => return code,
+    };
+    match run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            log_error(&e);
+            ExitCode::from(2)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -74,5 +100,18 @@ mod tests {
             parse_args::<Demo, _, _>(["demo", "--bogus"]).unwrap_err(),
             ExitCode::from(2)
         );
+    }
+
+    #[test]
+    fn run_main_maps_the_result_to_the_exit_code() {
+        let ok = run_main::<Demo, _, _, String>(["demo"], |_| Ok(()), |_| {});
+        assert_eq!(ok, ExitCode::SUCCESS);
+        let mut logged = String::new();
+        let failed = run_main::<Demo, _, _, String>(
+            ["demo"],
+            |_| Err("no robot".to_string()),
+            |e| logged = e.clone(),
+        );
+        assert_eq!((failed, logged.as_str()), (ExitCode::from(2), "no robot"));
     }
 }

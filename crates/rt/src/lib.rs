@@ -32,7 +32,7 @@ pub mod stop;
 pub mod thread;
 mod wait;
 
-pub use args::{IpcArgs, parse_args};
+pub use args::{IpcArgs, parse_args, run_main};
 pub use sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns, wait_for_event_until};
 pub use stop::{install_stop_handler, stop_requested};
 pub use thread::{

@@ -82,23 +82,9 @@ pub struct Args {
 
 /// Parses `args` (program name first), runs the daemon, maps the result to
 /// an exit code: 0 after a clean stop, 2 for a start-up error.
-pub fn main_with_args<I, T>(args: I) -> ExitCode
-where
-    I: IntoIterator<Item = T>,
-    T: Into<OsString> + Clone,
-{
+pub fn main_with_args(args: impl IntoIterator<Item = impl Into<OsString> + Clone>) -> ExitCode {
     init_logging();
-    let args = match hcc_rt::parse_args::<Args, _, _>(args) {
-        Ok(a) => a,
-        Err(code) => return code,
-    };
-    match run(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            error!("{e:#}");
-            ExitCode::from(2)
-        }
-    }
+    hcc_rt::run_main(args, run, |e| error!("{e:#}"))
 }
 
 /// Installs the process's `tracing` subscriber (once; later calls keep it):

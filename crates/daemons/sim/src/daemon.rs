@@ -105,24 +105,10 @@ pub struct Args {
 }
 
 /// Parses `args` (program name first) and runs the daemon; 0 after a clean
-/// stop, 2 for a start-up error, 1 for a failure while running.
-pub fn main_with_args<I, T>(args: I) -> ExitCode
-where
-    I: IntoIterator<Item = T>,
-    T: Into<OsString> + Clone,
-{
+/// stop, 2 for an error (at start-up or while running).
+pub fn main_with_args(args: impl IntoIterator<Item = impl Into<OsString> + Clone>) -> ExitCode {
     rt::init_logging();
-    let args = match hcc_rt::parse_args::<Args, _, _>(args) {
-        Ok(a) => a,
-        Err(code) => return code,
-    };
-    match run(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("hcc-sim: error: {e:#}");
-            ExitCode::from(2)
-        }
-    }
+    hcc_rt::run_main(args, run, |e| tracing::error!("hcc-sim: error: {e:#}"))
 }
 
 /// Counters shared with the logging thread.
