@@ -18,12 +18,14 @@
 //! | `hcc/<ns>/joint_state`           | [`JointState`]    | driver/simulator | controller, loggers    |
 //! | `hcc/<ns>/torque_command`        | [`TorqueCommand`] | controller       | driver/simulator, loggers |
 //! | `hcc/<ns>/telemetry`             | [`Telemetry`]     | controller       | loggers, `hcc` tools   |
+//! | `hcc/<ns>/setpoint`              | [`Setpoint`]      | clients (up to [`ipc::MAX_SETPOINT_PUBLISHERS`]) | controller, loggers |
 //! | `hcc/<ns>/state_ready` (event)   | —                 | driver notifies [`EVENT_STATE_PUBLISHED`] | controller (optional wake-up) |
 //! | `hcc/<ns>/command_ready` (event) | —                 | controller notifies [`EVENT_COMMAND_PUBLISHED`] | driver (optional wake-up) |
 //!
 //! `<ns>` is a per-robot namespace ([`validate_namespace`]: 1–64 characters
 //! of `[A-Za-z0-9_-]`), so two robots or two tests never share a service.
-//! Exactly one publisher per service. Subscribers should use a small buffer
+//! Exactly one publisher per service, except `setpoint`, which several
+//! clients may command at once (each with its own client id). Subscribers should use a small buffer
 //! with safe overflow (the newest sample wins) and read until empty each
 //! cycle, keeping the newest sample.
 //!
@@ -99,6 +101,16 @@
 //! from another version fails (`VersionMismatch`). Build all peers of one
 //! robot against the same hcc-msgs and iceoryx2 versions.
 //!
+//! ## Commanding a running controller
+//!
+//! Clients send [`Setpoint`]s (a level's goal, velocity feed-forward,
+//! stiffness and/or damping, and a transition duration) on
+//! `hcc/<ns>/setpoint`. [`Setpoint::validate`] does the model-free checks;
+//! the controller checks the rest against its law and model. Every setpoint
+//! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
+//! numbers). Adding the setpoint type changed no existing layout, so the
+//! schema version stays 1.
+//!
 //! ## Real-time use
 //!
 //! Nothing in this crate allocates except building service names and
@@ -110,6 +122,7 @@ mod error;
 pub mod ipc;
 mod sequence;
 mod service;
+mod setpoint;
 mod types;
 
 pub use error::{MsgError, NamespaceError};
@@ -117,6 +130,11 @@ pub use sequence::{CommandFreshness, SeqEvent, SequenceChecker, command_freshnes
 pub use service::{
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, MAX_NAMESPACE_LEN, Namespace, SERVICE_PREFIX,
     ServiceNames, validate_namespace,
+};
+pub use setpoint::{
+    ANSWER_ACCEPTED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, MAX_GAIN_ENTRIES,
+    MAX_TRANSITION_S, Rejection, SETPOINT, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL,
+    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SYMMETRY_TOLERANCE, Setpoint, answer_code,
 };
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,

@@ -48,6 +48,15 @@ fn layout_has_no_hidden_padding() {
     ] {
         assert_eq!(a, 8);
     }
+    // Header, client id, level, fields, dim, layout, duration, goal,
+    // velocity, two full gain matrices.
+    assert_eq!(
+        size_of::<Setpoint>(),
+        24 + 8 + 4 * 4 + 8 + 8 * MAX_TASK_DIM * 2 + 8 * MAX_GAIN_ENTRIES * 2
+    );
+    assert_eq!(size_of::<Setpoint>(), 16_952);
+    assert_eq!(offset_of!(Setpoint, goal), 56);
+    assert_eq!(align_of::<Setpoint>(), 8);
     // The torque path fits in a page each.
     assert!(size_of::<JointState>() <= 4096 && size_of::<TorqueCommand>() <= 4096);
     const { assert!(MAX_JOINTS >= 32) };
@@ -65,6 +74,7 @@ fn schema_version_is_encoded_in_every_type_name() {
             <Telemetry as ZeroCopySend>::type_name(),
             <TelemetryCounters as ZeroCopySend>::type_name(),
             <TelemetryTimings as ZeroCopySend>::type_name(),
+            <Setpoint as ZeroCopySend>::type_name(),
         ]
     };
     for name in names {
