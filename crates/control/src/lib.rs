@@ -59,6 +59,7 @@ pub mod controller;
 pub mod dense;
 pub mod saturation;
 pub mod spec;
+pub mod transition;
 
 pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
 pub use saturation::saturate;

@@ -45,3 +45,28 @@ fn ten_thousand_panda_steps_allocate_nothing() {
         after - before
     );
 }
+
+#[test]
+fn transitions_allocate_nothing() {
+    use hcc_control::transition::{GoalKind, Target, Transition};
+    use nalgebra::DMatrix;
+    let k = DMatrix::from_diagonal_element(3, 3, 1.0);
+    let k2 = DMatrix::from_diagonal_element(3, 3, 2.0);
+    let mut t = Transition::new(GoalKind::RollPitchYaw, &[0.0; 3], &k, &k).expect("transition");
+    let before = hcc_rtalloc::thread_stats().allocs;
+    for j in 0..100 {
+        t.start(
+            Target {
+                goal: Some(&[0.1, 0.2, j as f64 * 0.01]),
+                stiffness: Some(&k2),
+                damping: None,
+            },
+            0.05,
+        );
+        for _ in 0..10 {
+            t.advance(1e-3);
+        }
+    }
+    assert_eq!(hcc_rtalloc::thread_stats().allocs - before, 0);
+    assert!(t.goal().iter().all(|x| x.is_finite()));
+}
