@@ -338,6 +338,67 @@ impl Setpoint {
         gain_at(&self.damping, self.damping_full(), self.dim(), j, k)
     }
 
+    /// A setpoint of level `level` (0-based) and dimension `dim` that sets
+    /// nothing yet; add parts with the `with_*` builders. Sizes beyond the
+    /// capacities are kept as given, so [`Setpoint::validate`] names them.
+    pub fn for_level(client_id: u64, seq: u64, level: usize, dim: usize) -> Self {
+        let mut s = Self::zeroed();
+        s.client_id = client_id;
+        s.header.seq = seq;
+        s.level = level.min(u32::MAX as usize) as u32;
+        s.dim = dim.min(u32::MAX as usize) as u32;
+        s
+    }
+
+    /// Sets the goal (`dim` values) and [`SETPOINT_GOAL`].
+    pub fn with_goal(mut self, goal: &[f64]) -> Result<Self, Rejection> {
+        let dim = self.dim as usize;
+        copy_values(&mut self.goal, goal, dim)?;
+        self.fields |= SETPOINT_GOAL;
+        Ok(self)
+    }
+
+    /// Sets the velocity feed-forward (`dim` values) and [`SETPOINT_VELOCITY`].
+    pub fn with_velocity(mut self, velocity: &[f64]) -> Result<Self, Rejection> {
+        let dim = self.dim as usize;
+        copy_values(&mut self.velocity, velocity, dim)?;
+        self.fields |= SETPOINT_VELOCITY;
+        Ok(self)
+    }
+
+    /// Sets K from `dim` diagonal values or `dim²` row-major values (the
+    /// layout follows the length) and [`SETPOINT_STIFFNESS`].
+    pub fn with_stiffness(mut self, values: &[f64]) -> Result<Self, Rejection> {
+        let dim = self.dim as usize;
+        let full = copy_gain(&mut self.stiffness, values, dim)?;
+        self.set_layout(GAIN_STIFFNESS_FULL, full);
+        self.fields |= SETPOINT_STIFFNESS;
+        Ok(self)
+    }
+
+    /// Sets D like [`Setpoint::with_stiffness`] and [`SETPOINT_DAMPING`].
+    pub fn with_damping(mut self, values: &[f64]) -> Result<Self, Rejection> {
+        let dim = self.dim as usize;
+        let full = copy_gain(&mut self.damping, values, dim)?;
+        self.set_layout(GAIN_DAMPING_FULL, full);
+        self.fields |= SETPOINT_DAMPING;
+        Ok(self)
+    }
+
+    /// Sets the transition duration in s.
+    pub fn with_duration(mut self, duration_s: f64) -> Self {
+        self.duration_s = duration_s;
+        self
+    }
+
+    fn set_layout(&mut self, bit: u32, full: bool) {
+        if full {
+            self.gain_layout |= bit;
+        } else {
+            self.gain_layout &= !bit;
+        }
+    }
+
     /// The model-free checks (see [`Rejection`]), in this order: schema,
     /// fields, layout, capacities, finiteness of everything used, duration,
     /// symmetry and positive definiteness of K and D. Allocation-free (the
@@ -396,6 +457,34 @@ impl Default for Setpoint {
     fn default() -> Self {
         Self::zeroed()
     }
+}
+
+/// Copies `values` (length `dim`) into the front of `dst`, the rest zero.
+fn copy_values(dst: &mut [f64], values: &[f64], dim: usize) -> Result<(), Rejection> {
+    if dim == 0 || dim > dst.len() || values.len() != dim {
+        return Err(if dim == 0 || dim > MAX_TASK_DIM {
+            Rejection::DimensionCapacity
+        } else {
+            Rejection::DimensionMismatch
+        });
+    }
+    dst.fill(0.0);
+    dst[..dim].copy_from_slice(values);
+    Ok(())
+}
+
+/// Copies a diagonal (`dim` values) or full (`dim²`) gain; true if full.
+fn copy_gain(dst: &mut [f64], values: &[f64], dim: usize) -> Result<bool, Rejection> {
+    if dim == 0 || dim > MAX_TASK_DIM {
+        return Err(Rejection::DimensionCapacity);
+    }
+    let full = values.len() == dim * dim && dim > 1;
+    if !full && values.len() != dim {
+        return Err(Rejection::DimensionMismatch);
+    }
+    dst.fill(0.0);
+    dst[..values.len()].copy_from_slice(values);
+    Ok(full)
 }
 
 #[inline]
@@ -552,6 +641,50 @@ mod tests {
         assert_eq!(s.validate(), Err(Rejection::BadDuration));
         s.duration_s = MAX_TRANSITION_S;
         assert_eq!(s.validate(), Ok(()));
+    }
+
+    #[test]
+    fn builders_fill_and_size_check() {
+        let s = Setpoint::for_level(7, 3, 1, 2)
+            .with_goal(&[0.4, 0.5])
+            .unwrap()
+            .with_velocity(&[0.1, 0.0])
+            .unwrap()
+            .with_stiffness(&[400.0, 10.0, 10.0, 300.0])
+            .unwrap()
+            .with_damping(&[30.0, 20.0])
+            .unwrap()
+            .with_duration(1.5);
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!((s.client_id, s.header.seq, s.level), (7, 3, 1));
+        assert_eq!(s.fields, SETPOINT_FIELDS_KNOWN);
+        assert!(s.stiffness_full() && !s.damping_full());
+        assert_eq!(s.stiffness_at(1, 0), 10.0);
+        assert_eq!(s.damping_at(1, 1), 20.0);
+        assert_eq!(s.duration_s, 1.5);
+        // Sizes: wrong lengths and dimensions are the contract's codes.
+        let base = Setpoint::for_level(1, 1, 0, 3);
+        assert_eq!(
+            base.with_goal(&[1.0]).unwrap_err(),
+            Rejection::DimensionMismatch
+        );
+        assert_eq!(
+            base.with_stiffness(&[1.0; 4]).unwrap_err(),
+            Rejection::DimensionMismatch
+        );
+        assert_eq!(
+            Setpoint::for_level(1, 1, 0, 0).with_goal(&[]).unwrap_err(),
+            Rejection::DimensionCapacity
+        );
+        assert_eq!(
+            Setpoint::for_level(1, 1, 0, 33)
+                .with_damping(&[1.0; 33])
+                .unwrap_err(),
+            Rejection::DimensionCapacity
+        );
+        // Too many levels is left for validate to name.
+        let far = Setpoint::for_level(1, 1, 99, 1).with_goal(&[0.0]).unwrap();
+        assert_eq!(far.validate(), Err(Rejection::LevelCapacity));
     }
 
     #[test]
