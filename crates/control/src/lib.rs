@@ -61,7 +61,7 @@ pub mod saturation;
 pub mod spec;
 pub mod transition;
 
-pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
+pub use controller::{Controller, Diagnostics, FADE_RANGE, LevelTarget, Output};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec};
 

@@ -22,6 +22,8 @@ fn ten_thousand_panda_steps_allocate_nothing() {
     let mut bad = [0.0; 7];
     bad[3] = f64::NAN;
     c.step(&q, &qd).expect("warm-up");
+    let k_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 70.0);
+    let d_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 5.0);
     let before = hcc_rtalloc::thread_stats().allocs;
     let mut sum = 0.0;
     for k in 0..10_000 {
@@ -34,6 +36,9 @@ fn ten_thousand_panda_steps_allocate_nothing() {
             // The rejection path must not allocate either.
             assert!(c.step(&bad, &qd).is_err());
             c.set_goal(0, &[0.4, 0.1, 0.5]).expect("goal");
+            c.set_goal_velocity(0, &[0.01, 0.0, -0.01])
+                .expect("velocity");
+            c.set_gains(1, Some(&k_new), Some(&d_new)).expect("gains");
         }
     }
     let after = hcc_rtalloc::thread_stats().allocs;
