@@ -33,6 +33,7 @@
 //! q0 = [0.4, -0.5, -1.6, 0.4]
 //! ```
 
+pub mod commanding;
 pub mod error;
 pub mod schema;
 
@@ -209,6 +210,8 @@ pub struct Scenario {
     pub ipc: IpcSection,
     pub controller_daemon: ControllerDaemon,
     pub sim_daemon: SimDaemon,
+    /// Resolved `[commanding]`.
+    pub commanding: commanding::Commanding,
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
@@ -483,6 +486,7 @@ impl Scenario {
             simulation.control_rate_hz,
         )?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
+        let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &levels)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -505,6 +509,7 @@ impl Scenario {
             ipc: file.ipc.clone(),
             controller_daemon,
             sim_daemon,
+            commanding,
             model,
             file,
         })

@@ -27,6 +27,9 @@ pub struct ScenarioFile {
     pub controller_daemon: ControllerDaemonSection,
     #[serde(default)]
     pub sim_daemon: SimDaemonSection,
+    /// `[commanding]`: limits of setpoints sent while the controller runs.
+    #[serde(default)]
+    pub commanding: crate::commanding::CommandingSection,
 }
 
 /// `[robot]`

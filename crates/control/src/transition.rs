@@ -70,6 +70,9 @@ pub struct Transition {
     d_to: DMatrix<f64>,
     goal: DVector<f64>,
     goal_velocity: DVector<f64>,
+    /// Velocity feed-forward added to the profile's ẋ_d (from a setpoint
+    /// stream), held until the next goal.
+    feed_forward: DVector<f64>,
     stiffness: DMatrix<f64>,
     damping: DMatrix<f64>,
 }
@@ -140,6 +143,7 @@ impl Transition {
             d_to: damping.clone(),
             goal: g,
             goal_velocity: DVector::zeros(m),
+            feed_forward: DVector::zeros(m),
             stiffness: stiffness.clone(),
             damping: damping.clone(),
         })
@@ -148,6 +152,48 @@ impl Transition {
     /// Task dimension m.
     pub fn dim(&self) -> usize {
         self.goal.len()
+    }
+
+    /// How the goal is interpolated.
+    pub fn kind(&self) -> GoalKind {
+        self.kind
+    }
+
+    /// Distance from the current equilibrium to `goal`: Euclidean for
+    /// vector goals, the rotation angle for roll, pitch, yaw.
+    pub fn distance_to(&self, goal: &[f64]) -> f64 {
+        if goal.len() != self.dim() {
+            return f64::INFINITY;
+        }
+        match self.kind {
+            GoalKind::Vector => goal
+                .iter()
+                .zip(self.goal.iter())
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt(),
+            GoalKind::RollPitchYaw => {
+                self.current_rotation()
+                    .angle_to(&UnitQuaternion::from_euler_angles(
+                        goal[0], goal[1], goal[2],
+                    ))
+            }
+        }
+    }
+
+    /// Adds a velocity feed-forward v (m values) to ẋ_d from now on, held
+    /// until the next [`Transition::start`] with a goal (a setpoint stream
+    /// sends the goal and its velocity together). Wrong lengths are ignored.
+    pub fn set_feed_forward(&mut self, velocity: &[f64]) {
+        if velocity.len() == self.dim() {
+            self.feed_forward.as_mut_slice().copy_from_slice(velocity);
+            self.update();
+        }
+    }
+
+    /// Whether a nonzero velocity feed-forward is held.
+    pub fn has_feed_forward(&self) -> bool {
+        self.feed_forward.iter().any(|&v| v != 0.0)
     }
 
     /// Starts a transition of `duration` s (≤ 0: the target is reached at
@@ -163,6 +209,7 @@ impl Transition {
             self.rot_from = self.current_rotation();
         }
         if let Some(goal) = target.goal.filter(|g| g.len() == m) {
+            self.feed_forward.fill(0.0);
             self.goal_to.as_mut_slice().copy_from_slice(goal);
             if self.kind == GoalKind::RollPitchYaw {
                 self.rot_to = rpy(&self.goal_to);
@@ -221,7 +268,8 @@ impl Transition {
         self.goal_to.as_slice()
     }
 
-    /// ẋ_{i,d}(t) (world-frame angular velocity for orientation).
+    /// ẋ_{i,d}(t): the profile's velocity plus the feed-forward
+    /// (world-frame angular velocity for orientation).
     pub fn goal_velocity(&self) -> &[f64] {
         self.goal_velocity.as_slice()
     }
@@ -279,6 +327,7 @@ impl Transition {
                     .copy_from_slice(omega.as_slice());
             }
         }
+        self.goal_velocity += &self.feed_forward;
         let s1 = 1.0 - s;
         for (dst, (a, b)) in self
             .stiffness

@@ -93,7 +93,7 @@
 //! ## Versions
 //!
 //! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
-//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema1`), so
+//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema2`), so
 //! iceoryx2 itself refuses to connect peers of different schemas when a
 //! service is opened (`IncompatibleTypes`; size and alignment are compared
 //! too). iceoryx2's own version must match exactly between peers as well:
@@ -108,8 +108,8 @@
 //! `hcc/<ns>/setpoint`. [`Setpoint::validate`] does the model-free checks;
 //! the controller checks the rest against its law and model. Every setpoint
 //! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
-//! numbers). Adding the setpoint type changed no existing layout, so the
-//! schema version stays 1.
+//! numbers) in [`Telemetry::setpoint_answers`]; that extension of
+//! the telemetry layout is schema 2.
 //!
 //! ## Real-time use
 //!
@@ -138,15 +138,16 @@ pub use setpoint::{
 };
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
-    JOINT_STATE, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAGS_KNOWN, TELEMETRY,
-    TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings,
-    TorqueCommand,
+    JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+    STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND,
+    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
 };
 
 /// Version of this message schema. Bump it on any change of a type's layout
 /// or meaning, together with the `@schema<N>` suffix of every `type_name`
-/// (a unit test checks they agree).
-pub const SCHEMA_VERSION: u32 = 1;
+/// (a unit test checks they agree). Schema 2: [`Telemetry`] answers
+/// setpoints (active goals and gains, transition progress, per-client answers).
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// Joint capacity. 32 covers single and dual 7-DOF arms, mobile manipulators
 /// and humanoid upper bodies, and keeps [`JointState`] (816 B) and

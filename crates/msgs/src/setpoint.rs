@@ -232,7 +232,7 @@ pub const fn answer_code(result: Result<(), Rejection>) -> u32 {
 /// `fields`, `dim` and `gain_layout` select are ignored (writers keep them
 /// zero).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Setpoint@schema1")]
+#[type_name("hcc_msgs::Setpoint@schema2")]
 #[repr(C)]
 pub struct Setpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.
@@ -399,6 +399,24 @@ impl Setpoint {
         }
     }
 
+    /// Whether every eigenvalue of the (valid, symmetric) K sent is at most
+    /// `limit`: limit·I − K is positive semi-definite, tested as
+    /// (1 + 10⁻¹²)·limit·I − K positive definite. Allocation-free.
+    pub fn stiffness_within(&self, limit: f64) -> bool {
+        let m = self.dim();
+        if !self.stiffness_full() {
+            return self.stiffness().iter().all(|&k| k <= limit);
+        }
+        let top = limit * (1.0 + 1e-12);
+        cholesky_ok(
+            |j, k| {
+                let d = if j == k { top } else { 0.0 };
+                d - self.stiffness[j * m + k]
+            },
+            m,
+        )
+    }
+
     /// The model-free checks (see [`Rejection`]), in this order: schema,
     /// fields, layout, capacities, finiteness of everything used, duration,
     /// symmetry and positive definiteness of K and D. Allocation-free (the
@@ -519,17 +537,28 @@ fn check_spd(values: &[f64], full: bool, m: usize) -> Result<(), Rejection> {
         }
     }
     // Lower triangle of L, row-major m×m, using the lower triangle of A.
+    if cholesky_ok(|j, k| values[j * m + k], m) {
+        Ok(())
+    } else {
+        Err(Rejection::NotPositiveDefinite)
+    }
+}
+
+/// Whether the symmetric m×m matrix with lower-triangle entries `a(j, k)`
+/// (j ≥ k) is positive definite: the Cholesky factorisation A = L Lᵀ, in a
+/// stack buffer, finds every pivot > 0. Allocation-free.
+fn cholesky_ok(a: impl Fn(usize, usize) -> f64, m: usize) -> bool {
     let mut l = [0.0_f64; MAX_GAIN_ENTRIES];
     for j in 0..m {
         for k in 0..=j {
-            let mut s = values[j * m + k];
+            let mut s = a(j, k);
             for p in 0..k {
                 s -= l[j * m + p] * l[k * m + p];
             }
             if j == k {
                 // A NaN pivot comes from overflowing sums: not SPD either.
                 if s.is_nan() || s <= 0.0 {
-                    return Err(Rejection::NotPositiveDefinite);
+                    return false;
                 }
                 l[j * m + j] = s.sqrt();
             } else {
@@ -537,7 +566,7 @@ fn check_spd(values: &[f64], full: bool, m: usize) -> Result<(), Rejection> {
             }
         }
     }
-    Ok(())
+    true
 }
 
 #[cfg(test)]
@@ -685,6 +714,20 @@ mod tests {
         // Too many levels is left for validate to name.
         let far = Setpoint::for_level(1, 1, 99, 1).with_goal(&[0.0]).unwrap();
         assert_eq!(far.validate(), Err(Rejection::LevelCapacity));
+    }
+
+    #[test]
+    fn stiffness_limit_is_on_the_largest_eigenvalue() {
+        // [[4, 1], [1, 3]]: eigenvalues (7 ± √5) / 2 = 4.618…, 2.38…
+        let s = full_stiffness(2, &[4.0, 1.0, 1.0, 3.0]);
+        let top = (7.0 + 5.0_f64.sqrt()) / 2.0;
+        assert!(s.stiffness_within(top));
+        assert!(s.stiffness_within(4.7));
+        assert!(!s.stiffness_within(4.6));
+        let d = Setpoint::for_level(1, 1, 0, 2)
+            .with_stiffness(&[100.0, 300.0])
+            .unwrap();
+        assert!(d.stiffness_within(300.0) && !d.stiffness_within(299.0));
     }
 
     #[test]

@@ -37,10 +37,14 @@ fn layout_has_no_hidden_padding() {
         + 8 * MAX_LEVELS * 2
         + 8
         + size_of::<TelemetryCounters>()
-        + size_of::<TelemetryTimings>();
+        + size_of::<TelemetryTimings>()
+        + 3 * 8 * MAX_TASK_DIM * MAX_LEVELS
+        + 8 * MAX_LEVELS
+        + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
     assert_eq!(size_of::<TelemetryCounters>(), 9 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
+    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8);
     for a in [
         align_of::<JointState>(),
         align_of::<TorqueCommand>(),
@@ -75,6 +79,7 @@ fn schema_version_is_encoded_in_every_type_name() {
             <TelemetryCounters as ZeroCopySend>::type_name(),
             <TelemetryTimings as ZeroCopySend>::type_name(),
             <Setpoint as ZeroCopySend>::type_name(),
+            <SetpointAnswer as ZeroCopySend>::type_name(),
         ]
     };
     for name in names {

@@ -48,10 +48,11 @@
 use hcc_control::Controller;
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM,
-    SeqEvent, SequenceChecker, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
+    SeqEvent, SequenceChecker, Setpoint, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
     TorqueCommand, monotonic_now_ns,
 };
 
+use crate::commander::Commander;
 use crate::cycle::{CycleError, CycleSettings};
 use crate::status::LoopCounters;
 
@@ -122,6 +123,8 @@ pub struct Decider {
     peer_lost: bool,
     /// Duration of `Controller::step` in the last decision, ns.
     step_ns: Option<u64>,
+    /// Setpoints: checks, transitions, answers.
+    commander: Commander,
 }
 
 impl Decider {
@@ -145,7 +148,10 @@ impl Decider {
         }
         let mut limits = [f64::INFINITY; MAX_JOINTS];
         limits[..n].copy_from_slice(&settings.torque_limits);
+        let commander = Commander::new(&controller, &settings.commanding)?;
+        commander.fill(&mut telemetry);
         Ok(Decider {
+            commander,
             controller,
             n,
             r,
@@ -198,6 +204,15 @@ impl Decider {
     /// Whether the peer is lost (a stale timeout since the last state).
     pub fn peer_lost(&self) -> bool {
         self.peer_lost
+    }
+
+    /// Takes a client's setpoint (checked against the law, applied through
+    /// its transition from the next decision on); the answer goes into the
+    /// next telemetry sample. Returns the answer code. Allocation-free.
+    pub fn take_setpoint(&mut self, setpoint: &Setpoint) -> u32 {
+        let code = self.commander.take(setpoint);
+        self.commander.fill(&mut self.telemetry);
+        code
     }
 
     /// Decides the answer to `state`, received at `wake_ns` (CLOCK_MONOTONIC,
@@ -360,6 +375,9 @@ impl Decider {
     /// g(q_v). `None` on a numerical failure (counted).
     fn law(&mut self, state: &JointState, tau: &mut [f64; MAX_JOINTS]) -> Option<CommandMode> {
         let n = self.n;
+        // Transitions move by one nominal period per used state (deterministic).
+        self.commander
+            .advance(self.period_ns as f64 * 1e-9, &mut self.controller);
         let start = monotonic_now_ns();
         let result = self.controller.step(state.q(), state.qd());
         self.step_ns = Some(monotonic_now_ns().saturating_sub(start));
@@ -434,6 +452,7 @@ impl Decider {
         t.flags = self.command.flags;
         t.tau[..n].copy_from_slice(&tau[..n]);
         t.counters = self.counters.telemetry;
+        self.commander.fill(t);
         if !fresh {
             return;
         }

@@ -20,6 +20,7 @@
 //! iceoryx2 0.10 makes one small allocation per loan, which the real-time
 //! thread takes from a pre-faulted pool instead of the system allocator.
 
+pub mod commander;
 pub mod cycle;
 pub mod daemon;
 pub mod decide;
