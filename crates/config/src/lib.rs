@@ -35,6 +35,7 @@
 
 pub mod commanding;
 pub mod error;
+pub mod output;
 pub mod schema;
 
 pub use error::ConfigError;
@@ -212,6 +213,8 @@ pub struct Scenario {
     pub sim_daemon: SimDaemon,
     /// Resolved `[commanding]`.
     pub commanding: commanding::Commanding,
+    /// Resolved `[output]`.
+    pub output: output::Output,
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
@@ -487,6 +490,7 @@ impl Scenario {
         )?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
         let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &levels)?;
+        let output = output::resolve(cx.file, cx.text, &file.output)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -510,6 +514,7 @@ impl Scenario {
             controller_daemon,
             sim_daemon,
             commanding,
+            output,
             model,
             file,
         })

@@ -30,6 +30,9 @@ pub struct ScenarioFile {
     /// `[commanding]`: limits of setpoints sent while the controller runs.
     #[serde(default)]
     pub commanding: crate::commanding::CommandingSection,
+    /// `[output]`: the torque output pipeline after the law.
+    #[serde(default)]
+    pub output: crate::output::OutputSection,
 }
 
 /// `[robot]`

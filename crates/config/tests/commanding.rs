@@ -75,3 +75,29 @@ fn bad_limits_name_the_field() {
     }
     assert!(load("\n[commanding]\nunknown = 1\n").is_err());
 }
+
+#[test]
+fn the_output_pipeline_is_off_by_default_and_checked() {
+    use hcc_config::output::RateLimitMode;
+    let s = load("").unwrap();
+    assert_eq!(s.output.torque_rate_limit, None);
+    assert_eq!(s.output.low_pass_hz, None);
+    let s = load(
+        "\n[output]\ntorque_rate_limit = 1000.0\nrate_limit_mode = \"per_joint\"\nlow_pass_hz = 100.0\n",
+    )
+    .unwrap();
+    assert_eq!(s.output.torque_rate_limit, Some(1000.0));
+    assert_eq!(s.output.rate_limit_mode, RateLimitMode::PerJoint);
+    assert_eq!(s.output.low_pass_hz, Some(100.0));
+    for (extra, field) in [
+        (
+            "\n[output]\ntorque_rate_limit = -1.0\n",
+            "output.torque_rate_limit",
+        ),
+        ("\n[output]\nlow_pass_hz = 0.0\n", "output.low_pass_hz"),
+    ] {
+        let e = load(extra).unwrap_err().to_string();
+        assert!(e.contains(field), "{e}");
+    }
+    assert!(load("\n[output]\nrate_limit_mode = \"sometimes\"\n").is_err());
+}

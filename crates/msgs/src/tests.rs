@@ -42,7 +42,7 @@ fn layout_has_no_hidden_padding() {
         + 8 * MAX_LEVELS
         + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
-    assert_eq!(size_of::<TelemetryCounters>(), 9 * 8);
+    assert_eq!(size_of::<TelemetryCounters>(), 11 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
     assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8);
     for a in [
@@ -368,7 +368,7 @@ fn monotonic_clock_advances() {
 
 #[test]
 fn telemetry_counters_are_listed_once_in_field_order() {
-    assert_eq!(TelemetryCounters::COUNT, 9);
+    assert_eq!(TelemetryCounters::COUNT, 11);
     assert_eq!(
         TelemetryCounters::NAMES,
         [
@@ -381,6 +381,8 @@ fn telemetry_counters_are_listed_once_in_field_order() {
             "missed_states",
             "sequence_errors",
             "send_failures",
+            "rate_limited",
+            "low_passed",
         ]
     );
     // The wire layout: one u64 each, in the order of NAMES.
@@ -394,8 +396,10 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         offset_of!(TelemetryCounters, missed_states),
         offset_of!(TelemetryCounters, sequence_errors),
         offset_of!(TelemetryCounters, send_failures),
+        offset_of!(TelemetryCounters, rate_limited),
+        offset_of!(TelemetryCounters, low_passed),
     ];
-    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64]);
+    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 80]);
     let c = TelemetryCounters {
         cycles: 1,
         invalid_states: 2,
@@ -406,8 +410,10 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         missed_states: 7,
         sequence_errors: 8,
         send_failures: 9,
+        rate_limited: 10,
+        low_passed: 11,
     };
-    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9]);
+    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]);
     assert_eq!(TelemetryCounters::from_values(c.values()), c);
     assert_eq!(c.entries()[5], ("peer_lost_events", 6));
     assert_eq!(TelemetryCounters::ZERO, TelemetryCounters::default());

@@ -586,6 +586,10 @@ define_counters! {
         sequence_errors: "sequence errors",
         /// Commands that could not be sent (loan/send failure).
         send_failures: "send failures",
+        /// Cycles whose torque change was limited by the torque-rate limit.
+        rate_limited: "rate-limited cycles",
+        /// Cycles whose torque went through the output low-pass filter.
+        low_passed: "low-pass filtered cycles",
     }
 }
 

@@ -91,6 +91,8 @@ pub struct CycleSettings {
     pub hybrid_spin_ns: u64,
     /// Limits of setpoints (`[commanding]`).
     pub commanding: hcc_config::commanding::Commanding,
+    /// The torque output pipeline (`[output]`).
+    pub output: hcc_config::output::Output,
 }
 
 impl CycleSettings {
@@ -106,6 +108,7 @@ impl CycleSettings {
             hybrid_lead_ns: rt::HYBRID_LEAD_NS,
             hybrid_spin_ns: 200_000,
             commanding: scenario.commanding.clone(),
+            output: scenario.output.clone(),
         }
     }
 }

@@ -54,6 +54,7 @@ use hcc_msgs::{
 
 use crate::commander::Commander;
 use crate::cycle::{CycleError, CycleSettings};
+use crate::output::OutputPipeline;
 use crate::status::LoopCounters;
 
 /// Consecutive rejected sequence numbers (backwards or implausible jumps)
@@ -125,6 +126,8 @@ pub struct Decider {
     step_ns: Option<u64>,
     /// Setpoints: checks, transitions, answers.
     commander: Commander,
+    /// Rate limit and low-pass between the law and the saturation.
+    output: OutputPipeline,
 }
 
 impl Decider {
@@ -152,6 +155,7 @@ impl Decider {
         commander.fill(&mut telemetry);
         Ok(Decider {
             commander,
+            output: OutputPipeline::new(&settings.output, settings.period_ns as f64 * 1e-9),
             controller,
             n,
             r,
@@ -231,8 +235,14 @@ impl Decider {
         };
         // Whether tau contains g(q_v) = gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
-            Some(_) => self.gravity_compensation,
-            None => self.safe_command(&mut tau, gravity_conflict),
+            Some(_) => {
+                self.output_stages(&mut tau);
+                self.gravity_compensation
+            }
+            None => {
+                self.output.interrupt();
+                self.safe_command(&mut tau, gravity_conflict)
+            }
         };
         // Saturation to the torque limits: the control part is scaled as a
         // whole, which keeps the hierarchy (hcc_control::saturate).
@@ -288,6 +298,18 @@ impl Decider {
         t.flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST;
         t.counters = self.counters.telemetry;
         new_loss
+    }
+
+    /// The law's τ through the rate limit and the low-pass (module
+    /// [`crate::output`]), counted; nothing when both are off.
+    fn output_stages(&mut self, tau: &mut [f64; MAX_JOINTS]) {
+        if !self.output.is_active() {
+            return;
+        }
+        let stages = self.output.apply(&mut tau[..self.n]);
+        let c = &mut self.counters.telemetry;
+        c.rate_limited += u64::from(stages.rate_limited);
+        c.low_passed += u64::from(stages.low_passed);
     }
 
     /// Validation and sequence of `state`, counted.

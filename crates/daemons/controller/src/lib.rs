@@ -24,6 +24,7 @@ pub mod commander;
 pub mod cycle;
 pub mod daemon;
 pub mod decide;
+pub mod output;
 pub mod rt;
 pub mod status;
 

@@ -203,7 +203,11 @@ fn the_decision_step_allocates_nothing() {
     let scenario = scenario();
     let n = scenario.model.nq();
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-    let mut decider = Decider::new(controller, &CycleSettings::from_scenario(&scenario)).unwrap();
+    // With the whole output pipeline on (rate limit and low-pass).
+    let mut settings = CycleSettings::from_scenario(&scenario);
+    settings.output.torque_rate_limit = Some(10.0);
+    settings.output.low_pass_hz = Some(100.0);
+    let mut decider = Decider::new(controller, &settings).unwrap();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let mut states = Vec::new();
     for k in 0..2 * WARM_UP {
@@ -273,6 +277,8 @@ fn the_decision_step_allocates_nothing() {
     drop(rt);
     println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
     assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
+    let c = decider.counters().telemetry;
+    assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
     // Setpoints accepted and rejected, every cycle.
     assert!(
         setpoint_answers[0] > 0 && setpoint_answers[1] > 0,
