@@ -70,8 +70,8 @@ pub struct Transition {
     d_to: DMatrix<f64>,
     goal: DVector<f64>,
     goal_velocity: DVector<f64>,
-    /// Velocity feed-forward added to the profile's ẋ_d (from a setpoint
-    /// stream), held until the next goal.
+    /// Velocity feed-forward that replaces the profile's ẋ_d (from a
+    /// setpoint stream), held until the next goal.
     feed_forward: DVector<f64>,
     stiffness: DMatrix<f64>,
     damping: DMatrix<f64>,
@@ -181,9 +181,10 @@ impl Transition {
         }
     }
 
-    /// Adds a velocity feed-forward v (m values) to ẋ_d from now on, held
-    /// until the next [`Transition::start`] with a goal (a setpoint stream
-    /// sends the goal and its velocity together). Wrong lengths are ignored.
+    /// Sets a velocity feed-forward v (m values): ẋ_d = v from now on
+    /// (instead of the profile's velocity), held until the next
+    /// [`Transition::start`] with a goal (a setpoint stream sends the goal and
+    /// its velocity together). Wrong lengths are ignored.
     pub fn set_feed_forward(&mut self, velocity: &[f64]) {
         if velocity.len() == self.dim() {
             self.feed_forward.as_mut_slice().copy_from_slice(velocity);
@@ -268,8 +269,8 @@ impl Transition {
         self.goal_to.as_slice()
     }
 
-    /// ẋ_{i,d}(t): the profile's velocity plus the feed-forward
-    /// (world-frame angular velocity for orientation).
+    /// ẋ_{i,d}(t): the profile's velocity, or the feed-forward when one is
+    /// held (world-frame angular velocity for orientation).
     pub fn goal_velocity(&self) -> &[f64] {
         self.goal_velocity.as_slice()
     }
@@ -327,7 +328,13 @@ impl Transition {
                     .copy_from_slice(omega.as_slice());
             }
         }
-        self.goal_velocity += &self.feed_forward;
+        if self.feed_forward.iter().any(|&v| v != 0.0) {
+            // The client's trajectory velocity replaces the profile's: a
+            // stream restarts a short transition every cycle, whose own
+            // velocity only approximates the trajectory's (adding both
+            // would count the motion twice).
+            self.goal_velocity.copy_from(&self.feed_forward);
+        }
         let s1 = 1.0 - s;
         for (dst, (a, b)) in self
             .stiffness
