@@ -8,6 +8,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod command_cmd;
 mod daemons;
 mod jitter_cmd;
 mod model_cmd;
@@ -40,6 +41,12 @@ enum Command {
     Model(model_cmd::ModelArgs),
     /// Redraw the plots of a results directory from its trajectory.csv and metrics.json.
     Plot(plot_cmd::PlotArgs),
+    /// Set a level's goal on a running controller (exit 0 once it accepted it).
+    Goal(command_cmd::GoalArgs),
+    /// Set a level's stiffness and/or damping on a running controller.
+    Gains(command_cmd::GainsArgs),
+    /// Watch a running controller's telemetry (a table, or JSON lines).
+    Monitor(command_cmd::MonitorArgs),
 }
 
 /// Logs to stderr, filtered by `RUST_LOG` (default `info`; invalid
@@ -67,6 +74,9 @@ fn main() -> ExitCode {
         Command::Jitter(args) => jitter_cmd::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),
+        Command::Goal(args) => command_cmd::goal(args),
+        Command::Gains(args) => command_cmd::gains(args),
+        Command::Monitor(args) => command_cmd::monitor(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

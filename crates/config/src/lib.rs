@@ -39,7 +39,9 @@
 //! or one gain and goal for the whole level. The resolved hierarchy is
 //! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
+pub mod commanding;
 pub mod error;
+pub mod output;
 pub mod schema;
 
 pub use error::ConfigError;
@@ -123,6 +125,10 @@ pub struct Scenario {
     pub ipc: IpcSection,
     pub controller_daemon: ControllerDaemon,
     pub sim_daemon: SimDaemon,
+    /// Resolved `[commanding]`.
+    pub commanding: commanding::Commanding,
+    /// Resolved `[output]`.
+    pub output: output::Output,
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
@@ -318,6 +324,8 @@ impl Scenario {
             simulation.control_rate_hz,
         )?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
+        let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &spec.levels, n)?;
+        let output = output::resolve(cx.file, cx.text, &file.output)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -336,6 +344,8 @@ impl Scenario {
             ipc: file.ipc,
             controller_daemon,
             sim_daemon,
+            commanding,
+            output,
         })
     }
 }

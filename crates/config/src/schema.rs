@@ -31,6 +31,12 @@ pub struct ScenarioFile {
     /// `[safety]`: the controller's safety layer (every field optional).
     #[serde(default)]
     pub safety: SafetySection,
+    /// `[commanding]`: limits of setpoints sent while the controller runs.
+    #[serde(default)]
+    pub commanding: crate::commanding::CommandingSection,
+    /// `[output]`: the torque output pipeline after the law.
+    #[serde(default)]
+    pub output: crate::output::OutputSection,
 }
 
 /// `[robot]`

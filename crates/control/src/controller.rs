@@ -99,6 +99,19 @@ impl Output {
     }
 }
 
+/// A level's current spring–damper target ([`Controller::level_target`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LevelTarget<'a> {
+    /// x_{i,d} (roll, pitch, yaw for an orientation task).
+    pub goal: &'a [f64],
+    /// ẋ_{i,d} (zero for a fixed goal).
+    pub goal_velocity: &'a [f64],
+    /// K_i.
+    pub stiffness: &'a DMatrix<f64>,
+    /// D_i.
+    pub damping: &'a DMatrix<f64>,
+}
+
 /// Per-level workspace.
 #[derive(Clone, Debug)]
 struct Level {
@@ -110,6 +123,10 @@ struct Level {
     goal: DVector<f64>,
     /// R_d of the quaternion tasks and the buffers of the potential.
     pot: PotentialWork,
+    /// Velocity ẋ_{i,d} of a moving equilibrium (zero unless set; see
+    /// [`Controller::set_goal_velocity`]); the damping acts on ẋ_i − ẋ_{i,d}.
+    goal_velocity: DVector<f64>,
+    goal_moving: bool,
     // task
     j: DMatrix<f64>,
     jdot: DMatrix<f64>,
@@ -210,6 +227,8 @@ impl Level {
             damping: spec.damping.clone(),
             goal: spec.goal.clone(),
             pot: PotentialWork::new(&spec.tasks, &spec.goal, n),
+            goal_velocity: DVector::zeros(m),
+            goal_moving: false,
             j: DMatrix::zeros(m, n),
             jdot: DMatrix::zeros(m, n),
             err: DVector::zeros(m),
@@ -577,6 +596,70 @@ impl Controller {
         l.goal.as_mut_slice().copy_from_slice(goal);
         l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
         Ok(())
+    }
+
+    /// Sets the stiffness K_i and/or the damping D_i of level `i` (m_i × m_i)
+    /// of the spring–damper F_i (eqs. 20, 21) without allocating; `None`
+    /// keeps one. They must be symmetric positive definite for the stability
+    /// of Sec. IV: a wrong size, a non-finite or asymmetric matrix, or a
+    /// diagonal entry ≤ 0 is an error and changes nothing; full positive
+    /// definiteness is the caller's check (`hcc_msgs::Setpoint::validate`).
+    pub fn set_gains(
+        &mut self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        for g in [stiffness, damping].into_iter().flatten() {
+            let bad = g.shape() != (l.m, l.m)
+                || g.iter().any(|x| !x.is_finite())
+                || (0..l.m).any(|a| g[(a, a)] <= 0.0)
+                || (0..l.m).any(|a| (0..a).any(|b| g[(a, b)] != g[(b, a)]));
+            if bad {
+                return Err(ControlError::BadInput(
+                    "gain has the wrong size, a non-finite value, is asymmetric or not positive",
+                ));
+            }
+        }
+        if let Some(k) = stiffness {
+            l.stiffness.copy_from(k);
+        }
+        if let Some(d) = damping {
+            l.damping.copy_from(d);
+        }
+        Ok(())
+    }
+
+    /// Sets the velocity ẋ_{i,d} of level `i`'s equilibrium (m_i values, the
+    /// task's velocity: m/s, world-frame angular velocity in rad/s, joint
+    /// rad/s) without allocating. The damping then acts on ẋ_i − ẋ_{i,d}, so
+    /// a moving goal is tracked without lag; all zeros restore the paper's
+    /// D_i ẋ_i exactly.
+    pub fn set_goal_velocity(&mut self, i: usize, velocity: &[f64]) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        if velocity.len() != l.m || velocity.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::BadInput(
+                "goal velocity has the wrong length or a non-finite value",
+            ));
+        }
+        l.goal_velocity.as_mut_slice().copy_from_slice(velocity);
+        l.goal_moving = velocity.iter().any(|&x| x != 0.0);
+        Ok(())
+    }
+
+    /// Level `i`'s current goal x_{i,d}, velocity ẋ_{i,d}, K_i and D_i.
+    pub fn level_target(&self, i: usize) -> Option<LevelTarget<'_>> {
+        self.levels.get(i).map(|l| LevelTarget {
+            goal: l.goal.as_slice(),
+            goal_velocity: l.goal_velocity.as_slice(),
+            stiffness: &l.stiffness,
+            damping: &l.damping,
+        })
     }
 
     /// One control cycle: from the measured (q, q̇) to the torque command in
@@ -995,7 +1078,11 @@ impl Controller {
             &mut l.grad,
         );
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
-        // F_i = (∂V_i/∂x_i)ᵀ + D_i ẋ_i.
+        if l.goal_moving {
+            // A moving equilibrium: damp the velocity relative to it.
+            l.xdot -= &l.goal_velocity;
+        }
+        // F_i = (∂V_i/∂x_i)ᵀ + D_i (ẋ_i − ẋ_{i,d}), ẋ_{i,d} = 0 for a fixed goal.
         l.f.copy_from(&l.grad);
         gemv(&mut l.f, 1.0, &l.damping, &l.xdot, 1.0);
     }

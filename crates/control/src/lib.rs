@@ -73,8 +73,9 @@ pub mod safety;
 pub mod saturation;
 pub mod spec;
 pub mod task;
+pub mod transition;
 
-pub use controller::{Controller, Diagnostics, FADE_RANGE, Output};
+pub use controller::{Controller, Diagnostics, FADE_RANGE, LevelTarget, Output};
 pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};

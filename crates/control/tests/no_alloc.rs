@@ -22,6 +22,8 @@ fn ten_thousand_panda_steps_allocate_nothing() {
     let mut bad = [0.0; 7];
     bad[3] = f64::NAN;
     c.step(&q, &qd).expect("warm-up");
+    let k_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 70.0);
+    let d_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 5.0);
     let before = hcc_rtalloc::thread_stats().allocs;
     let mut sum = 0.0;
     for k in 0..10_000 {
@@ -34,6 +36,9 @@ fn ten_thousand_panda_steps_allocate_nothing() {
             // The rejection path must not allocate either.
             assert!(c.step(&bad, &qd).is_err());
             c.set_goal(0, &[0.4, 0.1, 0.5]).expect("goal");
+            c.set_goal_velocity(0, &[0.01, 0.0, -0.01])
+                .expect("velocity");
+            c.set_gains(1, Some(&k_new), Some(&d_new)).expect("gains");
         }
     }
     let after = hcc_rtalloc::thread_stats().allocs;
@@ -84,4 +89,29 @@ fn pose_level_steps_allocate_nothing() {
             after - before
         );
     }
+}
+
+#[test]
+fn transitions_allocate_nothing() {
+    use hcc_control::transition::{GoalKind, Target, Transition};
+    use nalgebra::DMatrix;
+    let k = DMatrix::from_diagonal_element(3, 3, 1.0);
+    let k2 = DMatrix::from_diagonal_element(3, 3, 2.0);
+    let mut t = Transition::new(GoalKind::RollPitchYaw, &[0.0; 3], &k, &k).expect("transition");
+    let before = hcc_rtalloc::thread_stats().allocs;
+    for j in 0..100 {
+        t.start(
+            Target {
+                goal: Some(&[0.1, 0.2, j as f64 * 0.01]),
+                stiffness: Some(&k2),
+                damping: None,
+            },
+            0.05,
+        );
+        for _ in 0..10 {
+            t.advance(1e-3);
+        }
+    }
+    assert_eq!(hcc_rtalloc::thread_stats().allocs - before, 0);
+    assert!(t.goal().iter().all(|x| x.is_finite()));
 }

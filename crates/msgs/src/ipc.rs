@@ -11,12 +11,17 @@
 //! | `joint_state`    | [`JointState`]    | 1          | [`MAX_STATE_SUBSCRIBERS`] | [`MAX_SUBSCRIBER_BUFFER`] | 0 | safe (newest wins) |
 //! | `torque_command` | [`TorqueCommand`] | 1          | [`MAX_COMMAND_SUBSCRIBERS`] | [`MAX_SUBSCRIBER_BUFFER`] | 0 | safe |
 //! | `telemetry`      | [`Telemetry`]     | 1          | [`MAX_TELEMETRY_SUBSCRIBERS`] | [`MAX_SUBSCRIBER_BUFFER`] | 0 | safe |
+//! | `setpoint`       | [`Setpoint`]      | [`MAX_SETPOINT_PUBLISHERS`] | [`MAX_SETPOINT_SUBSCRIBERS`] | [`MAX_SUBSCRIBER_BUFFER`] | 0 | safe |
 //! | `state_ready`, `command_ready` (events) | — | [`MAX_NOTIFIERS`] notifiers | [`MAX_LISTENERS`] listeners | | | |
 //!
 //! `max_publishers(1)` on `torque_command` is the guard of the torque channel:
 //! a second controller in the same namespace cannot create a publisher
 //! ("torque_command already has a publisher"). The same holds for
-//! `joint_state` (one robot per namespace) and `telemetry`.
+//! `joint_state` (one robot per namespace) and `telemetry`. `setpoint` is
+//! the one service with several publishers: up to [`MAX_SETPOINT_PUBLISHERS`]
+//! clients (an application, `hcc goal`, a scheduler) may command one
+//! controller at once; the controller subscribes with a queue of
+//! [`SETPOINT_BUFFER`] and takes every queued setpoint each cycle.
 //!
 //! Publishers never block ([`BackpressureStrategy::DiscardData`] with safe
 //! overflow): a slow or absent subscriber loses its oldest samples and never
@@ -58,7 +63,7 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 use thiserror::Error;
 
 use crate::{
-    EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, JointState, ServiceNames, Telemetry,
+    EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, JointState, ServiceNames, Setpoint, Telemetry,
     TorqueCommand,
 };
 
@@ -74,6 +79,10 @@ pub type StateSubscriber = Subscriber<Ipc, JointState, ()>;
 pub type CommandPublisher = Publisher<Ipc, TorqueCommand, ()>;
 /// Subscriber of [`TorqueCommand`].
 pub type CommandSubscriber = Subscriber<Ipc, TorqueCommand, ()>;
+/// Publisher of [`Setpoint`] (a client).
+pub type SetpointPublisher = Publisher<Ipc, Setpoint, ()>;
+/// Subscriber of [`Setpoint`] (the controller).
+pub type SetpointSubscriber = Subscriber<Ipc, Setpoint, ()>;
 /// Publisher of [`Telemetry`] (controller).
 pub type TelemetryPublisher = Publisher<Ipc, Telemetry, ()>;
 /// Subscriber of [`Telemetry`].
@@ -89,6 +98,16 @@ pub const MAX_STATE_SUBSCRIBERS: usize = 4;
 pub const MAX_COMMAND_SUBSCRIBERS: usize = 4;
 /// Subscribers of `telemetry`: recorders and monitors.
 pub const MAX_TELEMETRY_SUBSCRIBERS: usize = 4;
+/// Clients that may publish setpoints to one controller at once (a user's
+/// application, a scheduler and two command-line tools). A further client
+/// gets "it already has the maximum number of publishers".
+pub const MAX_SETPOINT_PUBLISHERS: usize = 4;
+/// Subscribers of `setpoint`: the controller, a recorder, two spare.
+pub const MAX_SETPOINT_SUBSCRIBERS: usize = 4;
+/// Queue of the controller's setpoint subscriber: enough for every client to
+/// send a few setpoints per cycle; with safe overflow a flood loses its
+/// oldest setpoints (never answered), never stalls a client.
+pub const SETPOINT_BUFFER: usize = 16;
 /// Largest subscriber queue a service supports (a recorder's buffer).
 pub const MAX_SUBSCRIBER_BUFFER: usize = 128;
 /// Queue of a control-loop subscriber: it drains the queue every cycle and
@@ -302,6 +321,7 @@ fn event_reason(e: EventOpenOrCreateError) -> String {
 fn open_pubsub<T: Debug + ZeroCopySend>(
     node: &IpcNode,
     name: &str,
+    max_publishers: usize,
     max_subscribers: usize,
 ) -> Result<publish_subscribe::PortFactory<Ipc, T, ()>, IpcError> {
     let err = |reason: String| IpcError::Service {
@@ -311,7 +331,7 @@ fn open_pubsub<T: Debug + ZeroCopySend>(
     let service_name = ServiceName::new(name).map_err(|e| err(format!("invalid name ({e:?})")))?;
     node.service_builder(&service_name)
         .publish_subscribe::<T>()
-        .max_publishers(1)
+        .max_publishers(max_publishers)
         .max_subscribers(max_subscribers)
         .max_nodes(MAX_NODES)
         .history_size(0)
@@ -343,12 +363,13 @@ fn open_event(
         .map_err(|e| err(event_reason(e)))
 }
 
-/// The five services of one namespace, opened (or created) with the contract's settings.
+/// The six services of one namespace, opened (or created) with the contract's settings.
 pub struct Services {
     names: ServiceNames,
     joint_state: publish_subscribe::PortFactory<Ipc, JointState, ()>,
     torque_command: publish_subscribe::PortFactory<Ipc, TorqueCommand, ()>,
     telemetry: publish_subscribe::PortFactory<Ipc, Telemetry, ()>,
+    setpoint: publish_subscribe::PortFactory<Ipc, Setpoint, ()>,
     state_ready: event::PortFactory<Ipc>,
     command_ready: event::PortFactory<Ipc>,
 }
@@ -365,9 +386,15 @@ impl Services {
     /// Opens (or creates) all services of `names` on `node`.
     pub fn open(node: &IpcNode, names: &ServiceNames) -> Result<Services, IpcError> {
         Ok(Services {
-            joint_state: open_pubsub(node, names.joint_state(), MAX_STATE_SUBSCRIBERS)?,
-            torque_command: open_pubsub(node, names.torque_command(), MAX_COMMAND_SUBSCRIBERS)?,
-            telemetry: open_pubsub(node, names.telemetry(), MAX_TELEMETRY_SUBSCRIBERS)?,
+            joint_state: open_pubsub(node, names.joint_state(), 1, MAX_STATE_SUBSCRIBERS)?,
+            torque_command: open_pubsub(node, names.torque_command(), 1, MAX_COMMAND_SUBSCRIBERS)?,
+            telemetry: open_pubsub(node, names.telemetry(), 1, MAX_TELEMETRY_SUBSCRIBERS)?,
+            setpoint: open_pubsub(
+                node,
+                names.setpoint(),
+                MAX_SETPOINT_PUBLISHERS,
+                MAX_SETPOINT_SUBSCRIBERS,
+            )?,
             state_ready: open_event(node, names.state_ready(), EVENT_STATE_PUBLISHED)?,
             command_ready: open_event(node, names.command_ready(), EVENT_COMMAND_PUBLISHED)?,
             names: names.clone(),
@@ -412,6 +439,17 @@ impl Services {
     /// A telemetry subscriber with a queue of `buffer` samples.
     pub fn telemetry_subscriber(&self, buffer: usize) -> Result<TelemetrySubscriber, IpcError> {
         subscriber(&self.telemetry, self.names.telemetry(), buffer)
+    }
+
+    /// A setpoint publisher (a client; up to [`MAX_SETPOINT_PUBLISHERS`] at once).
+    pub fn setpoint_publisher(&self) -> Result<SetpointPublisher, IpcError> {
+        publisher(&self.setpoint, self.names.setpoint(), "client")
+    }
+
+    /// A setpoint subscriber with a queue of `buffer` samples (the controller
+    /// uses [`SETPOINT_BUFFER`]).
+    pub fn setpoint_subscriber(&self, buffer: usize) -> Result<SetpointSubscriber, IpcError> {
+        subscriber(&self.setpoint, self.names.setpoint(), buffer)
     }
 
     /// Notifier of `state_ready` (default event [`EVENT_STATE_PUBLISHED`]).
@@ -486,9 +524,14 @@ fn publisher<T: Debug + ZeroCopySend>(
             reason: match e {
                 PublisherCreateError::ExceedsMaxSupportedPublishers => {
                     let short = service.rsplit('/').next().unwrap_or(service);
-                    format!(
-                        "{short} already has a publisher (is another {role} running in this namespace?)"
-                    )
+                    match factory.static_config().max_publishers() {
+                        1 => format!(
+                            "{short} already has a publisher (is another {role} running in this namespace?)"
+                        ),
+                        max => format!(
+                            "{short} already has {max} publishers, the most it allows (too many {role}s in this namespace)"
+                        ),
+                    }
                 }
                 other => format!("iceoryx2 failure {other:?}"),
             },
@@ -778,13 +821,44 @@ mod tests {
             }
             assert_eq!(seqs, (0..10).collect::<Vec<_>>());
 
+            // Setpoints: several clients publish, the controller receives all of them.
+            let setpoint_sub = services.setpoint_subscriber(SETPOINT_BUFFER).unwrap();
+            let clients: Vec<_> = (0..MAX_SETPOINT_PUBLISHERS)
+                .map(|_| other.setpoint_publisher().unwrap())
+                .collect();
+            let extra = services.setpoint_publisher().unwrap_err();
+            assert!(
+                extra
+                    .to_string()
+                    .contains("setpoint already has 4 publishers, the most it allows"),
+                "{extra}"
+            );
+            for (id, client) in clients.iter().enumerate() {
+                let mut sp = crate::Setpoint::zeroed();
+                sp.client_id = id as u64 + 100;
+                sp.header.seq = 1;
+                sp.fields = crate::SETPOINT_GOAL;
+                sp.dim = 1;
+                client.send_copy(sp).unwrap();
+            }
+            let mut ids = Vec::new();
+            while let Some(sp) = setpoint_sub.receive().unwrap() {
+                assert_eq!(sp.validate(), Ok(()));
+                ids.push(sp.client_id);
+            }
+            ids.sort_unstable();
+            assert_eq!(ids, [100, 101, 102, 103]);
+            drop(clients);
+            // A client that leaves frees its place.
+            let _again = services.setpoint_publisher().unwrap();
+
             let report = cleanup_dead_nodes(Some(&prefix)).unwrap();
             assert_eq!(report.alive, 1, "{report:?}");
             assert_eq!(report.dead, 0, "{report:?}");
             assert!(!leftover_files(&prefix).unwrap().is_empty());
 
             // A peer with another payload type under the same name: schema mismatch.
-            let wrong = open_pubsub::<TorqueCommand>(&node, names.joint_state(), 4).unwrap_err();
+            let wrong = open_pubsub::<TorqueCommand>(&node, names.joint_state(), 1, 4).unwrap_err();
             assert!(wrong.to_string().contains("schema mismatch"), "{wrong}");
             assert!(wrong.to_string().contains("joint_state"), "{wrong}");
         }

@@ -18,12 +18,14 @@
 //! | `hcc/<ns>/joint_state`           | [`JointState`]    | driver/simulator | controller, loggers    |
 //! | `hcc/<ns>/torque_command`        | [`TorqueCommand`] | controller       | driver/simulator, loggers |
 //! | `hcc/<ns>/telemetry`             | [`Telemetry`]     | controller       | loggers, `hcc` tools   |
+//! | `hcc/<ns>/setpoint`              | [`Setpoint`]      | clients (up to [`ipc::MAX_SETPOINT_PUBLISHERS`]) | controller, loggers |
 //! | `hcc/<ns>/state_ready` (event)   | —                 | driver notifies [`EVENT_STATE_PUBLISHED`] | controller (optional wake-up) |
 //! | `hcc/<ns>/command_ready` (event) | —                 | controller notifies [`EVENT_COMMAND_PUBLISHED`] | driver (optional wake-up) |
 //!
 //! `<ns>` is a per-robot namespace ([`validate_namespace`]: 1–64 characters
 //! of `[A-Za-z0-9_-]`), so two robots or two tests never share a service.
-//! Exactly one publisher per service. Subscribers should use a small buffer
+//! Exactly one publisher per service, except `setpoint`, which several
+//! clients may command at once (each with its own client id). Subscribers should use a small buffer
 //! with safe overflow (the newest sample wins) and read until empty each
 //! cycle, keeping the newest sample.
 //!
@@ -99,13 +101,23 @@
 //! ## Versions
 //!
 //! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
-//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema1`), so
+//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema2`), so
 //! iceoryx2 itself refuses to connect peers of different schemas when a
 //! service is opened (`IncompatibleTypes`; size and alignment are compared
 //! too). iceoryx2's own version must match exactly between peers as well:
 //! every service records the iceoryx2 version that created it, and opening it
 //! from another version fails (`VersionMismatch`). Build all peers of one
 //! robot against the same hcc-msgs and iceoryx2 versions.
+//!
+//! ## Commanding a running controller
+//!
+//! Clients send [`Setpoint`]s (a level's goal, velocity feed-forward,
+//! stiffness and/or damping, and a transition duration) on
+//! `hcc/<ns>/setpoint`. [`Setpoint::validate`] does the model-free checks;
+//! the controller checks the rest against its law and model. Every setpoint
+//! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
+//! numbers) in [`Telemetry::setpoint_answers`]; that extension of
+//! the telemetry layout is schema 2.
 //!
 //! ## Real-time use
 //!
@@ -119,6 +131,7 @@ mod error;
 pub mod ipc;
 mod sequence;
 mod service;
+mod setpoint;
 mod types;
 
 pub use error::{MsgError, NamespaceError};
@@ -127,17 +140,23 @@ pub use service::{
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, MAX_NAMESPACE_LEN, Namespace, SERVICE_PREFIX,
     ServiceNames, validate_namespace,
 };
+pub use setpoint::{
+    ANSWER_ACCEPTED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, MAX_GAIN_ENTRIES,
+    MAX_TRANSITION_S, Rejection, SETPOINT, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL,
+    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SYMMETRY_TOLERANCE, Setpoint, answer_code,
+};
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
-    JOINT_STATE, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAGS_KNOWN, TELEMETRY,
-    TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings,
-    TorqueCommand,
+    JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+    STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND,
+    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
 };
 
 /// Version of this message schema. Bump it on any change of a type's layout
 /// or meaning, together with the `@schema<N>` suffix of every `type_name`
-/// (a unit test checks they agree).
-pub const SCHEMA_VERSION: u32 = 1;
+/// (a unit test checks they agree). Schema 2: [`Telemetry`] answers
+/// setpoints (active goals and gains, transition progress, per-client answers).
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// Joint capacity. 32 covers single and dual 7-DOF arms, mobile manipulators
 /// and humanoid upper bodies, and keeps [`JointState`] (816 B) and

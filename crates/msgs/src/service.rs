@@ -96,6 +96,7 @@ pub struct ServiceNames {
     joint_state: String,
     torque_command: String,
     telemetry: String,
+    setpoint: String,
     state_ready: String,
     command_ready: String,
 }
@@ -113,6 +114,7 @@ impl ServiceNames {
             joint_state: format!("{base}/joint_state"),
             torque_command: format!("{base}/torque_command"),
             telemetry: format!("{base}/telemetry"),
+            setpoint: format!("{base}/setpoint"),
             state_ready: format!("{base}/state_ready"),
             command_ready: format!("{base}/command_ready"),
             namespace,
@@ -139,6 +141,11 @@ impl ServiceNames {
         &self.telemetry
     }
 
+    /// Publish-subscribe service of [`crate::Setpoint`] (clients → controller).
+    pub fn setpoint(&self) -> &str {
+        &self.setpoint
+    }
+
     /// Event service the driver notifies with [`EVENT_STATE_PUBLISHED`].
     pub fn state_ready(&self) -> &str {
         &self.state_ready
@@ -150,11 +157,12 @@ impl ServiceNames {
     }
 
     /// All names, for listing/cleanup.
-    pub fn all(&self) -> [&str; 5] {
+    pub fn all(&self) -> [&str; 6] {
         [
             &self.joint_state,
             &self.torque_command,
             &self.telemetry,
+            &self.setpoint,
             &self.state_ready,
             &self.command_ready,
         ]
@@ -171,6 +179,7 @@ mod tests {
         assert_eq!(s.joint_state(), "hcc/panda_left/joint_state");
         assert_eq!(s.torque_command(), "hcc/panda_left/torque_command");
         assert_eq!(s.telemetry(), "hcc/panda_left/telemetry");
+        assert_eq!(s.setpoint(), "hcc/panda_left/setpoint");
         assert_eq!(s.state_ready(), "hcc/panda_left/state_ready");
         assert_eq!(s.command_ready(), "hcc/panda_left/command_ready");
         let other = ServiceNames::new("panda_right").unwrap();

@@ -37,10 +37,14 @@ fn layout_has_no_hidden_padding() {
         + 8 * MAX_LEVELS * 2
         + 8
         + size_of::<TelemetryCounters>()
-        + size_of::<TelemetryTimings>();
+        + size_of::<TelemetryTimings>()
+        + 3 * 8 * MAX_TASK_DIM * MAX_LEVELS
+        + 8 * MAX_LEVELS
+        + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
-    assert_eq!(size_of::<TelemetryCounters>(), 9 * 8);
+    assert_eq!(size_of::<TelemetryCounters>(), 11 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
+    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8);
     for a in [
         align_of::<JointState>(),
         align_of::<TorqueCommand>(),
@@ -48,6 +52,15 @@ fn layout_has_no_hidden_padding() {
     ] {
         assert_eq!(a, 8);
     }
+    // Header, client id, level, fields, dim, layout, duration, goal,
+    // velocity, two full gain matrices.
+    assert_eq!(
+        size_of::<Setpoint>(),
+        24 + 8 + 4 * 4 + 8 + 8 * MAX_TASK_DIM * 2 + 8 * MAX_GAIN_ENTRIES * 2
+    );
+    assert_eq!(size_of::<Setpoint>(), 16_952);
+    assert_eq!(offset_of!(Setpoint, goal), 56);
+    assert_eq!(align_of::<Setpoint>(), 8);
     // The torque path fits in a page each.
     assert!(size_of::<JointState>() <= 4096 && size_of::<TorqueCommand>() <= 4096);
     const { assert!(MAX_JOINTS >= 32) };
@@ -65,6 +78,8 @@ fn schema_version_is_encoded_in_every_type_name() {
             <Telemetry as ZeroCopySend>::type_name(),
             <TelemetryCounters as ZeroCopySend>::type_name(),
             <TelemetryTimings as ZeroCopySend>::type_name(),
+            <Setpoint as ZeroCopySend>::type_name(),
+            <SetpointAnswer as ZeroCopySend>::type_name(),
         ]
     };
     for name in names {
@@ -353,7 +368,7 @@ fn monotonic_clock_advances() {
 
 #[test]
 fn telemetry_counters_are_listed_once_in_field_order() {
-    assert_eq!(TelemetryCounters::COUNT, 9);
+    assert_eq!(TelemetryCounters::COUNT, 11);
     assert_eq!(
         TelemetryCounters::NAMES,
         [
@@ -366,6 +381,8 @@ fn telemetry_counters_are_listed_once_in_field_order() {
             "missed_states",
             "sequence_errors",
             "send_failures",
+            "rate_limited",
+            "low_passed",
         ]
     );
     // The wire layout: one u64 each, in the order of NAMES.
@@ -379,8 +396,10 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         offset_of!(TelemetryCounters, missed_states),
         offset_of!(TelemetryCounters, sequence_errors),
         offset_of!(TelemetryCounters, send_failures),
+        offset_of!(TelemetryCounters, rate_limited),
+        offset_of!(TelemetryCounters, low_passed),
     ];
-    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64]);
+    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 80]);
     let c = TelemetryCounters {
         cycles: 1,
         invalid_states: 2,
@@ -391,8 +410,10 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         missed_states: 7,
         sequence_errors: 8,
         send_failures: 9,
+        rate_limited: 10,
+        low_passed: 11,
     };
-    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9]);
+    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]);
     assert_eq!(TelemetryCounters::from_values(c.values()), c);
     assert_eq!(c.entries()[5], ("peer_lost_events", 6));
     assert_eq!(TelemetryCounters::ZERO, TelemetryCounters::default());

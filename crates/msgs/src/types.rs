@@ -46,7 +46,7 @@ pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
 
 /// Header shared by all messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@schema1")]
+#[type_name("hcc_msgs::Header@schema2")]
 #[repr(C)]
 pub struct Header {
     /// [`SCHEMA_VERSION`] of the writer.
@@ -260,7 +260,7 @@ fn set_n(
 /// Units: q in rad (prismatic: m), q̇ in rad/s (m/s), τ in N·m (N).
 /// Joint order: the URDF chain order from root to tip (actuated joints only).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::JointState@schema1")]
+#[type_name("hcc_msgs::JointState@schema2")]
 #[repr(C)]
 pub struct JointState {
     /// `seq`: state counter (+1 per cycle); `stamp_ns`: sampling instant.
@@ -407,7 +407,7 @@ impl Default for JointState {
 
 /// Torque command, published by the controller once per received state.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::TorqueCommand@schema1")]
+#[type_name("hcc_msgs::TorqueCommand@schema2")]
 #[repr(C)]
 pub struct TorqueCommand {
     /// `seq`: command counter (+1 per command); `stamp_ns`: when τ was computed.
@@ -565,7 +565,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@schema1")]
+    #[type_name("hcc_msgs::TelemetryCounters@schema2")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -586,12 +586,16 @@ define_counters! {
         sequence_errors: "sequence errors",
         /// Commands that could not be sent (loan/send failure).
         send_failures: "send failures",
+        /// Cycles whose torque change was limited by the torque-rate limit.
+        rate_limited: "rate-limited cycles",
+        /// Cycles whose torque went through the output low-pass filter.
+        low_passed: "low-pass filtered cycles",
     }
 }
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@schema1")]
+#[type_name("hcc_msgs::TelemetryTimings@schema2")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -605,13 +609,37 @@ pub struct TelemetryTimings {
     pub max_compute_ns: u64,
 }
 
+/// Clients whose last answer [`Telemetry`] carries (the most recent ones;
+/// the slot of the client heard from longest ago is reused).
+pub const MAX_SETPOINT_CLIENTS: usize = 8;
+
+/// The controller's answer to the last setpoint of one client.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("hcc_msgs::SetpointAnswer@schema2")]
+#[repr(C)]
+pub struct SetpointAnswer {
+    /// The client's `Setpoint::client_id`.
+    pub client_id: u64,
+    /// `header.seq` of the client's last setpoint.
+    pub seq: u64,
+    /// Setpoints answered for this client so far (0: an empty slot).
+    pub answered: u64,
+    /// [`crate::ANSWER_ACCEPTED`] or a [`crate::Rejection`] code.
+    pub code: u32,
+    /// The level it addressed (as sent).
+    pub level: u32,
+    /// The transition duration in force for it, in s (stretched to the
+    /// level's speed limit if needed; 0 when rejected).
+    pub duration_s: f64,
+}
+
 /// Per-cycle diagnostics of the controller, published at the control rate.
 ///
 /// Paper quantities: τ_i per level (Eqs. (20), (21)), τ_μ (Eq. (22)), g and
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@schema1")]
+#[type_name("hcc_msgs::Telemetry@schema2")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -651,6 +679,17 @@ pub struct Telemetry {
     pub counters: TelemetryCounters,
     /// Cycle timings.
     pub timings: TelemetryTimings,
+    /// Active virtual equilibrium x_{i,d}(t) per level (first m_i entries;
+    /// roll, pitch, yaw for orientation), moving during a transition.
+    pub goal: [[f64; MAX_TASK_DIM]; MAX_LEVELS],
+    /// Diagonal of the active stiffness K_i(t) per level.
+    pub stiffness_diag: [[f64; MAX_TASK_DIM]; MAX_LEVELS],
+    /// Diagonal of the active damping D_i(t) per level.
+    pub damping_diag: [[f64; MAX_TASK_DIM]; MAX_LEVELS],
+    /// Progress t/T of each level's transition in [0, 1] (1: at rest).
+    pub transition_progress: [f64; MAX_LEVELS],
+    /// The answer to the last setpoint of each recent client.
+    pub setpoint_answers: [SetpointAnswer; MAX_SETPOINT_CLIENTS],
 }
 
 impl Telemetry {
@@ -680,6 +719,18 @@ impl Telemetry {
                 period_ns: 0,
                 max_compute_ns: 0,
             },
+            goal: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
+            stiffness_diag: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
+            damping_diag: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
+            transition_progress: [0.0; MAX_LEVELS],
+            setpoint_answers: [SetpointAnswer {
+                client_id: 0,
+                seq: 0,
+                answered: 0,
+                code: 0,
+                level: 0,
+                duration_s: 0.0,
+            }; MAX_SETPOINT_CLIENTS],
         }
     }
 
@@ -738,10 +789,18 @@ impl Telemetry {
                 v.fill(0.0);
             }
         }
-        for (i, e) in self.task_error.iter_mut().enumerate() {
-            let m = if i < r { task_dims[i] } else { 0 };
-            e[m..].fill(0.0);
+        for rows in [
+            &mut self.task_error,
+            &mut self.goal,
+            &mut self.stiffness_diag,
+            &mut self.damping_diag,
+        ] {
+            for (i, e) in rows.iter_mut().enumerate() {
+                let m = if i < r { task_dims[i] } else { 0 };
+                e[m..].fill(0.0);
+            }
         }
+        self.transition_progress[r..].fill(0.0);
         self.storage[r..].fill(0.0);
         self.min_singular_value[r..].fill(0.0);
         Ok(())
@@ -769,6 +828,23 @@ impl Telemetry {
         } else {
             &[]
         }
+    }
+
+    /// Active goal of level `level` (0-based), length m_i; empty if out of range.
+    pub fn goal(&self, level: usize) -> &[f64] {
+        if level < self.levels() {
+            let m = (self.task_dims[level] as usize).min(MAX_TASK_DIM);
+            &self.goal[level][..m]
+        } else {
+            &[]
+        }
+    }
+
+    /// The answer to the last setpoint of `client_id`, if this sample has one.
+    pub fn answer_for(&self, client_id: u64) -> Option<&SetpointAnswer> {
+        self.setpoint_answers
+            .iter()
+            .find(|a| a.answered > 0 && a.client_id == client_id)
     }
 
     /// Whether this sample reports a lost driver ([`TELEMETRY_FLAG_PEER_LOST`]).

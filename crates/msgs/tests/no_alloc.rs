@@ -2,8 +2,9 @@
 //! allocate: a counting global allocator must see zero allocations.
 
 use hcc_msgs::{
-    JointState, MsgError, SequenceChecker, Telemetry, TorqueCommand, check_gravity_agreement,
-    command_freshness, monotonic_now_ns,
+    GAIN_STIFFNESS_FULL, JointState, MsgError, Rejection, SETPOINT_DAMPING, SETPOINT_GOAL,
+    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SequenceChecker, Setpoint, Telemetry, TorqueCommand,
+    answer_code, check_gravity_agreement, command_freshness, monotonic_now_ns,
 };
 
 /// Counts the allocations of each thread (`hcc_rtalloc::thread_stats`), so the
@@ -124,4 +125,41 @@ fn driver_logic_does_not_allocate() {
     let after = hcc_rtalloc::thread_stats().allocs;
     assert_eq!(errors, 0);
     assert_eq!(after - before, 0, "allocations in the driver logic");
+}
+
+#[test]
+fn setpoint_validation_does_not_allocate() {
+    // A full 32×32 SPD stiffness (the largest factorisation) and a diagonal damping.
+    let m = hcc_msgs::MAX_TASK_DIM;
+    let mut setpoint = Box::new(Setpoint::zeroed());
+    setpoint.fields = SETPOINT_GOAL | SETPOINT_VELOCITY | SETPOINT_STIFFNESS | SETPOINT_DAMPING;
+    setpoint.gain_layout = GAIN_STIFFNESS_FULL;
+    setpoint.dim = m as u32;
+    for j in 0..m {
+        setpoint.damping[j] = 10.0;
+        for k in 0..m {
+            setpoint.stiffness[j * m + k] = if j == k { 100.0 } else { 0.5 };
+        }
+    }
+    let mut bad = setpoint.clone();
+    bad.stiffness[1] = -50.0; // asymmetric
+    let mut errors = 0usize;
+
+    let before = hcc_rtalloc::thread_stats().allocs;
+    for k in 0..200u64 {
+        setpoint.header.seq = k;
+        if setpoint.validate().is_err() {
+            errors += 1;
+        }
+        if bad.validate() != Err(Rejection::NotSymmetric) {
+            errors += 1;
+        }
+        let code = answer_code(bad.validate());
+        if Rejection::from_code(code).map(Rejection::name) != Some("not_symmetric") {
+            errors += 1;
+        }
+    }
+    let after = hcc_rtalloc::thread_stats().allocs;
+    assert_eq!(errors, 0);
+    assert_eq!(after - before, 0, "allocations in setpoint validation");
 }

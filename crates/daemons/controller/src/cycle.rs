@@ -23,8 +23,8 @@ use std::sync::atomic::Ordering;
 use hcc_config::WaitStrategy;
 use hcc_control::Controller;
 use hcc_msgs::ipc::{
-    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, Services,
-    StateSubscriber, TelemetryPublisher,
+    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, SETPOINT_BUFFER,
+    Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher,
 };
 use hcc_msgs::{CommandMode, JointState, TelemetryCounters, TelemetryTimings, monotonic_now_ns};
 
@@ -48,6 +48,8 @@ pub struct Ports {
     pub command_ready: EventNotifier,
     /// Telemetry (single publisher; never blocks).
     pub telemetry: TelemetryPublisher,
+    /// Setpoints from clients (buffer [`SETPOINT_BUFFER`]; all taken each cycle).
+    pub setpoints: SetpointSubscriber,
 }
 
 impl Ports {
@@ -58,7 +60,9 @@ impl Ports {
         let command_ready = services.command_ready_notifier()?;
         let states = services.joint_state_subscriber(LATEST_BUFFER)?;
         let state_ready = services.state_ready_listener()?;
+        let setpoints = services.setpoint_subscriber(SETPOINT_BUFFER)?;
         Ok(Ports {
+            setpoints,
             commands,
             telemetry,
             command_ready,
@@ -85,6 +89,10 @@ pub struct CycleSettings {
     pub hybrid_lead_ns: u64,
     /// Hybrid wait: poll this long after the expected time before blocking on the event, ns.
     pub hybrid_spin_ns: u64,
+    /// Limits of setpoints (`[commanding]`).
+    pub commanding: hcc_config::commanding::Commanding,
+    /// The torque output pipeline (`[output]`).
+    pub output: hcc_config::output::Output,
 }
 
 impl CycleSettings {
@@ -99,6 +107,8 @@ impl CycleSettings {
             gravity_compensation: scenario.spec.gravity_compensation,
             hybrid_lead_ns: rt::HYBRID_LEAD_NS,
             hybrid_spin_ns: 200_000,
+            commanding: scenario.commanding.clone(),
+            output: scenario.output.clone(),
         }
     }
 }
@@ -311,6 +321,13 @@ impl Cycle {
             .is_some()
             .then(|| wake.saturating_sub(self.last_wake_ns));
         self.note_state(wake);
+        // Every queued setpoint (at most the queue's length: bounded work).
+        for _ in 0..SETPOINT_BUFFER {
+            let Ok(Some(setpoint)) = ports.setpoints.receive() else {
+                break;
+            };
+            self.decider.take_setpoint(&setpoint);
+        }
         let answer = self.decider.decide(&self.state, wake);
         if let Some(step_ns) = self.decider.step_ns() {
             self.timings.step.record(step_ns);

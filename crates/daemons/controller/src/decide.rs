@@ -48,11 +48,13 @@
 use hcc_control::Controller;
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM,
-    SeqEvent, SequenceChecker, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
+    SeqEvent, SequenceChecker, Setpoint, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
     TorqueCommand, monotonic_now_ns,
 };
 
+use crate::commander::Commander;
 use crate::cycle::{CycleError, CycleSettings};
+use crate::output::OutputPipeline;
 use crate::status::LoopCounters;
 
 /// Consecutive rejected sequence numbers (backwards or implausible jumps)
@@ -122,6 +124,10 @@ pub struct Decider {
     peer_lost: bool,
     /// Duration of `Controller::step` in the last decision, ns.
     step_ns: Option<u64>,
+    /// Setpoints: checks, transitions, answers.
+    commander: Commander,
+    /// Rate limit and low-pass between the law and the saturation.
+    output: OutputPipeline,
 }
 
 impl Decider {
@@ -145,7 +151,11 @@ impl Decider {
         }
         let mut limits = [f64::INFINITY; MAX_JOINTS];
         limits[..n].copy_from_slice(&settings.torque_limits);
+        let commander = Commander::new(&controller, &settings.commanding)?;
+        commander.fill(&mut telemetry);
         Ok(Decider {
+            commander,
+            output: OutputPipeline::new(&settings.output, settings.period_ns as f64 * 1e-9),
             controller,
             n,
             r,
@@ -200,6 +210,15 @@ impl Decider {
         self.peer_lost
     }
 
+    /// Takes a client's setpoint (checked against the law, applied through
+    /// its transition from the next decision on); the answer goes into the
+    /// next telemetry sample. Returns the answer code. Allocation-free.
+    pub fn take_setpoint(&mut self, setpoint: &Setpoint) -> u32 {
+        let code = self.commander.take(setpoint);
+        self.commander.fill(&mut self.telemetry);
+        code
+    }
+
     /// Decides the answer to `state`, received at `wake_ns` (CLOCK_MONOTONIC,
     /// used only to judge sequence gaps): validate → sequence → law → safe
     /// command → saturate. For [`Answer::Command`], the command and the
@@ -216,8 +235,14 @@ impl Decider {
         };
         // Whether tau contains g(q_v) = gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
-            Some(_) => self.gravity_compensation,
-            None => self.safe_command(&mut tau, gravity_conflict),
+            Some(_) => {
+                self.output_stages(&mut tau);
+                self.gravity_compensation
+            }
+            None => {
+                self.output.interrupt();
+                self.safe_command(&mut tau, gravity_conflict)
+            }
         };
         // Saturation to the torque limits: the control part is scaled as a
         // whole, which keeps the hierarchy (hcc_control::saturate).
@@ -273,6 +298,18 @@ impl Decider {
         t.flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST;
         t.counters = self.counters.telemetry;
         new_loss
+    }
+
+    /// The law's τ through the rate limit and the low-pass (module
+    /// [`crate::output`]), counted; nothing when both are off.
+    fn output_stages(&mut self, tau: &mut [f64; MAX_JOINTS]) {
+        if !self.output.is_active() {
+            return;
+        }
+        let stages = self.output.apply(&mut tau[..self.n]);
+        let c = &mut self.counters.telemetry;
+        c.rate_limited += u64::from(stages.rate_limited);
+        c.low_passed += u64::from(stages.low_passed);
     }
 
     /// Validation and sequence of `state`, counted.
@@ -360,6 +397,9 @@ impl Decider {
     /// g(q_v). `None` on a numerical failure (counted).
     fn law(&mut self, state: &JointState, tau: &mut [f64; MAX_JOINTS]) -> Option<CommandMode> {
         let n = self.n;
+        // Transitions move by one nominal period per used state (deterministic).
+        self.commander
+            .advance(self.period_ns as f64 * 1e-9, &mut self.controller);
         let start = monotonic_now_ns();
         let result = self.controller.step(state.q(), state.qd());
         self.step_ns = Some(monotonic_now_ns().saturating_sub(start));
@@ -434,6 +474,7 @@ impl Decider {
         t.flags = self.command.flags;
         t.tau[..n].copy_from_slice(&tau[..n]);
         t.counters = self.counters.telemetry;
+        self.commander.fill(t);
         if !fresh {
             return;
         }

@@ -19,9 +19,11 @@
 //! iceoryx2 0.10 makes one small allocation per loan, which the real-time
 //! thread takes from a pre-faulted pool instead of the system allocator.
 
+pub mod commander;
 pub mod cycle;
 pub mod daemon;
 pub mod decide;
+pub mod output;
 pub mod status;
 
 pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports};

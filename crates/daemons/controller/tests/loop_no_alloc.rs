@@ -15,7 +15,7 @@ use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
 use hcc_controller::{Answer, Cycle, CycleSettings, Decider, Outcome, Ports};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
-use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames};
+use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames, Setpoint};
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
 use iceoryx2::prelude::SignalHandlingMode;
 
@@ -56,6 +56,24 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         let telemetry_sub = services
             .telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)
             .unwrap();
+        // A client streaming a setpoint every cycle (a small circle of goals,
+        // stiffness changes), prepared beforehand.
+        let setpoint_pub = services.setpoint_publisher().unwrap();
+        let setpoints: Vec<Setpoint> = (0..2 * WARM_UP)
+            .map(|k| {
+                let phase = k as f64 * 1e-3;
+                let goal = [0.90 + 0.01 * phase.sin(), 0.80 + 0.01 * phase.cos()];
+                let sp = Setpoint::for_level(9, k, 0, 2)
+                    .with_goal(&goal)
+                    .unwrap()
+                    .with_duration(0.005);
+                if k % 2 == 0 {
+                    sp.with_stiffness(&[1000.0 + (k % 100) as f64; 2]).unwrap()
+                } else {
+                    sp
+                }
+            })
+            .collect();
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
@@ -75,6 +93,9 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                 q[j] = q0[j] + 0.05 * s;
                 qd[j] = 0.05 * (k as f64 * 1e-3).cos();
             }
+            let mut ok = setpoint_pub
+                .send_copy(setpoints[k as usize % setpoints.len()])
+                .is_ok();
             let Ok(sample) = state_pub.loan_uninit() else {
                 return (false, Occupancy { after: 0 });
             };
@@ -82,7 +103,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             let st = sample.payload_mut();
             st.header.seq = k;
             st.header.stamp_ns = hcc_msgs::monotonic_now_ns();
-            let mut ok = st.set_joints(&q[..n], &qd[..n], &zero[..n]).is_ok();
+            ok &= st.set_joints(&q[..n], &qd[..n], &zero[..n]).is_ok();
             ok &= sample.send().is_ok();
             ok &= state_ready.notify().is_ok();
             ok &= cycle.run_once(&ports) == Outcome::Answered(CommandMode::Normal);
@@ -93,6 +114,9 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             }
             while let Ok(Some(t)) = telemetry_sub.receive() {
                 ok &= t.state_seq == k;
+                ok &= t
+                    .answer_for(9)
+                    .is_some_and(|a| a.seq == k % (2 * WARM_UP) && a.code == 0);
             }
             (
                 ok,
@@ -179,7 +203,11 @@ fn the_decision_step_allocates_nothing() {
     let scenario = scenario();
     let n = scenario.model.nq();
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-    let mut decider = Decider::new(controller, &CycleSettings::from_scenario(&scenario)).unwrap();
+    // With the whole output pipeline on (rate limit and low-pass).
+    let mut settings = CycleSettings::from_scenario(&scenario);
+    settings.output.torque_rate_limit = Some(10.0);
+    settings.output.low_pass_hz = Some(100.0);
+    let mut decider = Decider::new(controller, &settings).unwrap();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let mut states = Vec::new();
     for k in 0..2 * WARM_UP {
@@ -199,11 +227,35 @@ fn the_decision_step_allocates_nothing() {
         }
         states.push(s);
     }
+    // A setpoint every cycle (prepared beforehand): goals along a small
+    // circle, gain changes, full matrices, and rejected ones (NaN, not SPD,
+    // unknown level).
+    let setpoints: Vec<Setpoint> = (0..2 * WARM_UP)
+        .map(|k| {
+            let phase = k as f64 * 1e-3;
+            let goal = [0.90 + 0.02 * phase.sin(), 0.80 + 0.02 * phase.cos()];
+            let mut sp = Setpoint::for_level(k % 3 + 1, k, 0, 2)
+                .with_goal(&goal)
+                .unwrap()
+                .with_velocity(&[0.02 * phase.cos(), -0.02 * phase.sin()])
+                .unwrap()
+                .with_duration(0.01);
+            match k % 7 {
+                1 => sp = sp.with_stiffness(&[1000.0, 10.0, 10.0, 900.0]).unwrap(),
+                2 => sp.goal[0] = f64::NAN,
+                3 => sp = sp.with_damping(&[40.0, -1.0]).unwrap(),
+                4 => sp.level = 6,
+                _ => {}
+            }
+            sp
+        })
+        .collect();
     let decide = |decider: &mut Decider, k: u64| {
         if k % 500 == 499 {
             decider.stale(k * 1_000_000);
         }
-        decider.decide(&states[k as usize], k * 1_000_000)
+        let code = decider.take_setpoint(&setpoints[k as usize]);
+        (decider.decide(&states[k as usize], k * 1_000_000), code)
     };
     let rt = RtSection::enter();
     for k in 0..WARM_UP {
@@ -211,8 +263,11 @@ fn the_decision_step_allocates_nothing() {
     }
     let before = thread_stats();
     let mut answers = [0u64; 2];
+    let mut setpoint_answers = [0u64; 2];
     for k in WARM_UP..2 * WARM_UP {
-        match decide(&mut decider, k) {
+        let (answer, code) = decide(&mut decider, k);
+        setpoint_answers[usize::from(code != 0)] += 1;
+        match answer {
             Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
             Answer::Command(_) => answers[0] += 1,
             Answer::Duplicate => {}
@@ -222,6 +277,13 @@ fn the_decision_step_allocates_nothing() {
     drop(rt);
     println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
     assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
+    let c = decider.counters().telemetry;
+    assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
+    // Setpoints accepted and rejected, every cycle.
+    assert!(
+        setpoint_answers[0] > 0 && setpoint_answers[1] > 0,
+        "{setpoint_answers:?}"
+    );
     assert_eq!(during.pool_allocs, 0, "{during:?}");
     assert_eq!(during.system_allocs, 0, "{during:?}");
     assert_eq!(during.fallbacks, 0, "{during:?}");

@@ -1,0 +1,260 @@
+//! `hcc goal`, `hcc gains` and `hcc monitor`: commanding and watching a
+//! running controller through hcc-client. Levels are 1-based here (the
+//! order of the scenario's `[[level]]`s).
+
+use std::io::{IsTerminal, Write};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use hcc_client::Client;
+use hcc_msgs::{CommandMode, Telemetry, TelemetryCounters};
+
+/// Where the controller is.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Target {
+    /// Namespace of the controller's services.
+    #[arg(long)]
+    pub namespace: String,
+    /// iceoryx2 file prefix of the controller's peers (default: the
+    /// HCC_IPC_FILE_PREFIX environment variable, else iceoryx2's).
+    #[arg(long)]
+    pub file_prefix: Option<String>,
+    /// How long to wait for the controller's answer, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub timeout: f64,
+}
+
+/// `hcc goal`.
+#[derive(clap::Args, Debug)]
+pub struct GoalArgs {
+    #[command(flatten)]
+    pub target: Target,
+    /// Level (1-based, the order of the scenario's [[level]]s).
+    #[arg(long)]
+    pub level: usize,
+    /// Transition duration, s (0: as fast as the level's speed limit allows).
+    #[arg(long, default_value_t = 0.0)]
+    pub duration: f64,
+    /// The goal in the task's coordinates, as in the TOML.
+    #[arg(required = true, allow_negative_numbers = true)]
+    pub value: Vec<f64>,
+}
+
+/// `hcc gains`.
+#[derive(clap::Args, Debug)]
+pub struct GainsArgs {
+    #[command(flatten)]
+    pub target: Target,
+    /// Level (1-based).
+    #[arg(long)]
+    pub level: usize,
+    /// Task dimension m of the level.
+    #[arg(long)]
+    pub dim: usize,
+    /// Stiffness: m diagonal values or m² row-major.
+    #[arg(long, num_args = 1.., allow_negative_numbers = true)]
+    pub stiffness: Vec<f64>,
+    /// Damping: m diagonal values or m² row-major.
+    #[arg(long, num_args = 1.., allow_negative_numbers = true)]
+    pub damping: Vec<f64>,
+    /// Transition duration, s.
+    #[arg(long, default_value_t = 0.0)]
+    pub duration: f64,
+}
+
+/// `hcc monitor`.
+#[derive(clap::Args, Debug)]
+pub struct MonitorArgs {
+    #[command(flatten)]
+    pub target: Target,
+    /// One JSON object per line instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop after this many samples.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Samples per second shown (table) or written (JSON).
+    #[arg(long, default_value_t = 4.0)]
+    pub rate: f64,
+}
+
+fn connect(t: &Target) -> anyhow::Result<Client> {
+    let prefix = t
+        .file_prefix
+        .clone()
+        .or_else(hcc_msgs::ipc::file_prefix_from_env);
+    Client::connect(&t.namespace, prefix.as_deref())
+        .with_context(|| format!("cannot connect to namespace {:?}", t.namespace))
+}
+
+fn level_index(level: usize) -> anyhow::Result<usize> {
+    if level == 0 {
+        bail!("--level is 1-based (the first [[level]] is 1)");
+    }
+    Ok(level - 1)
+}
+
+fn timeout(t: &Target) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(t.timeout).context("--timeout must be a non-negative number of s")
+}
+
+/// `hcc goal`: exit 0 once the controller accepted the goal.
+pub fn goal(args: GoalArgs) -> anyhow::Result<()> {
+    let level = level_index(args.level)?;
+    let mut client = connect(&args.target)?;
+    let seq = client.set_goal(level, &args.value, args.duration)?;
+    let answer = client.wait_until_accepted(seq, timeout(&args.target)?)?;
+    println!(
+        "level {} goal {:?} accepted; transition {:.3} s",
+        args.level, args.value, answer.duration_s
+    );
+    Ok(())
+}
+
+/// `hcc gains`: exit 0 once the controller accepted the gains.
+pub fn gains(args: GainsArgs) -> anyhow::Result<()> {
+    let level = level_index(args.level)?;
+    if args.stiffness.is_empty() && args.damping.is_empty() {
+        bail!("give --stiffness and/or --damping");
+    }
+    let mut client = connect(&args.target)?;
+    let seq = client.set_gains(
+        level,
+        args.dim,
+        &args.stiffness,
+        &args.damping,
+        args.duration,
+    )?;
+    let answer = client.wait_until_accepted(seq, timeout(&args.target)?)?;
+    println!(
+        "level {} gains accepted; transition {:.3} s",
+        args.level, answer.duration_s
+    );
+    Ok(())
+}
+
+/// One telemetry sample as the monitor's JSON object.
+pub fn sample_json(t: &Telemetry) -> serde_json::Value {
+    let levels: Vec<_> = (0..t.levels())
+        .map(|i| {
+            let m = t.task_error(i).len();
+            let error = t.task_error(i);
+            serde_json::json!({
+                "level": i + 1,
+                "name": format!("level {}", i + 1),
+                "error": error,
+                "error_norm": error.iter().map(|x| x * x).sum::<f64>().sqrt(),
+                "goal": t.goal(i),
+                "stiffness": &t.stiffness_diag[i][..m],
+                "damping": &t.damping_diag[i][..m],
+                "storage": t.storage[i],
+                "singular": t.is_singular(i),
+                "transition_progress": t.transition_progress[i],
+            })
+        })
+        .collect();
+    let counters: serde_json::Map<_, _> = t
+        .counters
+        .entries()
+        .iter()
+        .map(|(k, v)| ((*k).to_owned(), serde_json::json!(v)))
+        .collect();
+    serde_json::json!({
+        "stamp_ns": t.header.stamp_ns,
+        "seq": t.header.seq,
+        "mode": mode_name(t.mode),
+        "levels": levels,
+        "tau": t.tau(),
+        "counters": counters,
+        "compute_ns": t.timings.compute_ns,
+        "wakeup_latency_ns": t.timings.wakeup_latency_ns,
+    })
+}
+
+fn mode_name(code: u32) -> &'static str {
+    match CommandMode::from_code(code) {
+        Ok(CommandMode::Normal) => "normal",
+        Ok(CommandMode::SafeHold) => "safe_hold",
+        Ok(CommandMode::Singular) => "singular",
+        Ok(CommandMode::Stop) => "stop",
+        Err(_) => "unknown",
+    }
+}
+
+fn table(t: &Telemetry) -> String {
+    let mut s = format!(
+        "seq {}  mode {}  compute {:.1} µs  latency {:.1} µs\n",
+        t.header.seq,
+        mode_name(t.mode),
+        t.timings.compute_ns as f64 * 1e-3,
+        t.timings.wakeup_latency_ns as f64 * 1e-3
+    );
+    s += "level  |error|      storage      progress  singular  goal\n";
+    for i in 0..t.levels() {
+        let e = t.task_error(i);
+        s += &format!(
+            "{:<6} {:<12.3e} {:<12.3e} {:<9.2} {:<9} {:?}\n",
+            i + 1,
+            e.iter().map(|x| x * x).sum::<f64>().sqrt(),
+            t.storage[i],
+            t.transition_progress[i],
+            t.is_singular(i),
+            t.goal(i)
+        );
+    }
+    let c: &TelemetryCounters = &t.counters;
+    s += &format!(
+        "cycles {}  saturated {}  rate-limited {}  singular {}  invalid {}  missed {}\n",
+        c.cycles,
+        c.saturations,
+        c.rate_limited,
+        c.singular_cycles,
+        c.invalid_states,
+        c.missed_states
+    );
+    s
+}
+
+/// `hcc monitor`: reads the controller's telemetry (never writes to it).
+pub fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        bail!("--rate must be positive");
+    }
+    let mut client = connect(&args.target)?;
+    let wait = timeout(&args.target)?;
+    let every = Duration::from_secs_f64(1.0 / args.rate);
+    let clear = !args.json && std::io::stdout().is_terminal();
+    let mut out = std::io::stdout().lock();
+    let mut shown = 0u64;
+    let mut last_seq = None;
+    let mut heard = Instant::now();
+    while args.count.is_none_or(|k| shown < k) {
+        let sample = client.poll_telemetry().copied();
+        match sample.filter(|t| Some(t.header.seq) != last_seq) {
+            Some(t) => {
+                last_seq = Some(t.header.seq);
+                heard = Instant::now();
+                if args.json {
+                    writeln!(out, "{}", sample_json(&t))?;
+                } else {
+                    if clear {
+                        write!(out, "\x1b[2J\x1b[H")?;
+                    }
+                    write!(out, "{}", table(&t))?;
+                }
+                out.flush()?;
+                shown += 1;
+                std::thread::sleep(every);
+            }
+            None if heard.elapsed() > wait => {
+                bail!(
+                    "no telemetry from namespace {:?} within {:.1} s (is hcc-controller running?)",
+                    args.target.namespace,
+                    wait.as_secs_f64()
+                )
+            }
+            None => std::thread::sleep(Duration::from_millis(2)),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,345 @@
+//! Setpoints applied to the running law, allocation-free.
+//!
+//! [`Commander::take`] checks a [`Setpoint`] — first the model-free checks of
+//! [`Setpoint::validate`], then against the law: the level exists, `dim`
+//! equals m_i, every eigenvalue of K ≤ the level's `max_stiffness`, joint goals
+//! inside the URDF limits, position goals inside the level's workspace (the
+//! `[[commanding.level]]` box, by default the ball the chain reaches from its
+//! root) — and, if accepted, starts the level's transition
+//! ([`hcc_control::transition::Transition`]: minimum-jerk equilibrium, slerp
+//! for orientation, convex gains). A transition shorter than the level's
+//! speed limit allows is **stretched** to it: the equilibrium's peak speed
+//! 15/8 · |Δx| / T stays ≤ `max_speed` (|Δx| the Euclidean distance, the
+//! rotation angle for orientation). The answer (accepted, or a rejection
+//! code, with the duration in force) is kept per client for telemetry.
+//!
+//! [`Commander::advance`] moves every transition by one period and hands
+//! x_{i,d}(t), K_i(t), D_i(t) and — with `relative_damping` — ẋ_{i,d}(t) to
+//! the law (`set_goal`, `set_gains`, `set_goal_velocity`). Nothing changes
+//! for a level that never received a setpoint, so a run without setpoints is
+//! bit-identical to one without this module.
+
+use hcc_config::commanding::Commanding;
+use hcc_control::transition::{GoalKind, Target, Transition};
+use hcc_control::{Controller, TaskSpec};
+use hcc_msgs::{
+    MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Rejection, SETPOINT_DAMPING, SETPOINT_GOAL,
+    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer, Telemetry, answer_code,
+};
+use nalgebra::DMatrix;
+
+use crate::cycle::CycleError;
+
+/// Where a level's position goals may lie.
+#[derive(Debug, Clone)]
+enum Workspace {
+    /// Not a position task.
+    None,
+    /// A box (min, max) on the task's coordinates.
+    Box(Box<([f64; MAX_TASK_DIM], [f64; MAX_TASK_DIM])>),
+    /// The ball of `radius` around `center`, on the selected axes.
+    Ball {
+        center: [f64; 3],
+        radius: f64,
+        axes: [usize; 3],
+    },
+}
+
+/// One level's limits and state.
+struct LevelState {
+    transition: Transition,
+    max_stiffness: f64,
+    max_speed: f64,
+    workspace: Workspace,
+    /// Joint indices of a joint task (goal entry a ↔ joint `joints[a]`).
+    joints: Option<Vec<usize>>,
+    /// Whether the law must be updated this cycle (a transition runs or just ended).
+    active: bool,
+    k: DMatrix<f64>,
+    d: DMatrix<f64>,
+}
+
+/// The setpoint side of the controller (see the module docs).
+pub struct Commander {
+    levels: Vec<LevelState>,
+    relative_damping: bool,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    answers: [SetpointAnswer; MAX_SETPOINT_CLIENTS],
+    /// Per answer slot: when the client was last heard (a running count).
+    heard: [u64; MAX_SETPOINT_CLIENTS],
+    count: u64,
+    zeros: [f64; MAX_TASK_DIM],
+}
+
+/// Radius and centre of the ball the chain reaches, for `frame`.
+fn reach(controller: &Controller, frame: hcc_model::FrameId) -> ([f64; 3], f64) {
+    let model = controller.model();
+    let center = model
+        .joints
+        .first()
+        .map(|j| j.placement.translation.vector)
+        .unwrap_or_default();
+    let mut radius: f64 = model
+        .joints
+        .iter()
+        .skip(1)
+        .map(|j| j.placement.translation.vector.norm())
+        .sum();
+    radius += model
+        .joints
+        .iter()
+        .filter(|j| j.kind == hcc_model::JointKind::Prismatic)
+        .map(|j| j.upper.abs().max(j.lower.abs()))
+        .sum::<f64>();
+    if let Some(f) = model.frames.get(frame) {
+        radius += f.placement.translation.vector.norm();
+    }
+    ([center.x, center.y, center.z], radius)
+}
+
+impl Commander {
+    /// Limits from `settings` (one entry per level) for `controller`'s levels.
+    /// Allocates.
+    pub fn new(controller: &Controller, settings: &Commanding) -> Result<Commander, CycleError> {
+        let r = controller.levels();
+        if settings.levels.len() != r {
+            return Err(CycleError::Shape(format!(
+                "commanding has limits for {} levels, the controller {r}",
+                settings.levels.len()
+            )));
+        }
+        let model = controller.model();
+        let lower = model.joints.iter().map(|j| j.lower).collect();
+        let upper = model.joints.iter().map(|j| j.upper).collect();
+        let mut levels = Vec::with_capacity(r);
+        for (i, limits) in settings.levels.iter().enumerate() {
+            let spec = &controller.spec().levels[i];
+            let target = controller
+                .level_target(i)
+                .ok_or_else(|| CycleError::Shape(format!("no level {i}")))?;
+            // A single orientation task moves on SO(3) (slerp); every other
+            // level, stacked ones included, row by row (a pose level's roll,
+            // pitch and yaw rows too: smooth, but not a slerp).
+            let kind = match spec.tasks.as_slice() {
+                [TaskSpec::Orientation { .. }] => GoalKind::RollPitchYaw,
+                _ => GoalKind::Vector,
+            };
+            let transition = Transition::new(kind, target.goal, target.stiffness, target.damping)
+                .map_err(|e| CycleError::Shape(e.to_string()))?;
+            let workspace = match (spec.tasks.as_slice(), &limits.workspace) {
+                ([TaskSpec::Position { .. }], Some((lo, hi))) => {
+                    let mut a = [0.0; MAX_TASK_DIM];
+                    let mut b = [0.0; MAX_TASK_DIM];
+                    a[..lo.len()].copy_from_slice(lo);
+                    b[..hi.len()].copy_from_slice(hi);
+                    Workspace::Box(Box::new((a, b)))
+                }
+                ([TaskSpec::Position { frame, axes }], None) => {
+                    let (center, radius) = reach(controller, *frame);
+                    let mut ax = [3; 3];
+                    ax[..axes.len()].copy_from_slice(axes);
+                    Workspace::Ball {
+                        center,
+                        radius,
+                        axes: ax,
+                    }
+                }
+                // The position rows (the first three) of a pose level.
+                ([TaskSpec::Pose { frame }], None) => {
+                    let (center, radius) = reach(controller, *frame);
+                    Workspace::Ball {
+                        center,
+                        radius,
+                        axes: [0, 1, 2],
+                    }
+                }
+                _ => Workspace::None,
+            };
+            let joints = match spec.tasks.as_slice() {
+                [TaskSpec::Joints { indices }] => Some(indices.clone()),
+                [TaskSpec::Posture] => Some((0..controller.nq()).collect()),
+                _ => None,
+            };
+            let m = controller.task_dim(i);
+            levels.push(LevelState {
+                transition,
+                max_stiffness: limits.max_stiffness,
+                max_speed: limits.max_speed,
+                workspace,
+                joints,
+                active: false,
+                k: DMatrix::zeros(m, m),
+                d: DMatrix::zeros(m, m),
+            });
+        }
+        Ok(Commander {
+            levels,
+            relative_damping: settings.relative_damping,
+            lower,
+            upper,
+            answers: [SetpointAnswer::default(); MAX_SETPOINT_CLIENTS],
+            heard: [0; MAX_SETPOINT_CLIENTS],
+            count: 0,
+            zeros: [0.0; MAX_TASK_DIM],
+        })
+    }
+
+    /// Checks `setpoint`, starts its transition if accepted, and records the
+    /// answer for its client. Returns the answer code. Allocation-free.
+    pub fn take(&mut self, setpoint: &Setpoint) -> u32 {
+        let result = self.check(setpoint);
+        let duration = match result {
+            Ok(()) => self.start(setpoint),
+            Err(_) => 0.0,
+        };
+        let code = answer_code(result);
+        self.record(setpoint, code, duration);
+        code
+    }
+
+    /// The law-side checks (module docs), after the model-free ones.
+    fn check(&self, sp: &Setpoint) -> Result<(), Rejection> {
+        sp.validate()?;
+        let level = self
+            .levels
+            .get(sp.level as usize)
+            .ok_or(Rejection::UnknownLevel)?;
+        let m = level.transition.dim();
+        if sp.dim() != m {
+            return Err(Rejection::DimensionMismatch);
+        }
+        if sp.sets(SETPOINT_STIFFNESS) && !sp.stiffness_within(level.max_stiffness) {
+            return Err(Rejection::StiffnessAboveLimit);
+        }
+        if !sp.sets(SETPOINT_GOAL) {
+            return Ok(());
+        }
+        let goal = sp.goal();
+        if let Some(joints) = &level.joints {
+            for (a, &j) in joints.iter().enumerate() {
+                let (lo, hi) = (self.lower[j], self.upper[j]);
+                // A joint without limits (continuous) has lower ≥ upper in the model.
+                if lo < hi && !(lo..=hi).contains(&goal[a]) {
+                    return Err(Rejection::JointLimit);
+                }
+            }
+        }
+        let inside = match &level.workspace {
+            Workspace::None => true,
+            Workspace::Box(b) => (0..m).all(|a| (b.0[a]..=b.1[a]).contains(&goal[a])),
+            Workspace::Ball {
+                center,
+                radius,
+                axes,
+            } => {
+                let d2: f64 = (0..m)
+                    .map(|a| (goal[a] - center[axes[a].min(2)]).powi(2))
+                    .sum();
+                d2 <= radius * radius
+            }
+        };
+        if inside {
+            Ok(())
+        } else {
+            Err(Rejection::OutsideWorkspace)
+        }
+    }
+
+    /// Starts the accepted setpoint's transition; returns its duration (s),
+    /// stretched to the level's speed limit.
+    fn start(&mut self, sp: &Setpoint) -> f64 {
+        let level = &mut self.levels[sp.level as usize];
+        let m = level.transition.dim();
+        let mut duration = sp.duration_s;
+        if sp.sets(SETPOINT_GOAL) {
+            let distance = level.transition.distance_to(sp.goal());
+            // Peak speed of the quintic profile: 15/8 · distance / T.
+            duration = duration.max(1.875 * distance / level.max_speed);
+        }
+        for a in 0..m {
+            for b in 0..m {
+                // Symmetrised, so the law's exact symmetry check holds.
+                level.k[(a, b)] = 0.5 * (sp.stiffness_at(a, b) + sp.stiffness_at(b, a));
+                level.d[(a, b)] = 0.5 * (sp.damping_at(a, b) + sp.damping_at(b, a));
+            }
+        }
+        let target = Target {
+            goal: sp.sets(SETPOINT_GOAL).then(|| sp.goal()),
+            stiffness: sp.sets(SETPOINT_STIFFNESS).then_some(&level.k),
+            damping: sp.sets(SETPOINT_DAMPING).then_some(&level.d),
+        };
+        level.transition.start(target, duration);
+        if sp.sets(SETPOINT_VELOCITY) {
+            level.transition.set_feed_forward(sp.velocity());
+        }
+        level.active = true;
+        duration
+    }
+
+    /// Keeps the answer in the client's slot (or the least recently heard one).
+    fn record(&mut self, sp: &Setpoint, code: u32, duration_s: f64) {
+        self.count += 1;
+        let slot = self
+            .answers
+            .iter()
+            .position(|a| a.answered > 0 && a.client_id == sp.client_id)
+            .unwrap_or_else(|| {
+                (0..MAX_SETPOINT_CLIENTS)
+                    .min_by_key(|&k| self.heard[k])
+                    .unwrap_or(0)
+            });
+        let answered = if self.answers[slot].client_id == sp.client_id {
+            self.answers[slot].answered + 1
+        } else {
+            1
+        };
+        self.answers[slot] = SetpointAnswer {
+            client_id: sp.client_id,
+            seq: sp.header.seq,
+            answered,
+            code,
+            level: sp.level,
+            duration_s,
+        };
+        self.heard[slot] = self.count;
+    }
+
+    /// Advances every active transition by `dt` s and hands the equilibrium,
+    /// the gains and (with relative damping) the equilibrium's velocity to
+    /// the law. Levels without a setpoint are not touched. Allocation-free.
+    pub fn advance(&mut self, dt: f64, controller: &mut Controller) {
+        for (i, level) in self.levels.iter_mut().enumerate() {
+            if !level.active {
+                continue;
+            }
+            level.transition.advance(dt);
+            let t = &level.transition;
+            // The values come from checked setpoints: these calls cannot fail.
+            let _ = controller.set_goal(i, t.goal());
+            let _ = controller.set_gains(i, Some(t.stiffness()), Some(t.damping()));
+            let velocity = if self.relative_damping {
+                t.goal_velocity()
+            } else {
+                &self.zeros[..t.dim()]
+            };
+            let _ = controller.set_goal_velocity(i, velocity);
+            level.active = t.is_moving() || t.has_feed_forward();
+        }
+    }
+
+    /// Writes the active goals, gain diagonals, progress and answers into `t`.
+    pub fn fill(&self, t: &mut Telemetry) {
+        for (i, level) in self.levels.iter().enumerate().take(MAX_LEVELS) {
+            let tr = &level.transition;
+            let m = tr.dim().min(MAX_TASK_DIM);
+            t.goal[i][..m].copy_from_slice(&tr.goal()[..m]);
+            for a in 0..m {
+                t.stiffness_diag[i][a] = tr.stiffness()[(a, a)];
+                t.damping_diag[i][a] = tr.damping()[(a, a)];
+            }
+            t.transition_progress[i] = tr.progress();
+        }
+        t.setpoint_answers = self.answers;
+    }
+}

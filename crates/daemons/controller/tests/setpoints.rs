@@ -1,0 +1,161 @@
+//! Setpoints through the decision step, without iceoryx2: accepted ones move
+//! the law's equilibrium smoothly to the target (stretched to the level's
+//! speed limit), every bad kind is rejected with its code and changes
+//! nothing, and every setpoint is answered in telemetry.
+
+use std::path::PathBuf;
+
+use hcc_config::Scenario;
+use hcc_control::Controller;
+use hcc_controller::{CycleSettings, Decider};
+use hcc_msgs::{ANSWER_ACCEPTED, JointState, Rejection, Setpoint};
+
+const PERIOD: u64 = 1_000_000;
+
+fn scenario() -> Scenario {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
+    Scenario::load(&path).unwrap()
+}
+
+fn decider(scenario: &Scenario) -> Decider {
+    let settings = CycleSettings::from_scenario(scenario);
+    let c = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    Decider::new(c, &settings).unwrap()
+}
+
+fn state(scenario: &Scenario, seq: u64) -> JointState {
+    let n = scenario.model.nq();
+    let q: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut s = JointState::zeroed();
+    s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+    s.header.seq = seq;
+    s
+}
+
+#[test]
+fn a_goal_moves_the_equilibrium_smoothly_and_is_answered() {
+    let sc = scenario();
+    let mut d = decider(&sc);
+    let mut seq = 1;
+    d.decide(&state(&sc, seq), PERIOD);
+    let start = d.controller().level_target(0).unwrap().goal.to_vec();
+    assert_eq!(start, [0.55, 0.20, 0.30]);
+    // 0.1 m in 0.2 s would peak at 0.94 m/s: stretched to 15/8 · 0.1 / 0.25 = 0.75 s.
+    let sp = Setpoint::for_level(42, 7, 0, 3)
+        .with_goal(&[0.55, 0.30, 0.30])
+        .unwrap()
+        .with_duration(0.2);
+    assert_eq!(d.take_setpoint(&sp), ANSWER_ACCEPTED);
+    let a = *d.telemetry().answer_for(42).expect("answered");
+    assert_eq!((a.seq, a.code, a.level), (7, ANSWER_ACCEPTED, 0));
+    assert!((a.duration_s - 0.75).abs() < 1e-12, "{}", a.duration_s);
+    let mut last = start[1];
+    for k in 0..750 {
+        seq += 1;
+        d.decide(&state(&sc, seq), (k + 2) * PERIOD);
+        let y = d.controller().level_target(0).unwrap().goal[1];
+        assert!(
+            y >= last && y - last < 0.25e-3 + 1e-12,
+            "smooth and within the speed limit"
+        );
+        last = y;
+    }
+    let t = d.telemetry();
+    assert!((t.goal(0)[1] - 0.30).abs() < 1e-12);
+    assert_eq!(t.transition_progress[0], 1.0);
+    assert_eq!(t.stiffness_diag[0][..3], [350.0; 3]);
+    assert_eq!(
+        d.controller().level_target(0).unwrap().goal,
+        [0.55, 0.30, 0.30]
+    );
+    // The other levels were not touched.
+    assert_eq!(
+        d.controller().level_target(2).unwrap().goal,
+        sc.q0.as_slice()
+    );
+}
+
+#[test]
+fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
+    let sc = scenario();
+    let mut d = decider(&sc);
+    d.decide(&state(&sc, 1), PERIOD);
+    let goal = |level: usize, g: &[f64]| {
+        Setpoint::for_level(1, 1, level, g.len())
+            .with_goal(g)
+            .unwrap()
+    };
+    let mut nan = goal(0, &[0.5, 0.1, 0.3]);
+    nan.goal[1] = f64::NAN;
+    let not_spd = Setpoint::for_level(1, 1, 0, 3)
+        .with_stiffness(&[100.0, 0.0, -5.0])
+        .unwrap();
+    let too_stiff = Setpoint::for_level(1, 1, 0, 3)
+        .with_stiffness(&[100.0, 100.0, 4.0 * 350.0 + 1.0])
+        .unwrap();
+    let mut joint = sc.q0.as_slice().to_vec();
+    joint[3] = 1.0; // the Panda's joint 4 is limited to [-3.07, -0.07] rad
+    let cases = [
+        (goal(5, &[0.5, 0.1, 0.3]), Rejection::UnknownLevel),
+        (goal(0, &[0.5, 0.1]), Rejection::DimensionMismatch),
+        (nan, Rejection::NonFinite),
+        (not_spd, Rejection::NotPositiveDefinite),
+        (too_stiff, Rejection::StiffnessAboveLimit),
+        (goal(2, &joint), Rejection::JointLimit),
+        (goal(0, &[3.0, 0.0, 0.3]), Rejection::OutsideWorkspace),
+        (
+            goal(0, &[0.5, 0.1, 0.3]).with_duration(-1.0),
+            Rejection::BadDuration,
+        ),
+    ];
+    for (k, (mut sp, reason)) in cases.into_iter().enumerate() {
+        sp.header.seq = k as u64 + 10;
+        assert_eq!(d.take_setpoint(&sp), reason.code(), "{reason}");
+        let a = *d.telemetry().answer_for(1).unwrap();
+        assert_eq!((a.seq, a.code), (k as u64 + 10, reason.code()));
+        d.decide(&state(&sc, k as u64 + 2), (k as u64 + 2) * PERIOD);
+        let target = d.controller().level_target(0).unwrap();
+        assert_eq!(target.goal, [0.55, 0.20, 0.30], "unchanged after {reason}");
+        assert_eq!(target.stiffness[(2, 2)], 350.0);
+        assert_eq!(d.telemetry().transition_progress[0], 1.0);
+    }
+    assert_eq!(d.telemetry().answer_for(1).unwrap().answered, 8);
+}
+
+#[test]
+fn a_workspace_box_and_the_velocity_feed_forward() {
+    let sc = scenario();
+    let mut settings = CycleSettings::from_scenario(&sc);
+    settings.commanding.levels[0].workspace = Some((vec![0.3, -0.3, 0.2], vec![0.7, 0.3, 0.6]));
+    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let mut d = Decider::new(c, &settings).unwrap();
+    d.decide(&state(&sc, 1), PERIOD);
+    let outside = Setpoint::for_level(3, 1, 0, 3)
+        .with_goal(&[0.55, 0.20, 0.65])
+        .unwrap();
+    assert_eq!(
+        d.take_setpoint(&outside),
+        Rejection::OutsideWorkspace.code()
+    );
+    // Inside the box, with a feed-forward: the law damps ẋ − ẋ_d.
+    let inside = Setpoint::for_level(3, 2, 0, 3)
+        .with_goal(&[0.55, 0.20, 0.30])
+        .unwrap()
+        .with_velocity(&[0.0, 0.05, 0.0])
+        .unwrap();
+    assert_eq!(d.take_setpoint(&inside), ANSWER_ACCEPTED);
+    d.decide(&state(&sc, 2), 2 * PERIOD);
+    let v = d.controller().level_target(0).unwrap().goal_velocity;
+    assert_eq!(v, [0.0, 0.05, 0.0]);
+
+    // With relative damping off, the law keeps D ẋ (ẋ_d = 0).
+    settings.commanding.relative_damping = false;
+    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let mut d = Decider::new(c, &settings).unwrap();
+    d.decide(&state(&sc, 1), PERIOD);
+    assert_eq!(d.take_setpoint(&inside), ANSWER_ACCEPTED);
+    d.decide(&state(&sc, 2), 2 * PERIOD);
+    let v = d.controller().level_target(0).unwrap().goal_velocity;
+    assert_eq!(v, [0.0; 3]);
+}
