@@ -4,18 +4,21 @@ The creator of an iceoryx2 service fixes its capacities and an opener's
 values are minimum requirements, so every peer of one robot opens the
 services with the same settings (mirror of ``hcc_msgs::ipc``):
 
-================  ===============  ==========  ===========================  ======
-service           payload          publishers  subscribers                  buffer
-================  ===============  ==========  ===========================  ======
-joint_state       JointState       1           MAX_STATE_SUBSCRIBERS        128
-torque_command    TorqueCommand    1           MAX_COMMAND_SUBSCRIBERS      128
-telemetry         Telemetry        1           MAX_TELEMETRY_SUBSCRIBERS    128
-state_ready       event            2 notifiers 4 listeners
-command_ready     event            2 notifiers 4 listeners
-================  ===============  ==========  ===========================  ======
+================  ===============  ===========  ===========================  ======
+service           payload          publishers   subscribers                  buffer
+================  ===============  ===========  ===========================  ======
+joint_state       JointState       1            MAX_STATE_SUBSCRIBERS        128
+torque_command    TorqueCommand    1            MAX_COMMAND_SUBSCRIBERS      128
+telemetry         Telemetry        1            MAX_TELEMETRY_SUBSCRIBERS    128
+setpoint          Setpoint         4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
+state_ready       event            2 notifiers  4 listeners
+command_ready     event            2 notifiers  4 listeners
+================  ===============  ===========  ===========================  ======
 
 History 0, safe overflow (the newest sample wins), publishers discard data
-instead of blocking.
+instead of blocking. ``setpoint`` is the one service with several
+publishers: up to :data:`MAX_SETPOINT_PUBLISHERS` clients may command one
+controller at once; the controller reads every queued setpoint each cycle.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from typing import Any
 
 import iceoryx2 as iox2
 
-from .msgs import JointState, Telemetry, TorqueCommand
+from .msgs import JointState, Setpoint, Telemetry, TorqueCommand
 
 #: Prefix of all hcc service names.
 SERVICE_PREFIX: str = "hcc"
@@ -39,6 +42,12 @@ MAX_STATE_SUBSCRIBERS: int = 4
 MAX_COMMAND_SUBSCRIBERS: int = 4
 #: Subscribers of telemetry.
 MAX_TELEMETRY_SUBSCRIBERS: int = 4
+#: Clients that may publish setpoints to one controller at once.
+MAX_SETPOINT_PUBLISHERS: int = 4
+#: Subscribers of setpoint: the controller, a recorder, two spare.
+MAX_SETPOINT_SUBSCRIBERS: int = 4
+#: Queue of the controller's setpoint subscriber.
+SETPOINT_BUFFER: int = 16
 #: Largest subscriber queue a service supports.
 MAX_SUBSCRIBER_BUFFER: int = 128
 #: Queue of a control-loop subscriber (drains every cycle, keeps the newest).
@@ -106,6 +115,11 @@ class ServiceNames:
         return self._name("telemetry")
 
     @property
+    def setpoint(self) -> str:
+        """Publish-subscribe service of Setpoint (clients → controller)."""
+        return self._name("setpoint")
+
+    @property
     def state_ready(self) -> str:
         """Event service the driver notifies with EVENT_STATE_PUBLISHED."""
         return self._name("state_ready")
@@ -141,12 +155,14 @@ def create_node(name: str, file_prefix: str | None = None) -> Any:
         raise IpcError(f"ipc node {name!r}: {e!r}") from e
 
 
-def _pubsub(node: Any, name: str, payload: type, max_subscribers: int) -> Any:
+def _pubsub(
+    node: Any, name: str, payload: type, max_subscribers: int, max_publishers: int = 1
+) -> Any:
     try:
         return (
             node.service_builder(iox2.ServiceName.new(name))
             .publish_subscribe(payload)
-            .max_publishers(1)
+            .max_publishers(max_publishers)
             .max_subscribers(max_subscribers)
             .max_nodes(MAX_NODES)
             .history_size(0)
@@ -175,7 +191,7 @@ def _event(node: Any, name: str) -> Any:
 
 
 class Services:
-    """The five services of one namespace, opened with the contract's settings."""
+    """The six services of one namespace, opened with the contract's settings."""
 
     def __init__(self, node: Any, names: ServiceNames) -> None:
         self.names = names
@@ -184,6 +200,9 @@ class Services:
             node, names.torque_command, TorqueCommand, MAX_COMMAND_SUBSCRIBERS
         )
         self.telemetry = _pubsub(node, names.telemetry, Telemetry, MAX_TELEMETRY_SUBSCRIBERS)
+        self.setpoint = _pubsub(
+            node, names.setpoint, Setpoint, MAX_SETPOINT_SUBSCRIBERS, MAX_SETPOINT_PUBLISHERS
+        )
         self.state_ready = _event(node, names.state_ready)
         self.command_ready = _event(node, names.command_ready)
 
@@ -195,10 +214,16 @@ class Services:
             raise IpcError(f"service {service!r}: cannot create a {what}: {e!r}") from e
 
     def publisher(self, which: str) -> Any:
-        """The single publisher of ``which`` (joint_state, torque_command or telemetry)."""
+        """A publisher of ``which``: the single one of joint_state,
+        torque_command or telemetry, or one of the setpoint clients."""
         factory = getattr(self, which)
+        limit = (
+            f"(setpoint allows {MAX_SETPOINT_PUBLISHERS} clients at once)"
+            if which == "setpoint"
+            else "(is another peer publishing in this namespace?)"
+        )
         return self._port(
-            "publisher (is another peer publishing in this namespace?)",
+            f"publisher {limit}",
             getattr(self.names, which),
             lambda: factory.publisher_builder()
             .max_loaned_samples(MAX_LOANED_SAMPLES)

@@ -16,10 +16,10 @@ from __future__ import annotations
 import ctypes
 import enum
 import math
-from typing import Sequence
+from typing import Any, Sequence
 
 #: Version of the message schema; part of every type name.
-SCHEMA_VERSION: int = 1
+SCHEMA_VERSION: int = 2
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -37,6 +37,8 @@ COMMAND_FLAG_GRAVITY_INCLUDED: int = 1 << 0
 COMMAND_FLAGS_KNOWN: int = COMMAND_FLAG_GRAVITY_INCLUDED
 #: :attr:`Telemetry.flags` bit: the controller lost the driver (no state within its timeout).
 TELEMETRY_FLAG_PEER_LOST: int = 1 << 16
+#: Clients whose last answer :class:`Telemetry` carries (the most recent ones).
+MAX_SETPOINT_CLIENTS: int = 8
 
 _Joints = ctypes.c_double * MAX_JOINTS
 
@@ -276,7 +278,22 @@ class TelemetryCounters(ctypes.Structure):
         ("missed_states", ctypes.c_uint64),
         ("sequence_errors", ctypes.c_uint64),
         ("send_failures", ctypes.c_uint64),
+        ("rate_limited", ctypes.c_uint64),
+        ("low_passed", ctypes.c_uint64),
     ]
+    cycles: int
+    invalid_states: int
+    saturations: int
+    singular_cycles: int
+    stale_events: int
+    peer_lost_events: int
+    missed_states: int
+    sequence_errors: int
+    send_failures: int
+    #: Cycles whose torque change was limited by the torque-rate limit.
+    rate_limited: int
+    #: Cycles whose torque went through the output low-pass filter.
+    low_passed: int
 
     @staticmethod
     def type_name() -> str:
@@ -300,12 +317,61 @@ class TelemetryTimings(ctypes.Structure):
         return _type_name("TelemetryTimings")
 
 
+class SetpointAnswer(ctypes.Structure):
+    """The controller's answer to the last setpoint of one client (in :class:`Telemetry`)."""
+
+    _fields_ = [
+        ("client_id", ctypes.c_uint64),
+        ("seq", ctypes.c_uint64),
+        ("answered", ctypes.c_uint64),
+        ("code", ctypes.c_uint32),
+        ("level", ctypes.c_uint32),
+        ("duration_s", ctypes.c_double),
+    ]
+    #: The client's :attr:`Setpoint.client_id`.
+    client_id: int
+    #: ``header.seq`` of the client's last setpoint.
+    seq: int
+    #: Setpoints answered for this client so far (0: an empty slot).
+    answered: int
+    #: :data:`ANSWER_ACCEPTED` or a :class:`Rejection` code.
+    code: int
+    #: The level it addressed (0-based, as sent).
+    level: int
+    #: The transition duration in force, s (stretched to the level's speed
+    #: limit if needed; 0 when rejected).
+    duration_s: float
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name of the Rust type."""
+        return _type_name("SetpointAnswer")
+
+    def accepted(self) -> bool:
+        """Whether the setpoint was accepted."""
+        return self.code == ANSWER_ACCEPTED
+
+    def rejection(self) -> "Rejection | None":
+        """The rejection, None when accepted or for an unknown code."""
+        return Rejection.from_code(self.code)
+
+    def __repr__(self) -> str:
+        return (
+            f"SetpointAnswer(client_id={self.client_id:#x}, seq={self.seq}, "
+            f"answered={self.answered}, code={self.code}, level={self.level}, "
+            f"duration_s={self.duration_s})"
+        )
+
+
 class Telemetry(ctypes.Structure):
     """Per-cycle diagnostics of the controller.
 
     Paper quantities: τ_i per level (Eqs. (20), (21)), τ_μ (Eq. (22)), g and
     the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs.
-    (26), (28)), P_μ = τ_μᵀ q̇.
+    (26), (28)), P_μ = τ_μᵀ q̇. Since schema 2 also the active goal
+    x_{i,d}(t) and the diagonals of K_i(t) and D_i(t) of every level
+    (Eqs. (20), (21)), each level's transition progress, and the answer to
+    the last setpoint of each recent client.
     """
 
     _fields_ = [
@@ -327,6 +393,11 @@ class Telemetry(ctypes.Structure):
         ("p_mu", ctypes.c_double),
         ("counters", TelemetryCounters),
         ("timings", TelemetryTimings),
+        ("goal", (ctypes.c_double * MAX_TASK_DIM) * MAX_LEVELS),
+        ("stiffness_diag", (ctypes.c_double * MAX_TASK_DIM) * MAX_LEVELS),
+        ("damping_diag", (ctypes.c_double * MAX_TASK_DIM) * MAX_LEVELS),
+        ("transition_progress", ctypes.c_double * MAX_LEVELS),
+        ("setpoint_answers", SetpointAnswer * MAX_SETPOINT_CLIENTS),
     ]
     header: Header
     state_seq: int
@@ -363,6 +434,38 @@ class Telemetry(ctypes.Structure):
         """Euclidean norm of the task error of ``level`` (0-based)."""
         return math.sqrt(sum(e * e for e in self.task_error_list(level)))
 
+    def _per_level(self, rows: ctypes.Array, level: int) -> list[float]:
+        if not 0 <= level < self.levels():
+            return []
+        return list(rows[level][: min(self.task_dims[level], MAX_TASK_DIM)])
+
+    def goal_list(self, level: int) -> list[float]:
+        """Active goal x_{i,d}(t) of ``level`` (0-based), length m_i (roll,
+        pitch, yaw for orientation); moves during a transition. Empty if out
+        of range."""
+        return self._per_level(self.goal, level)
+
+    def stiffness_diag_list(self, level: int) -> list[float]:
+        """Diagonal of the active stiffness K_i(t) of ``level``, length m_i."""
+        return self._per_level(self.stiffness_diag, level)
+
+    def damping_diag_list(self, level: int) -> list[float]:
+        """Diagonal of the active damping D_i(t) of ``level``, length m_i."""
+        return self._per_level(self.damping_diag, level)
+
+    def progress(self, level: int) -> float:
+        """Progress t/T of ``level``'s transition in [0, 1] (1: at rest); NaN if out of range."""
+        if not 0 <= level < self.levels():
+            return math.nan
+        return self.transition_progress[level]
+
+    def answer_for(self, client_id: int) -> SetpointAnswer | None:
+        """The answer to the last setpoint of ``client_id``, if this sample has one."""
+        for a in self.setpoint_answers:
+            if a.answered > 0 and a.client_id == client_id:
+                return a
+        return None
+
     def tau_list(self) -> list[float]:
         """Total commanded τ (Eq. (19)), length n."""
         return list(self.tau[: self.n()])
@@ -376,6 +479,393 @@ class Telemetry(ctypes.Structure):
         return 0 <= level < 32 and bool(self.singular_levels & (1 << level))
 
 
+# --- Setpoints (mirror of hcc_msgs::Setpoint, Rejection and their constants) ---
+
+#: :attr:`Setpoint.fields` bit: set the goal x_{i,d} (``goal``).
+SETPOINT_GOAL: int = 1 << 0
+#: :attr:`Setpoint.fields` bit: set the goal's velocity feed-forward ẋ_{i,d}
+#: (``velocity``); only together with :data:`SETPOINT_GOAL`.
+SETPOINT_VELOCITY: int = 1 << 1
+#: :attr:`Setpoint.fields` bit: set the stiffness K_i (``stiffness``).
+SETPOINT_STIFFNESS: int = 1 << 2
+#: :attr:`Setpoint.fields` bit: set the damping D_i (``damping``).
+SETPOINT_DAMPING: int = 1 << 3
+#: All :attr:`Setpoint.fields` bits of this schema.
+SETPOINT_FIELDS_KNOWN: int = (
+    SETPOINT_GOAL | SETPOINT_VELOCITY | SETPOINT_STIFFNESS | SETPOINT_DAMPING
+)
+#: :attr:`Setpoint.gain_layout` bit: ``stiffness`` holds the full m×m matrix
+#: row-major (m² values); otherwise its diagonal (m values).
+GAIN_STIFFNESS_FULL: int = 1 << 0
+#: :attr:`Setpoint.gain_layout` bit: ``damping`` holds the full m×m matrix row-major.
+GAIN_DAMPING_FULL: int = 1 << 1
+#: All :attr:`Setpoint.gain_layout` bits of this schema.
+GAIN_LAYOUT_KNOWN: int = GAIN_STIFFNESS_FULL | GAIN_DAMPING_FULL
+#: Capacity of one full gain matrix (m×m with m ≤ :data:`MAX_TASK_DIM`).
+MAX_GAIN_ENTRIES: int = MAX_TASK_DIM * MAX_TASK_DIM
+#: Longest transition a setpoint may ask for, s (one hour).
+MAX_TRANSITION_S: float = 3600.0
+#: Relative tolerance of the symmetry check of a full K or D:
+#: |A_jk − A_kj| ≤ tolerance · max |A_jk|.
+SYMMETRY_TOLERANCE: float = 1e-9
+#: The answer code of an accepted setpoint; every other code is a :class:`Rejection`.
+ANSWER_ACCEPTED: int = 0
+
+_REJECTION_TEXT: dict[int, str] = {}
+
+
+class Rejection(enum.IntEnum):
+    """Why a setpoint was rejected (a rejected setpoint changes nothing).
+
+    The codes are stable (they travel in telemetry). :meth:`Setpoint.validate`
+    checks codes 1-11 (no model needed); the controller checks 12-16 against
+    its law and model. :attr:`label` is the Rust ``Rejection::name()``
+    (snake_case, as in ``hcc goal`` and ``hcc monitor --json``), :attr:`reason`
+    the text for a person.
+    """
+
+    #: ``header.schema_version`` differs from :data:`SCHEMA_VERSION`.
+    SCHEMA_MISMATCH = 1
+    #: ``fields`` has bits this schema does not define.
+    UNKNOWN_FIELDS = 2
+    #: ``fields`` is zero: the setpoint sets nothing.
+    NOTHING_SET = 3
+    #: :data:`SETPOINT_VELOCITY` without :data:`SETPOINT_GOAL`.
+    VELOCITY_WITHOUT_GOAL = 4
+    #: ``gain_layout`` has bits this schema does not define.
+    UNKNOWN_LAYOUT = 5
+    #: ``level`` ≥ :data:`MAX_LEVELS`.
+    LEVEL_CAPACITY = 6
+    #: ``dim`` is 0 or above :data:`MAX_TASK_DIM`.
+    DIMENSION_CAPACITY = 7
+    #: A value that is used is NaN or infinite.
+    NON_FINITE = 8
+    #: ``duration_s`` is negative or above :data:`MAX_TRANSITION_S`.
+    BAD_DURATION = 9
+    #: A full K or D is not symmetric (beyond :data:`SYMMETRY_TOLERANCE`).
+    NOT_SYMMETRIC = 10
+    #: K or D is not positive definite.
+    NOT_POSITIVE_DEFINITE = 11
+    #: The controller has no level ``level``.
+    UNKNOWN_LEVEL = 12
+    #: ``dim`` differs from the level's task dimension m_i.
+    DIMENSION_MISMATCH = 13
+    #: K exceeds the level's ``max_stiffness`` (an eigenvalue above it).
+    STIFFNESS_ABOVE_LIMIT = 14
+    #: A joint goal lies outside the joint's URDF limits.
+    JOINT_LIMIT = 15
+    #: A position goal lies outside the level's workspace.
+    OUTSIDE_WORKSPACE = 16
+
+    @property
+    def label(self) -> str:
+        """The short machine-friendly name (``outside_workspace``), as in Rust."""
+        return self.name.lower()
+
+    @property
+    def reason(self) -> str:
+        """The reason in plain words."""
+        return _REJECTION_TEXT[self.value]
+
+    @classmethod
+    def from_code(cls, code: int) -> "Rejection | None":
+        """Decodes a code; None for :data:`ANSWER_ACCEPTED` and unknown codes."""
+        try:
+            return cls(code)
+        except ValueError:
+            return None
+
+    def __str__(self) -> str:
+        return f"{self.label} (code {self.value}): {self.reason}"
+
+
+_REJECTION_TEXT.update({
+    1: "the client speaks another hcc-msgs schema version",
+    2: "the setpoint sets fields this schema does not define",
+    3: "the setpoint sets nothing (no goal, velocity, stiffness or damping)",
+    4: "a velocity feed-forward needs a goal in the same setpoint",
+    5: "the gain layout has bits this schema does not define",
+    6: "the level index exceeds the message capacity",
+    7: "the dimension is 0 or exceeds the message capacity",
+    8: "a value is NaN or infinite",
+    9: "the transition duration is negative or longer than one hour",
+    10: "a stiffness or damping matrix is not symmetric",
+    11: "a stiffness or damping matrix is not positive definite",
+    12: "the controller has no such level",
+    13: "the dimension differs from the level's task dimension",
+    14: "the stiffness exceeds the level's max_stiffness",
+    15: "a joint goal lies outside the joint's limits",
+    16: "a position goal lies outside the level's workspace",
+})
+
+
+class SetpointError(MsgError):
+    """A setpoint that fails a check; :attr:`rejection` names the reason.
+
+    Raised before sending by :meth:`Setpoint.validate` and the ``with_*``
+    builders (the controller's codes for the same faults).
+    """
+
+    def __init__(self, rejection: Rejection, message: str | None = None) -> None:
+        super().__init__(message or f"setpoint not sent: {rejection}")
+        #: The rejection.
+        self.rejection = rejection
+
+
+_U32_MAX = 0xFFFF_FFFF
+_Task = ctypes.c_double * MAX_TASK_DIM
+_Gains = ctypes.c_double * MAX_GAIN_ENTRIES
+
+
+def _floats(values: Any) -> list[float]:
+    """A flat list of floats from a sequence, a nested m×m sequence or an array."""
+    out: list[float] = []
+    for v in values:
+        if isinstance(v, (int, float)) or not hasattr(v, "__iter__"):
+            out.append(float(v))
+        else:
+            out.extend(float(x) for x in v)
+    return out
+
+
+def _copy_values(dst: ctypes.Array, values: Sequence[float], dim: int) -> None:
+    if dim == 0 or dim > MAX_TASK_DIM:
+        raise SetpointError(Rejection.DIMENSION_CAPACITY)
+    if len(values) != dim:
+        raise SetpointError(
+            Rejection.DIMENSION_MISMATCH,
+            f"setpoint not sent: {len(values)} values for dimension {dim}",
+        )
+    ctypes.memset(dst, 0, ctypes.sizeof(dst))
+    for k, v in enumerate(values):
+        dst[k] = v
+
+
+def _copy_gain(dst: ctypes.Array, values: Sequence[float], dim: int) -> bool:
+    if dim == 0 or dim > MAX_TASK_DIM:
+        raise SetpointError(Rejection.DIMENSION_CAPACITY)
+    full = len(values) == dim * dim and dim > 1
+    if not full and len(values) != dim:
+        raise SetpointError(
+            Rejection.DIMENSION_MISMATCH,
+            f"setpoint not sent: {len(values)} gain values for dimension {dim} "
+            f"(give {dim} diagonal values or {dim * dim} row-major)",
+        )
+    ctypes.memset(dst, 0, ctypes.sizeof(dst))
+    for k, v in enumerate(values):
+        dst[k] = v
+    return full
+
+
+def _cholesky_ok(a: Sequence[float], m: int) -> bool:
+    """Whether the symmetric m×m matrix (row-major, lower triangle used) is
+    positive definite: A = L Lᵀ finds every pivot > 0."""
+    low = [0.0] * (m * m)
+    for j in range(m):
+        for k in range(j + 1):
+            s = a[j * m + k]
+            for p in range(k):
+                s -= low[j * m + p] * low[k * m + p]
+            if j == k:
+                if math.isnan(s) or s <= 0.0:
+                    return False
+                low[j * m + j] = math.sqrt(s)
+            else:
+                low[j * m + k] = s / low[k * m + k]
+    return True
+
+
+def _check_spd(values: Sequence[float], full: bool, m: int) -> Rejection | None:
+    if not full:
+        return None if all(v > 0.0 for v in values) else Rejection.NOT_POSITIVE_DEFINITE
+    scale = max((abs(v) for v in values), default=0.0)
+    for j in range(m):
+        for k in range(j):
+            if abs(values[j * m + k] - values[k * m + j]) > SYMMETRY_TOLERANCE * scale:
+                return Rejection.NOT_SYMMETRIC
+    return None if _cholesky_ok(values, m) else Rejection.NOT_POSITIVE_DEFINITE
+
+
+class Setpoint(ctypes.Structure):
+    """A setpoint for one hierarchy level (mirror of ``hcc_msgs::Setpoint``).
+
+    Changes the level's goal x_{i,d} (with an optional velocity feed-forward
+    ẋ_{i,d}), its stiffness K_i and/or its damping D_i (paper Eqs. (20),
+    (21)) over a transition of ``duration_s`` seconds. Values are in the
+    task's own coordinates, as in the scenario TOML: metres on a position
+    task's axes, roll/pitch/yaw in rad for orientation, rad (m) per joint for
+    a posture. K and D are m×m: diagonal (m values) or full (m² row-major).
+
+    ``header.seq`` is the client's sequence number (echoed in the answer),
+    ``header.stamp_ns`` the send time, ``header.n_joints`` unused (0).
+    Build one with :meth:`for_level` and the chainable ``with_*`` methods.
+    """
+
+    _fields_ = [
+        ("header", Header),
+        ("client_id", ctypes.c_uint64),
+        ("level", ctypes.c_uint32),
+        ("fields", ctypes.c_uint32),
+        ("dim", ctypes.c_uint32),
+        ("gain_layout", ctypes.c_uint32),
+        ("duration_s", ctypes.c_double),
+        ("goal", _Task),
+        ("velocity", _Task),
+        ("stiffness", _Gains),
+        ("damping", _Gains),
+    ]
+    header: Header
+    #: The client's identity (answers are kept per client id).
+    client_id: int
+    #: Target level, 0-based in the order of the scenario's levels.
+    level: int
+    #: ``SETPOINT_*`` bits: what this setpoint sets.
+    fields: int
+    #: Task dimension m of the values (must equal the level's m_i).
+    dim: int
+    #: ``GAIN_*_FULL`` bits: full or diagonal K and D.
+    gain_layout: int
+    #: Transition duration, s (0: as fast as the level's speed limit allows).
+    duration_s: float
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name of the Rust type."""
+        return _type_name("Setpoint")
+
+    @classmethod
+    def zeroed(cls) -> "Setpoint":
+        """An all-zero setpoint with the current schema (sets nothing)."""
+        return cls(header=_new_header())
+
+    @classmethod
+    def for_level(cls, client_id: int, seq: int, level: int, dim: int) -> "Setpoint":
+        """A setpoint of ``level`` (0-based) and dimension ``dim`` that sets nothing yet.
+
+        Sizes beyond the capacities are kept (clamped to 32 bits) so that
+        :meth:`validate` names them; negative ones raise ValueError.
+        """
+        if level < 0 or dim < 0:
+            raise ValueError(f"level ({level}) and dimension ({dim}) must not be negative")
+        s = cls.zeroed()
+        s.client_id = client_id
+        s.header.seq = seq
+        s.level = min(level, _U32_MAX)
+        s.dim = min(dim, _U32_MAX)
+        return s
+
+    def n_dim(self) -> int:
+        """``dim`` clamped to the capacity."""
+        return min(self.dim, MAX_TASK_DIM)
+
+    def sets(self, field: int) -> bool:
+        """Whether every bit of ``field`` (``SETPOINT_*``) is set."""
+        return self.fields & field == field
+
+    def stiffness_full(self) -> bool:
+        """Whether K is sent as a full matrix."""
+        return bool(self.gain_layout & GAIN_STIFFNESS_FULL)
+
+    def damping_full(self) -> bool:
+        """Whether D is sent as a full matrix."""
+        return bool(self.gain_layout & GAIN_DAMPING_FULL)
+
+    def goal_list(self) -> list[float]:
+        """The goal, length ``dim``."""
+        return list(self.goal[: self.n_dim()])
+
+    def velocity_list(self) -> list[float]:
+        """The velocity feed-forward, length ``dim``."""
+        return list(self.velocity[: self.n_dim()])
+
+    def stiffness_list(self) -> list[float]:
+        """The K values sent: ``dim`` (diagonal) or ``dim²`` (full, row-major)."""
+        m = self.n_dim()
+        return list(self.stiffness[: m * m if self.stiffness_full() else m])
+
+    def damping_list(self) -> list[float]:
+        """The D values sent: ``dim`` (diagonal) or ``dim²`` (full, row-major)."""
+        m = self.n_dim()
+        return list(self.damping[: m * m if self.damping_full() else m])
+
+    def with_goal(self, goal: Sequence[float]) -> "Setpoint":
+        """Sets the goal (``dim`` values) and :data:`SETPOINT_GOAL`; returns self."""
+        _copy_values(self.goal, _floats(goal), self.dim)
+        self.fields |= SETPOINT_GOAL
+        return self
+
+    def with_velocity(self, velocity: Sequence[float]) -> "Setpoint":
+        """Sets the velocity feed-forward (``dim`` values, goal units per s)."""
+        _copy_values(self.velocity, _floats(velocity), self.dim)
+        self.fields |= SETPOINT_VELOCITY
+        return self
+
+    def _with_gain(self, which: str, values: Any, bit: int, layout: int) -> "Setpoint":
+        full = _copy_gain(getattr(self, which), _floats(values), self.dim)
+        self.gain_layout = self.gain_layout | layout if full else self.gain_layout & ~layout
+        self.fields |= bit
+        return self
+
+    def with_stiffness(self, values: Any) -> "Setpoint":
+        """Sets K: ``dim`` diagonal values, or the full m×m matrix (nested or
+        ``dim²`` row-major; the layout follows the length)."""
+        return self._with_gain("stiffness", values, SETPOINT_STIFFNESS, GAIN_STIFFNESS_FULL)
+
+    def with_damping(self, values: Any) -> "Setpoint":
+        """Sets D like :meth:`with_stiffness`."""
+        return self._with_gain("damping", values, SETPOINT_DAMPING, GAIN_DAMPING_FULL)
+
+    def with_duration(self, duration_s: float) -> "Setpoint":
+        """Sets the transition duration in s."""
+        self.duration_s = float(duration_s)
+        return self
+
+    def check(self) -> Rejection | None:
+        """The model-free checks of ``Setpoint::validate``, in its order; the
+        first failure or None."""
+        if self.header.schema_version != SCHEMA_VERSION:
+            return Rejection.SCHEMA_MISMATCH
+        if self.fields & ~SETPOINT_FIELDS_KNOWN:
+            return Rejection.UNKNOWN_FIELDS
+        if self.fields == 0:
+            return Rejection.NOTHING_SET
+        if self.sets(SETPOINT_VELOCITY) and not self.sets(SETPOINT_GOAL):
+            return Rejection.VELOCITY_WITHOUT_GOAL
+        if self.gain_layout & ~GAIN_LAYOUT_KNOWN:
+            return Rejection.UNKNOWN_LAYOUT
+        if self.level >= MAX_LEVELS:
+            return Rejection.LEVEL_CAPACITY
+        if self.dim == 0 or self.dim > MAX_TASK_DIM:
+            return Rejection.DIMENSION_CAPACITY
+        used = (
+            (SETPOINT_GOAL, self.goal_list),
+            (SETPOINT_VELOCITY, self.velocity_list),
+            (SETPOINT_STIFFNESS, self.stiffness_list),
+            (SETPOINT_DAMPING, self.damping_list),
+        )
+        for bit, values in used:
+            if self.sets(bit) and not all(math.isfinite(v) for v in values()):
+                return Rejection.NON_FINITE
+        if not math.isfinite(self.duration_s):
+            return Rejection.NON_FINITE
+        if not 0.0 <= self.duration_s <= MAX_TRANSITION_S:
+            return Rejection.BAD_DURATION
+        m = self.n_dim()
+        if self.sets(SETPOINT_STIFFNESS):
+            found = _check_spd(self.stiffness_list(), self.stiffness_full(), m)
+            if found is not None:
+                return found
+        if self.sets(SETPOINT_DAMPING):
+            return _check_spd(self.damping_list(), self.damping_full(), m)
+        return None
+
+    def validate(self) -> None:
+        """Raises :class:`SetpointError` if :meth:`check` finds a fault."""
+        found = self.check()
+        if found is not None:
+            raise SetpointError(found)
+
+
 #: Every wire type by its Rust name.
 WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "Header": Header,
@@ -383,5 +873,7 @@ WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "TorqueCommand": TorqueCommand,
     "TelemetryCounters": TelemetryCounters,
     "TelemetryTimings": TelemetryTimings,
+    "SetpointAnswer": SetpointAnswer,
     "Telemetry": Telemetry,
+    "Setpoint": Setpoint,
 }

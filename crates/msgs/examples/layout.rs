@@ -1,17 +1,23 @@
 //! Prints the memory layout of every contract type as JSON: size, alignment
 //! and the offset of each field, plus the schema version, the iceoryx2 type
-//! names, the service names and settings, and the flag bits. Bindings in other languages compare their
-//! mirrors of the types with this output so that the two never drift apart.
+//! names, the service names and settings, the flag bits, the setpoint
+//! constants and the rejection codes with their names and reasons. Bindings
+//! in other languages compare their mirrors of the types with this output so
+//! that the two never drift apart.
 //!
 //! Run with `cargo run -q -p hcc-msgs --example layout`.
 
 use std::mem::{align_of, offset_of, size_of};
 
 use hcc_msgs::{
-    COMMAND_FLAG_GRAVITY_INCLUDED, EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, Header,
-    JointState, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_TASK_DIM, SCHEMA_VERSION,
-    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, ServiceNames, TELEMETRY_FLAG_PEER_LOST, Telemetry,
-    TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+    ANSWER_ACCEPTED, COMMAND_FLAG_GRAVITY_INCLUDED, EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED,
+    GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, Header, JointState,
+    MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_SETPOINT_CLIENTS,
+    MAX_TASK_DIM, MAX_TRANSITION_S, Rejection, SCHEMA_VERSION, SETPOINT_DAMPING,
+    SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, SYMMETRY_TOLERANCE, ServiceNames, Setpoint,
+    SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings,
+    TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -37,6 +43,15 @@ macro_rules! fields {
     };
 }
 
+/// `"key": value` pairs joined into the body of a JSON object.
+fn object<V: std::fmt::Display>(entries: &[(&str, V)]) -> String {
+    let entries: Vec<String> = entries
+        .iter()
+        .map(|(k, v)| format!("\"{k}\": {v}"))
+        .collect();
+    entries.join(", ")
+}
+
 fn main() {
     let structs = [
         (
@@ -54,17 +69,28 @@ fn main() {
         (
             "TelemetryCounters",
             fields!(TelemetryCounters: cycles, invalid_states, saturations, singular_cycles,
-                stale_events, peer_lost_events, missed_states, sequence_errors, send_failures),
+                stale_events, peer_lost_events, missed_states, sequence_errors, send_failures,
+                rate_limited, low_passed),
         ),
         (
             "TelemetryTimings",
             fields!(TelemetryTimings: wakeup_latency_ns, compute_ns, period_ns, max_compute_ns),
         ),
         (
+            "SetpointAnswer",
+            fields!(SetpointAnswer: client_id, seq, answered, code, level, duration_s),
+        ),
+        (
             "Telemetry",
             fields!(Telemetry: header, state_seq, command_seq, mode, n_levels, task_dims,
                 singular_levels, flags, tau, tau_level, tau_mu, tau_gravity, task_error,
-                storage, min_singular_value, p_mu, counters, timings),
+                storage, min_singular_value, p_mu, counters, timings, goal, stiffness_diag,
+                damping_diag, transition_progress, setpoint_answers),
+        ),
+        (
+            "Setpoint",
+            fields!(Setpoint: header, client_id, level, fields, dim, gain_layout, duration_s,
+                goal, velocity, stiffness, damping),
         ),
     ];
     let body: Vec<String> = structs
@@ -72,20 +98,24 @@ fn main() {
         .map(|(name, json)| format!("    \"{name}\": {json}"))
         .collect();
     let names = ServiceNames::new("NS").expect("a valid namespace");
-    let services: Vec<String> = [
+    let services: Vec<(&str, String)> = [
         ("joint_state", names.joint_state()),
         ("torque_command", names.torque_command()),
         ("telemetry", names.telemetry()),
+        ("setpoint", names.setpoint()),
         ("state_ready", names.state_ready()),
         ("command_ready", names.command_ready()),
     ]
     .iter()
-    .map(|(k, v)| format!("\"{k}\": \"{v}\""))
+    .map(|(k, v)| (*k, format!("\"{v}\"")))
     .collect();
-    let settings: Vec<String> = [
+    let settings = object(&[
         ("max_state_subscribers", ipc::MAX_STATE_SUBSCRIBERS),
         ("max_command_subscribers", ipc::MAX_COMMAND_SUBSCRIBERS),
         ("max_telemetry_subscribers", ipc::MAX_TELEMETRY_SUBSCRIBERS),
+        ("max_setpoint_publishers", ipc::MAX_SETPOINT_PUBLISHERS),
+        ("max_setpoint_subscribers", ipc::MAX_SETPOINT_SUBSCRIBERS),
+        ("setpoint_buffer", ipc::SETPOINT_BUFFER),
         ("max_subscriber_buffer", ipc::MAX_SUBSCRIBER_BUFFER),
         ("latest_buffer", ipc::LATEST_BUFFER),
         ("max_borrowed_samples", ipc::MAX_BORROWED_SAMPLES),
@@ -97,27 +127,47 @@ fn main() {
         ("event_state_published", EVENT_STATE_PUBLISHED),
         ("event_command_published", EVENT_COMMAND_PUBLISHED),
         ("max_namespace_len", MAX_NAMESPACE_LEN),
-    ]
-    .iter()
-    .map(|(k, v)| format!("\"{k}\": {v}"))
-    .collect();
-    let flags: Vec<String> = [
+    ]);
+    let flags = object(&[
         (
             "state_driver_gravity_compensation",
             STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
         ),
         ("command_gravity_included", COMMAND_FLAG_GRAVITY_INCLUDED),
         ("telemetry_peer_lost", TELEMETRY_FLAG_PEER_LOST),
-    ]
-    .iter()
-    .map(|(k, v)| format!("\"{k}\": {v}"))
-    .collect();
+        ("setpoint_goal", SETPOINT_GOAL),
+        ("setpoint_velocity", SETPOINT_VELOCITY),
+        ("setpoint_stiffness", SETPOINT_STIFFNESS),
+        ("setpoint_damping", SETPOINT_DAMPING),
+        ("setpoint_fields_known", SETPOINT_FIELDS_KNOWN),
+        ("gain_stiffness_full", GAIN_STIFFNESS_FULL),
+        ("gain_damping_full", GAIN_DAMPING_FULL),
+        ("gain_layout_known", GAIN_LAYOUT_KNOWN),
+    ]);
+    let setpoint = object(&[
+        ("max_setpoint_clients", MAX_SETPOINT_CLIENTS.to_string()),
+        ("max_gain_entries", MAX_GAIN_ENTRIES.to_string()),
+        ("max_transition_s", format!("{MAX_TRANSITION_S:?}")),
+        ("symmetry_tolerance", format!("{SYMMETRY_TOLERANCE:?}")),
+        ("answer_accepted", ANSWER_ACCEPTED.to_string()),
+    ]);
+    // Names and reasons are plain ASCII without quotes or backslashes.
+    let rejections: Vec<String> = Rejection::ALL
+        .iter()
+        .map(|r| {
+            format!(
+                "{{\"code\": {}, \"name\": \"{}\", \"reason\": \"{}\"}}",
+                r.code(),
+                r.name(),
+                r.reason()
+            )
+        })
+        .collect();
     println!(
-        "{{\n  \"schema_version\": {SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{}}},\n  \"flags\": {{{}}},\n  \"structs\": {{\n{}\n  }}\n}}",
+        "{{\n  \"schema_version\": {SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
         ipc::FILE_PREFIX_ENV,
-        services.join(", "),
-        settings.join(", "),
-        flags.join(", "),
+        object(&services),
+        rejections.join(", "),
         body.join(",\n")
     );
 }
