@@ -5,12 +5,13 @@
 * :mod:`hcc.ipc`: the services and their settings.
 * :class:`hcc.Driver`: the driver side of the contract (which command may be
   applied; hold, fallback, stop) for drivers written in Python.
-* :class:`hcc.Client`: reads the controller's telemetry and the joint states.
+* :class:`hcc.Client`: reads the controller's telemetry and the joint states,
+  sets goals and gains at run time (setpoints) and waits for their answers.
 * :mod:`hcc.mujoco`: a plant driver on the MuJoCo physics engine
   (``python -m hcc.mujoco``).
 """
 
-from .client import Client
+from .client import Client, SetpointRejected, new_client_id
 from .driver import Action, Driver, DriverSettings, Offer, Rejection, StopReason
 from .msgs import (
     ANSWER_ACCEPTED,
@@ -67,6 +68,7 @@ __all__ = [
     "Setpoint",
     "SetpointAnswer",
     "SetpointError",
+    "SetpointRejected",
     "SetpointRejection",
     "STATE_FLAG_DRIVER_GRAVITY_COMPENSATION",
     "StopReason",
@@ -75,4 +77,5 @@ __all__ = [
     "TelemetryCounters",
     "TelemetryTimings",
     "TorqueCommand",
+    "new_client_id",
 ]

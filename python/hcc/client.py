@@ -1,35 +1,88 @@
-"""Reading a running controller from Python: telemetry and joint states.
+"""Commanding and reading a running controller from Python.
 
 :class:`Client` opens the services of one namespace with the contract's
-settings and subscribes to the controller's :class:`~hcc.msgs.Telemetry`
-and the driver's :class:`~hcc.msgs.JointState`.
+settings, reads the controller's :class:`~hcc.msgs.Telemetry` and the
+driver's :class:`~hcc.msgs.JointState`, and commands the controller with
+:class:`~hcc.msgs.Setpoint`\ s on ``hcc/<ns>/setpoint`` (the semantics of
+the Rust ``hcc-client``): :meth:`Client.set_goal`, :meth:`Client.set_gains`
+and :meth:`Client.send` return the setpoint's sequence number, and
+:meth:`Client.wait_until_accepted` waits for the controller's answer in its
+telemetry (accepted, or the controller's :class:`~hcc.msgs.Rejection`).
+Levels are 0-based, in the order of the scenario's ``[[level]]``\ s.
 
-Not here yet: setting goals and gains, streaming setpoints and waiting until
-a new goal is accepted. Those need a run-time setpoint service in the
-contract, which does not exist yet; the client does not imitate it. Until
-then, goals and gains come from the scenario file the controller was
-started with.
+Example::
+
+    with hcc.Client("panda") as client:
+        seq = client.set_goal(0, [0.5, 0.1, 0.4], duration=2.0)
+        answer = client.wait_until_accepted(seq, timeout=1.0)
+        print(f"moving over {answer.duration_s:.2f} s")
+        client.wait_until_converged(0, tolerance=1e-3, timeout=5.0)
 """
 
 from __future__ import annotations
 
+import os
 import time
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 from . import ipc
-from .msgs import JointState, Telemetry
+from .msgs import (
+    ANSWER_ACCEPTED,
+    JointState,
+    Rejection,
+    Setpoint,
+    SetpointAnswer,
+    SetpointError,
+    Telemetry,
+)
 
 #: Polling interval of the iterators, s.
 POLL_S: float = 0.0005
 
 
+class SetpointRejected(SetpointError):
+    """The controller rejected a setpoint (it changed nothing).
+
+    :attr:`rejection` is the controller's reason (None for a code this
+    schema does not know, then see :attr:`code`); :attr:`answer` the answer
+    as it came in telemetry.
+    """
+
+    def __init__(self, answer: SetpointAnswer) -> None:
+        rejection = Rejection.from_code(answer.code)
+        what = str(rejection) if rejection is not None else f"unknown code {answer.code}"
+        super().__init__(
+            rejection, f"setpoint {answer.seq} rejected by the controller: {what}"
+        )
+        #: The answer code (a :class:`~hcc.msgs.Rejection` value).
+        self.code: int = answer.code
+        #: The controller's answer.
+        self.answer: SetpointAnswer = answer
+
+
+def new_client_id() -> int:
+    """A client id unique among the clients of one host (as the Rust
+    ``hcc-client``): the process id in the high 32 bits, the monotonic clock
+    in the low ones."""
+    return ((os.getpid() << 32) ^ (time.monotonic_ns() & 0xFFFF_FFFF)) & 0xFFFF_FFFF_FFFF_FFFF
+
+
 class Client:
-    """Telemetry and joint states of the robot in ``namespace``.
+    """Telemetry, joint states and setpoints of the robot in ``namespace``.
 
     ``file_prefix``: the shared-memory file prefix of the peers (default:
     $HCC_IPC_FILE_PREFIX, else iceoryx2's default). ``buffer``: queue length
     of the subscribers (samples older than that are lost when not read in
-    time). Use as a context manager or call :meth:`close`.
+    time). ``client_id``: this client's identity in its setpoints (default
+    :func:`new_client_id`); the controller keeps its answers per client id,
+    so two clients of one controller must not share one. Use as a context
+    manager or call :meth:`close`.
+
+    The setpoint publisher is created with the first setpoint sent (a client
+    that only reads takes none of the
+    :data:`~hcc.ipc.MAX_SETPOINT_PUBLISHERS` client slots). The waiting
+    methods read the same telemetry queue as :meth:`telemetry`. Not for a
+    real-time loop: every call allocates and the waits sleep.
     """
 
     def __init__(
@@ -38,14 +91,20 @@ class Client:
         *,
         file_prefix: str | None = None,
         buffer: int = ipc.MAX_SUBSCRIBER_BUFFER,
+        client_id: int | None = None,
     ) -> None:
+        if client_id is not None and not 0 <= client_id <= 0xFFFF_FFFF_FFFF_FFFF:
+            raise ValueError(f"client_id {client_id} does not fit in 64 unsigned bits")
         self.names = ipc.ServiceNames(namespace)
         self._node = ipc.create_node("hcc-py-client", file_prefix)
         self._services = ipc.Services(self._node, self.names)
         self._telemetry = self._services.subscriber("telemetry", buffer)
         self._states = self._services.subscriber("joint_state", buffer)
+        self._publisher: Any = None
         self._last_telemetry: Telemetry | None = None
         self._last_state: JointState | None = None
+        self._client_id = new_client_id() if client_id is None else client_id
+        self._seq = 0
 
     def __enter__(self) -> "Client":
         return self
@@ -54,11 +113,11 @@ class Client:
         self.close()
 
     def close(self) -> None:
-        """Releases the subscribers and the node."""
-        for port in (self._telemetry, self._states):
+        """Releases the ports and the node."""
+        for port in (self._telemetry, self._states, self._publisher):
             if port is not None:
                 port.delete()
-        self._telemetry = self._states = None
+        self._telemetry = self._states = self._publisher = None
         self._services = None
         self._node = None
 
@@ -133,3 +192,147 @@ class Client:
         raise TimeoutError(
             f"level {level} not converged to {tolerance} within {timeout} s ({error})"
         )
+
+    # --- Commanding -----------------------------------------------------------
+
+    @property
+    def client_id(self) -> int:
+        """This client's id (the controller keeps its answers under it)."""
+        return self._client_id
+
+    @property
+    def last_seq(self) -> int:
+        """Sequence number of the last setpoint built (0: none yet)."""
+        return self._seq
+
+    def setpoint(self, level: int, dim: int) -> Setpoint:
+        """A setpoint of this client for ``level`` (0-based) and dimension
+        ``dim`` with the next sequence number (+1 per setpoint); fill it with
+        the ``with_*`` methods and hand it to :meth:`send`."""
+        self._seq += 1
+        return Setpoint.for_level(self._client_id, self._seq, level, dim)
+
+    def send(self, setpoint: Setpoint) -> int:
+        """Checks ``setpoint`` (the model-free checks), stamps it with the
+        monotonic clock and publishes it; returns its sequence number.
+
+        Raises :class:`~hcc.msgs.SetpointError` (nothing sent) when a check
+        fails, :class:`~hcc.ipc.IpcError` when no publisher can be created
+        (all client slots taken). Use it for streams (e.g. goal and velocity
+        every cycle); the controller answers only the newest setpoint of a
+        client that it read in a cycle.
+        """
+        setpoint.validate()
+        msg = Setpoint.from_buffer_copy(setpoint)
+        msg.header.stamp_ns = time.monotonic_ns()
+        if self._publisher is None:
+            self._publisher = self._services.publisher("setpoint")
+        try:
+            self._publisher.send_copy(msg)
+        except Exception as e:  # iceoryx2 raises its own exception types
+            raise ipc.IpcError(f"cannot send the setpoint: {e!r}") from e
+        return msg.header.seq
+
+    def set_goal(
+        self,
+        level: int,
+        values: Sequence[float],
+        duration: float | None = None,
+        velocity: Sequence[float] | None = None,
+    ) -> int:
+        """Sets ``level``'s goal x_{i,d} (its task coordinates, as in the
+        scenario TOML: m on a position task's axes, roll/pitch/yaw in rad,
+        rad per joint) over a transition of ``duration`` s (None or 0: as
+        fast as the level's speed limit allows; shorter transitions are
+        stretched to it), with an optional velocity feed-forward ẋ_{i,d}.
+        Returns the sequence number for :meth:`wait_until_accepted`."""
+        values = list(values)
+        sp = self.setpoint(level, len(values)).with_goal(values)
+        if velocity is not None:
+            sp.with_velocity(velocity)
+        return self.send(sp.with_duration(0.0 if duration is None else duration))
+
+    def set_gains(
+        self,
+        level: int,
+        stiffness: Any = None,
+        damping: Any = None,
+        duration: float | None = None,
+    ) -> int:
+        """Sets ``level``'s stiffness K_i and/or damping D_i (paper Eqs.
+        (20), (21)) over ``duration`` s (None or 0: at once, within the
+        level's limits). Each is m diagonal values (a flat sequence) or the
+        full symmetric positive definite m×m matrix (nested rows or a 2-D
+        array); None keeps it. Returns the sequence number."""
+        dims = {name: _gain_dim(v) for name, v in (("stiffness", stiffness), ("damping", damping))
+                if v is not None}
+        if len(set(dims.values())) > 1:
+            raise SetpointError(
+                Rejection.DIMENSION_MISMATCH,
+                f"setpoint not sent: stiffness is {dims['stiffness']}-dimensional, "
+                f"damping {dims['damping']}-dimensional",
+            )
+        sp = self.setpoint(level, next(iter(dims.values()), 0))
+        if stiffness is not None:
+            sp.with_stiffness(stiffness)
+        if damping is not None:
+            sp.with_damping(damping)
+        return self.send(sp.with_duration(0.0 if duration is None else duration))
+
+    def wait_until_accepted(self, seq: int, timeout: float = 1.0) -> SetpointAnswer:
+        """Waits for the controller's answer to this client's setpoint ``seq``
+        (or a later one of this client: telemetry keeps only a client's last
+        answer) and returns it when accepted.
+
+        Raises :class:`SetpointRejected` with the controller's reason, or
+        TimeoutError when no controller answers within ``timeout`` s.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            t = self._poll_telemetry()
+            answer = t.answer_for(self._client_id) if t is not None else None
+            if answer is not None and answer.seq >= seq:
+                if answer.code == ANSWER_ACCEPTED:
+                    return SetpointAnswer.from_buffer_copy(answer)
+                raise SetpointRejected(SetpointAnswer.from_buffer_copy(answer))
+            if time.monotonic() >= deadline:
+                raise TimeoutError(
+                    f"no controller answered setpoint {seq} within {timeout:.1f} s "
+                    f"(is hcc-controller running in namespace {self.names.namespace!r}?)"
+                )
+            time.sleep(POLL_S)
+
+    def wait_until_converged(self, level: int, tolerance: float, timeout: float = 10.0) -> float:
+        """Waits until ``level``'s (0-based) transition is over and its task
+        error norm ‖x̃‖ is ≤ ``tolerance``; returns that norm. Call it after
+        :meth:`wait_until_accepted` (before, the old goal may count). Raises
+        TimeoutError after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        last = float("nan")
+        while True:
+            t = self._poll_telemetry()
+            if t is not None and level < t.levels():
+                last = t.error_norm(level)
+                if t.transition_progress[level] >= 1.0 and last <= tolerance:
+                    return last
+            if time.monotonic() >= deadline:
+                raise TimeoutError(
+                    f"level {level} did not converge to {tolerance} within {timeout:.1f} s "
+                    f"(error {last:.3e})"
+                )
+            time.sleep(POLL_S)
+
+    def _poll_telemetry(self) -> Telemetry | None:
+        newest = ipc.receive_latest(self._telemetry, Telemetry)
+        if newest is not None:
+            self._last_telemetry = newest
+        return self._last_telemetry
+
+
+def _gain_dim(values: Any) -> int:
+    """m of a gain given as m diagonal values or an m×m matrix (nested rows)."""
+    shape = getattr(values, "shape", None)
+    if shape is not None:
+        return int(shape[0])
+    values = list(values)
+    return len(values)

@@ -606,9 +606,9 @@ class SetpointError(MsgError):
     builders (the controller's codes for the same faults).
     """
 
-    def __init__(self, rejection: Rejection, message: str | None = None) -> None:
+    def __init__(self, rejection: Rejection | None, message: str | None = None) -> None:
         super().__init__(message or f"setpoint not sent: {rejection}")
-        #: The rejection.
+        #: The rejection (None only for an answer code this schema does not know).
         self.rejection = rejection
 
 
