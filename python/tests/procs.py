@@ -1,4 +1,4 @@
-"""Starting the MuJoCo driver and the Rust controller as a user would, and cleaning up."""
+"""Starting the MuJoCo driver, hcc-sim and the Rust controller as a user would, and cleaning up."""
 
 from __future__ import annotations
 
@@ -106,3 +106,29 @@ def remove_ipc_files(prefix: str) -> None:
         for path in root.rglob(f"{prefix}*"):
             if path.is_file():
                 path.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def sim_pair(
+    scenario: pathlib.Path, tmp: pathlib.Path, duration: float = 60.0
+) -> Iterator[tuple[str, str, subprocess.Popen, subprocess.Popen]]:
+    """hcc-controller and hcc-sim (real time, ``duration`` s) on ``scenario``.
+
+    Unique namespace and file prefix; yields (namespace, file prefix,
+    controller, simulator); both are stopped and the prefix's files removed
+    afterwards.
+    """
+    ns = unique("pycmd")
+    prefix = f"{unique('hccpy')}_"[:32]
+    env = dict(os.environ, HCC_IPC_FILE_PREFIX=prefix)
+    controller = [str(binary("hcc-controller")), str(scenario), "--namespace", ns]
+    sim = [str(binary("hcc-sim")), str(scenario), "--namespace", ns, "--realtime"]
+    sim += ["--duration", repr(duration)]
+    try:
+        with (
+            started(controller, env, tmp / "controller.log") as ctl,
+            started(sim, env, tmp / "sim.log") as plant,
+        ):
+            yield ns, prefix, ctl, plant
+    finally:
+        remove_ipc_files(prefix)

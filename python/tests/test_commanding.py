@@ -9,7 +9,6 @@ model-free checks is refused before it is sent.
 from __future__ import annotations
 
 import math
-import os
 import pathlib
 import time
 
@@ -18,83 +17,73 @@ import pytest
 from hcc import Client, SetpointError, SetpointRejected, SetpointRejection
 from hcc.msgs import Rejection
 
-from conftest import ROOT, binary, unique
-from procs import remove_ipc_files, started
+from conftest import ROOT
+from procs import sim_pair
 
 SCENARIO = ROOT / "config" / "panda-pose-posture.toml"
 GOAL = [0.55, 0.10, 0.30]
 
 
 def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Path) -> None:
-    ns = unique("pycmd")
-    prefix = f"{unique('hccpy')}_"[:32]
-    env = dict(os.environ, HCC_IPC_FILE_PREFIX=prefix)
-    controller = [str(binary("hcc-controller")), str(SCENARIO), "--namespace", ns]
-    sim = [str(binary("hcc-sim")), str(SCENARIO), "--namespace", ns, "--realtime"]
-    sim += ["--duration", "60"]
-    try:
-        with (
-            started(controller, env, tmp_path / "controller.log") as ctl,
-            started(sim, env, tmp_path / "sim.log") as plant,
-            Client(ns, file_prefix=prefix) as client,
-        ):
-            # The arm settles at the scenario's goal first.
-            client.wait_until_converged(0, 1e-3, timeout=30.0)
-            start = client.latest_telemetry()
-            assert start is not None and start.levels() == 3
+    with (
+        sim_pair(SCENARIO, tmp_path) as (ns, prefix, ctl, plant),
+        Client(ns, file_prefix=prefix) as client,
+    ):
+        # The arm settles at the scenario's goal first.
+        client.wait_until_converged(0, 1e-3, timeout=30.0)
+        start = client.latest_telemetry()
+        assert start is not None and start.levels() == 3
 
-            t0 = time.monotonic()
-            seq = client.set_goal(0, GOAL, duration=1.0)
-            assert seq == client.last_seq == 1
-            answer = client.wait_until_accepted(seq, timeout=5.0)
-            assert answer.seq == seq and answer.client_id == client.client_id
-            assert answer.accepted() and answer.level == 0 and answer.duration_s >= 1.0
-            error = client.wait_until_converged(0, 1e-3, timeout=10.0)
-            reached = time.monotonic() - t0
-            t = client.latest_telemetry()
-            assert t is not None
-            moved = math.dist(start.goal_list(0), GOAL)
-            print(
-                f"set_goal: TCP goal moved {1e3 * moved:.1f} mm over {answer.duration_s:.2f} s, "
-                f"within {1e3 * error:.3f} mm of it after {reached:.2f} s"
-            )
-            assert moved > 0.05
-            assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12)
-            assert error < 1e-3
+        t0 = time.monotonic()
+        seq = client.set_goal(0, GOAL, duration=1.0)
+        assert seq == client.last_seq == 1
+        answer = client.wait_until_accepted(seq, timeout=5.0)
+        assert answer.seq == seq and answer.client_id == client.client_id
+        assert answer.accepted() and answer.level == 0 and answer.duration_s >= 1.0
+        error = client.wait_until_converged(0, 1e-3, timeout=10.0)
+        reached = time.monotonic() - t0
+        t = client.latest_telemetry()
+        assert t is not None
+        moved = math.dist(start.goal_list(0), GOAL)
+        print(
+            f"set_goal: TCP goal moved {1e3 * moved:.1f} mm over {answer.duration_s:.2f} s, "
+            f"within {1e3 * error:.3f} mm of it after {reached:.2f} s"
+        )
+        assert moved > 0.05
+        assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12)
+        assert error < 1e-3
 
-            # Rejected by the controller, with its reason; nothing changes.
-            seq = client.set_goal(0, [3.0, 0.0, 0.3], duration=1.0)
-            with pytest.raises(SetpointRejected) as e:
-                client.wait_until_accepted(seq, timeout=5.0)
-            assert e.value.rejection is Rejection.OUTSIDE_WORKSPACE is SetpointRejection(16)
-            assert e.value.answer.seq == seq and "outside_workspace" in str(e.value)
-            assert "workspace" in e.value.rejection.reason
-            print(f"rejected: {e.value}")
-            seq = client.set_gains(0, stiffness=[1e6, 1e6, 1e6])
-            with pytest.raises(SetpointRejected) as e:
-                client.wait_until_accepted(seq, timeout=5.0)
-            assert e.value.rejection is Rejection.STIFFNESS_ABOVE_LIMIT
-
-            # Refused before sending (no sequence number used, nothing sent).
-            before = client.last_seq
-            with pytest.raises(SetpointError) as e:
-                client.set_gains(0, damping=[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-            assert e.value.rejection is Rejection.NOT_POSITIVE_DEFINITE
-            with pytest.raises(SetpointError) as e:
-                client.set_goal(0, [0.5, math.nan, 0.3])
-            assert e.value.rejection is Rejection.NON_FINITE
-            assert client.last_seq == before + 2, "each setpoint built takes a number"
-
-            # A valid full stiffness and diagonal damping are accepted.
-            k = [[400.0, 0.0, 0.0], [0.0, 400.0, 0.0], [0.0, 0.0, 300.0]]
-            seq = client.set_gains(0, stiffness=k, damping=[40.0, 40.0, 35.0], duration=0.5)
+        # Rejected by the controller, with its reason; nothing changes.
+        seq = client.set_goal(0, [3.0, 0.0, 0.3], duration=1.0)
+        with pytest.raises(SetpointRejected) as e:
             client.wait_until_accepted(seq, timeout=5.0)
-            client.wait_until_converged(0, 1e-3, timeout=10.0)
-            t = client.latest_telemetry()
-            assert t is not None
-            assert t.stiffness_diag_list(0) == pytest.approx([400.0, 400.0, 300.0])
-            assert t.damping_diag_list(0) == pytest.approx([40.0, 40.0, 35.0])
-            assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12), "targets kept"
-            assert ctl.poll() is None and plant.poll() is None, "the pair keeps running"
-    finally:
-        remove_ipc_files(prefix)
+        assert e.value.rejection is Rejection.OUTSIDE_WORKSPACE is SetpointRejection(16)
+        assert e.value.answer.seq == seq and "outside_workspace" in str(e.value)
+        assert "workspace" in e.value.rejection.reason
+        print(f"rejected: {e.value}")
+        seq = client.set_gains(0, stiffness=[1e6, 1e6, 1e6])
+        with pytest.raises(SetpointRejected) as e:
+            client.wait_until_accepted(seq, timeout=5.0)
+        assert e.value.rejection is Rejection.STIFFNESS_ABOVE_LIMIT
+
+        # Refused before sending (no sequence number used, nothing sent).
+        before = client.last_seq
+        with pytest.raises(SetpointError) as e:
+            client.set_gains(0, damping=[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        assert e.value.rejection is Rejection.NOT_POSITIVE_DEFINITE
+        with pytest.raises(SetpointError) as e:
+            client.set_goal(0, [0.5, math.nan, 0.3])
+        assert e.value.rejection is Rejection.NON_FINITE
+        assert client.last_seq == before + 2, "each setpoint built takes a number"
+
+        # A valid full stiffness and diagonal damping are accepted.
+        k = [[400.0, 0.0, 0.0], [0.0, 400.0, 0.0], [0.0, 0.0, 300.0]]
+        seq = client.set_gains(0, stiffness=k, damping=[40.0, 40.0, 35.0], duration=0.5)
+        client.wait_until_accepted(seq, timeout=5.0)
+        client.wait_until_converged(0, 1e-3, timeout=10.0)
+        t = client.latest_telemetry()
+        assert t is not None
+        assert t.stiffness_diag_list(0) == pytest.approx([400.0, 400.0, 300.0])
+        assert t.damping_diag_list(0) == pytest.approx([40.0, 40.0, 35.0])
+        assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12), "targets kept"
+        assert ctl.poll() is None and plant.poll() is None, "the pair keeps running"

@@ -6,9 +6,9 @@ presses with the force its level-1 stiffness implies, F = K1 (x_d − x)
 along the wall's normal, stays stable, and the lower levels (orientation,
 posture) keep converging in the remaining redundancy.
 
-Moving the goal at run time needs a setpoint service the contract does not
-have yet, so the release is a second run: it starts from the pressed state
-with the goal in front of the wall, and the arm comes back to it.
+The release is a second run: it starts from the pressed state with the
+goal in front of the wall, and the arm comes back to it (this also checks a
+start from a pressed state; Client.set_goal could move the goal in one run).
 """
 
 from __future__ import annotations
