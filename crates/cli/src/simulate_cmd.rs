@@ -1,8 +1,14 @@
 //! `hcc simulate CONFIG --out DIR`: the closed loop in one process (controller
 //! sampled at the control rate, torque held, plant integrated with RK4), then
 //! trajectory.csv, metrics.json and plots in DIR and a short summary on stdout.
+//! The scenario's `[[setpoint]]` entries are applied at their cycles.
 
 use anyhow::Context;
+use hcc_config::Scenario;
+use hcc_control::Controller;
+use hcc_controller::schedule::Schedule;
+use hcc_plant::SimError;
+use hcc_plant::closed_loop::{self, Commands, HierarchicalLaw};
 use hcc_report::{Metrics, RunDescription, Trajectory};
 use std::path::{Path, PathBuf};
 
@@ -34,7 +40,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     if args.no_coriolis_cancellation {
         scenario.set_coriolis_cancellation(false)?;
     }
-    let run = hcc_plant::closed_loop::simulate(&scenario)
+    let run = closed_loop::simulate_law(&scenario, scheduled_law(&scenario)?)
         .with_context(|| format!("simulation of {} failed", args.config.display()))?;
     let metrics = write_results(&args.out, &run.trajectory, &run.description, args.no_plots)?;
     print!("{}", metrics.summary());
@@ -67,4 +73,25 @@ pub fn write_results(
         return Ok(m);
     }
     Ok(hcc_report::write_run(out, traj, description)?.metrics)
+}
+
+/// The scenario's `[[setpoint]]` schedule as [`Commands`] of the in-process law.
+struct ScheduledCommands(Schedule);
+
+impl Commands for ScheduledCommands {
+    fn before_step(&mut self, k: u64, controller: &mut Controller) -> Result<(), SimError> {
+        self.0.before_step(k, controller).map_err(SimError::Invalid)
+    }
+}
+
+/// The in-process law of `scenario`, its `[[setpoint]]` entries (if any)
+/// applied through the controller daemon's commander
+/// ([`hcc_controller::schedule::Schedule`]).
+pub(crate) fn scheduled_law(scenario: &Scenario) -> anyhow::Result<HierarchicalLaw> {
+    let law = HierarchicalLaw::new(scenario)?;
+    if scenario.setpoints.is_empty() {
+        return Ok(law);
+    }
+    let schedule = Schedule::new(law.controller(), scenario)?;
+    Ok(law.with_commands(Box::new(ScheduledCommands(schedule))))
 }

@@ -42,6 +42,7 @@
 pub mod commanding;
 pub mod error;
 pub mod output;
+pub mod schedule;
 pub mod schema;
 
 pub use error::ConfigError;
@@ -129,6 +130,8 @@ pub struct Scenario {
     pub commanding: commanding::Commanding,
     /// Resolved `[output]`.
     pub output: output::Output,
+    /// The `[[setpoint]]` entries, checked and sorted by time.
+    pub setpoints: Vec<schedule::ScheduledSetpoint>,
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
@@ -326,6 +329,7 @@ impl Scenario {
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
         let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &spec.levels, n)?;
         let output = output::resolve(cx.file, cx.text, &file.output)?;
+        let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -346,6 +350,7 @@ impl Scenario {
             sim_daemon,
             commanding,
             output,
+            setpoints,
         })
     }
 }

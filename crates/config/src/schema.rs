@@ -37,6 +37,9 @@ pub struct ScenarioFile {
     /// `[output]`: the torque output pipeline after the law.
     #[serde(default)]
     pub output: crate::output::OutputSection,
+    /// `[[setpoint]]`: setpoints scheduled in time.
+    #[serde(default, rename = "setpoint")]
+    pub setpoints: Vec<crate::schedule::SetpointSection>,
 }
 
 /// `[robot]`

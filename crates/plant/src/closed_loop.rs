@@ -195,6 +195,14 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
     })
 }
 
+/// Changes to the law's goals and gains made before a cycle's step (the
+/// controller's setpoint side: scheduled setpoints, see `hcc simulate`).
+pub trait Commands {
+    /// Called before the step of cycle `k` (t_k = k · T); may set goals,
+    /// gains and goal velocities of `controller`.
+    fn before_step(&mut self, k: u64, controller: &mut Controller) -> Result<(), SimError>;
+}
+
 /// The hierarchical compliance controller of hcc-control as a [`ControlLaw`],
 /// its torque saturated to `[controller_daemon] torque_limits` exactly as the
 /// controller daemon saturates its commands ([`hcc_control::saturate`]: the
@@ -206,6 +214,9 @@ pub struct HierarchicalLaw {
     gravity_compensation: bool,
     tau: DVector<f64>,
     saturated_cycles: u64,
+    commands: Option<Box<dyn Commands>>,
+    /// Cycles computed so far (the index k of the next one).
+    cycle: u64,
 }
 
 impl HierarchicalLaw {
@@ -220,7 +231,15 @@ impl HierarchicalLaw {
             gravity_compensation: scenario.spec.gravity_compensation,
             tau: DVector::zeros(n),
             saturated_cycles: 0,
+            commands: None,
+            cycle: 0,
         })
+    }
+
+    /// The law with `commands` applied before every step.
+    pub fn with_commands(mut self, commands: Box<dyn Commands>) -> HierarchicalLaw {
+        self.commands = Some(commands);
+        self
     }
 
     /// The wrapped controller.
@@ -236,6 +255,10 @@ impl HierarchicalLaw {
 
 impl ControlLaw for HierarchicalLaw {
     fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), SimError> {
+        if let Some(commands) = &mut self.commands {
+            commands.before_step(self.cycle, &mut self.controller)?;
+        }
+        self.cycle += 1;
         let out = self
             .controller
             .step(q.as_slice(), qd.as_slice())
@@ -285,7 +308,11 @@ impl ControlLaw for HierarchicalLaw {
 /// The torque is saturated as the daemon saturates it; the number of
 /// saturated cycles is in the run's settings (`saturated_cycles`).
 pub fn simulate(scenario: &Scenario) -> Result<Run, SimError> {
-    let mut law = HierarchicalLaw::new(scenario)?;
+    simulate_law(scenario, HierarchicalLaw::new(scenario)?)
+}
+
+/// [`simulate`] with a given law (e.g. one with [`Commands`]).
+pub fn simulate_law(scenario: &Scenario, mut law: HierarchicalLaw) -> Result<Run, SimError> {
     let mut run = simulate_with(scenario, &mut law)?;
     run.description.settings.insert(
         "saturated_cycles".into(),

@@ -233,7 +233,8 @@ impl Commander {
                 radius,
                 axes,
             } => {
-                let d2: f64 = (0..m)
+                // The position rows only (a pose level's first three).
+                let d2: f64 = (0..m.min(3))
                     .map(|a| (goal[a] - center[axes[a].min(2)]).powi(2))
                     .sum();
                 d2 <= radius * radius

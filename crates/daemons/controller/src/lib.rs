@@ -24,6 +24,7 @@ pub mod cycle;
 pub mod daemon;
 pub mod decide;
 pub mod output;
+pub mod schedule;
 pub mod status;
 
 pub use cycle::{Cycle, CycleError, CycleSettings, Outcome, Ports};

@@ -1,0 +1,72 @@
+//! `config/panda-waypoints.toml`: `hcc simulate` applies the scenario's
+//! `[[setpoint]]` schedule and the Panda's TCP reaches each of the four
+//! waypoints to within 1 mm before the next one is sent (the posture goal
+//! and the TCP stiffness change on the way).
+
+use hcc_system_tests::*;
+use std::process::Command;
+use std::time::Duration;
+
+/// Times (s) the waypoints are sent, the end of the run last.
+const SENT: [f64; 5] = [0.5, 4.0, 7.5, 11.0, 14.5];
+/// The transition time of every waypoint, s.
+const TRANSITION_S: f64 = 2.0;
+
+#[test]
+fn panda_visits_four_waypoints_within_a_millimetre() {
+    let dir = TempDir::new("panda_waypoints");
+    let sim = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .arg("simulate")
+            .arg(repo_root().join("config/panda-waypoints.toml"))
+            .arg("--out")
+            .arg(dir.path().join("simulate"))
+            .arg("--no-plots"),
+        dir.path(),
+        "simulate",
+        Duration::from_secs(120),
+    );
+    assert!(sim.status.success(), "hcc simulate failed\n{}", sim.log());
+    let (header, rows) = read_csv(&dir.path().join("simulate/trajectory.csv"));
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+    };
+    let t = col("t");
+    // x − x_d of the TCP position rows (x_d the equilibrium, the waypoint
+    // once the transition is over).
+    let e = [col("e1_1"), col("e1_2"), col("e1_3")];
+    for w in 0..4 {
+        let (sent, next) = (SENT[w], SENT[w + 1]);
+        let window: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r[t] >= sent + TRANSITION_S && r[t] < next - 1e-9)
+            .map(|r| (r[t], e.iter().map(|&c| r[c] * r[c]).sum::<f64>().sqrt()))
+            .collect();
+        assert!(!window.is_empty(), "waypoint {}: no rows", w + 1);
+        let last_above = window
+            .iter()
+            .filter(|(_, err)| *err >= 1e-3)
+            .map(|(time, _)| *time)
+            .fold(f64::NAN, f64::max);
+        let (end_t, end_err) = *window.last().unwrap();
+        let within = if last_above.is_nan() {
+            sent + TRANSITION_S
+        } else {
+            last_above + 1e-3
+        };
+        println!(
+            "waypoint {}: sent at {sent} s, within 1 mm from t = {within:.3} s ({:.3} s after the transition ended); |e| = {end_err:.3e} m at t = {end_t:.3} s",
+            w + 1,
+            within - sent - TRANSITION_S
+        );
+        assert!(
+            end_err < 1e-3 && within < next,
+            "waypoint {}: |e| = {end_err:e} m at t = {end_t} s",
+            w + 1
+        );
+    }
+}
