@@ -954,6 +954,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .set_duration(d)
             .with_context(|| format!("--duration {d}"))?;
     }
+    if !scenario.setpoints.is_empty() {
+        tracing::warn!(
+            "{} scheduled [[setpoint]] entries are not sent by hcc run yet (hcc simulate applies them); \
+             the run keeps the scenario's initial goals",
+            scenario.setpoints.len()
+        );
+    }
     let launch = Launch::new(&args, &scenario)?;
 
     // Subscribe before the children start, so that no sample is missed.
