@@ -28,10 +28,20 @@ const STATS: [&str; 11] = [
     "negative",
 ];
 
-#[test]
-fn jitter_reports_every_figure_and_consistent_counts() {
-    let dir = TempDir::new("jitter");
-    let namespace = unique_namespace("jitter");
+/// The stages of the controller's cycle in the report.
+const STAGES: [&str; 5] = [
+    "controller_stage_setpoints",
+    "controller_stage_decide",
+    "controller_stage_send",
+    "controller_stage_notify",
+    "controller_stage_telemetry",
+];
+
+/// Runs `hcc jitter` for 2 s (floor 0.5 s) with `extra` arguments; returns
+/// the report and the printed table.
+fn jitter(name: &str, extra: &[&str]) -> (serde_json::Value, String) {
+    let dir = TempDir::new(name);
+    let namespace = unique_namespace(name);
     let prefix = unique_file_prefix();
     let out = dir.path().join("jitter");
     let run = run_with_timeout(
@@ -40,6 +50,7 @@ fn jitter_reports_every_figure_and_consistent_counts() {
             .env(FILE_PREFIX_ENV, &prefix)
             .args(["jitter", "--duration", "2", "--floor-duration", "0.5"])
             .args(["--namespace", &namespace, "--quiet"])
+            .args(extra)
             .arg("--out")
             .arg(&out),
         dir.path(),
@@ -48,8 +59,51 @@ fn jitter_reports_every_figure_and_consistent_counts() {
     );
     assert!(run.status.success(), "hcc jitter failed\n{}", run.log());
     println!("{}", run.stdout);
+    let png = std::fs::read(out.join("jitter.png")).expect("jitter.png");
+    assert!(png.starts_with(b"\x89PNG"));
+    assert!(run.stdout.contains("simulator tick lateness") && run.stdout.contains("floor"));
+    assert_clean(&namespace, &prefix);
+    (read_json(&out.join("jitter.json")), run.stdout)
+}
 
-    let report = read_json(&out.join("jitter.json"));
+fn count(report: &serde_json::Value, figure: &str) -> u64 {
+    report["figures"][figure]["pair"]["count"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("{figure} has no count"))
+}
+
+/// A polling simulator: the controller skips `command_ready` for every
+/// answer; with telemetry every 10th cycle, a tenth of the answers publish
+/// telemetry. The stages are timed in every answered cycle.
+#[test]
+fn jitter_with_a_polling_simulator_skips_every_notification() {
+    let (report, stdout) = jitter(
+        "jitter_poll",
+        &["--poll-commands", "--telemetry-every", "10"],
+    );
+    let s = &report["settings"];
+    assert_eq!(s["poll_commands"], true);
+    assert_eq!(s["telemetry_every"], 10);
+    let answered = count(&report, "controller_compute_time");
+    assert!(answered > 1900, "{}", report["counts"]);
+    assert_eq!(s["notifications_skipped"].as_u64(), Some(answered), "{s}");
+    for stage in &STAGES[..4] {
+        assert_eq!(count(&report, stage), answered, "{stage}");
+    }
+    let telemetry = count(&report, "controller_stage_telemetry");
+    assert_eq!(telemetry, answered / 10, "telemetry samples");
+    let c = &report["counts"];
+    assert_eq!(
+        c["cycles"].as_u64().unwrap(),
+        c["received_commands"].as_u64().unwrap() + c["missed_commands"].as_u64().unwrap(),
+        "{c}"
+    );
+    assert!(stdout.contains("stage: command_ready notify"));
+}
+
+#[test]
+fn jitter_reports_every_figure_and_consistent_counts() {
+    let (report, _) = jitter("jitter", &[]);
     for name in FIGURES {
         let f = &report["figures"][name];
         for s in STATS {
@@ -122,9 +176,10 @@ fn jitter_reports_every_figure_and_consistent_counts() {
     }
     assert!(report["steal_fraction"]["pair"].is_object());
     assert!(!report["targets"].as_array().unwrap().is_empty());
-
-    let png = std::fs::read(out.join("jitter.png")).expect("jitter.png");
-    assert!(png.starts_with(b"\x89PNG"));
-    assert!(run.stdout.contains("simulator tick lateness") && run.stdout.contains("floor"));
-    assert_clean(&namespace, &prefix);
+    // Every answer notified, and its stages timed.
+    assert_eq!(s["notifications_skipped"], 0, "{s}");
+    let answered = count(&report, "controller_compute_time");
+    for stage in STAGES {
+        assert_eq!(count(&report, stage), answered, "{stage}");
+    }
 }

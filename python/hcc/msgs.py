@@ -29,8 +29,11 @@ MAX_TASK_DIM: int = MAX_JOINTS
 
 #: :attr:`JointState.flags` bit: the driver adds gravity compensation g(q) itself.
 STATE_FLAG_DRIVER_GRAVITY_COMPENSATION: int = 1 << 0
+#: :attr:`JointState.flags` bit: the driver polls for its commands and never waits on
+#: ``command_ready``, so the controller skips that notification.
+STATE_FLAG_DRIVER_POLLS_COMMANDS: int = 1 << 1
 #: All :attr:`JointState.flags` bits of this schema.
-STATE_FLAGS_KNOWN: int = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION
+STATE_FLAGS_KNOWN: int = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION | STATE_FLAG_DRIVER_POLLS_COMMANDS
 #: :attr:`TorqueCommand.flags` bit: τ contains the gravity torque g(q) (paper Eq. (19)).
 COMMAND_FLAG_GRAVITY_INCLUDED: int = 1 << 0
 #: All :attr:`TorqueCommand.flags` bits of this schema.

@@ -34,6 +34,8 @@ def test_constants(rust: dict[str, Any]) -> None:
     assert rust["ipc_file_prefix_env"] == ipc.FILE_PREFIX_ENV
     flags = rust["flags"]
     assert flags["state_driver_gravity_compensation"] == msgs.STATE_FLAG_DRIVER_GRAVITY_COMPENSATION
+    assert flags["state_driver_polls_commands"] == msgs.STATE_FLAG_DRIVER_POLLS_COMMANDS
+    assert flags["state_flags_known"] == msgs.STATE_FLAGS_KNOWN
     assert flags["command_gravity_included"] == msgs.COMMAND_FLAG_GRAVITY_INCLUDED
     assert flags["telemetry_peer_lost"] == msgs.TELEMETRY_FLAG_PEER_LOST
     for key in [

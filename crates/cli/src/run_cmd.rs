@@ -110,6 +110,54 @@ pub struct RunArgs {
     /// No progress lines on stderr.
     #[arg(long)]
     pub quiet: bool,
+    /// Run the daemons with normal scheduling. By default a real-time run
+    /// asks for the real-time set-up `hcc jitter` measures: SCHED_FIFO
+    /// priority 80, locked memory, the hybrid wait in both daemons and, on a
+    /// machine with two cores or more, one core per daemon (simulator on
+    /// the first, controller on the second) unless the scenario pins them.
+    /// A daemon that may not have them says so and runs normally.
+    #[arg(long)]
+    pub no_rt: bool,
+}
+
+/// SCHED_FIFO priority of the daemons of a real-time `hcc run`.
+const RUN_PRIORITY: i32 = 80;
+
+/// The real-time arguments of a real-time run's daemons: (simulator,
+/// controller). The controller's wait strategy is the scenario's
+/// (`[controller_daemon] wait_strategy`, hybrid by default); a priority the
+/// scenario sets is kept. When SCHED_FIFO is not permitted, it warns once
+/// here and asks for normal scheduling.
+fn realtime_args(scenario: &Scenario, quiet: bool) -> (Vec<String>, Vec<String>) {
+    let mut sim = vec![
+        "--wait".to_string(),
+        "hybrid".to_string(),
+        "--mlock".to_string(),
+    ];
+    let mut controller = vec!["--mlock".to_string()];
+    match hcc_rt::fifo_permitted(RUN_PRIORITY) {
+        Ok(()) => {
+            sim.extend(["--sched-priority".to_string(), RUN_PRIORITY.to_string()]);
+            if scenario.controller_daemon.sched_priority.is_none() {
+                controller.extend(["--sched-priority".to_string(), RUN_PRIORITY.to_string()]);
+            }
+        }
+        Err(e) if !quiet => warn!(
+            "SCHED_FIFO {RUN_PRIORITY} is not permitted ({e}): the daemons run with normal \
+             scheduling and may miss commands under load (grant CAP_SYS_NICE or an rtprio \
+             limit, see the README's timing section; --no-rt silences this)"
+        ),
+        Err(_) => {}
+    }
+    let cores = hcc_rt::available_cores();
+    if cores.len() >= 2
+        && scenario.sim_daemon.cpu_core.is_none()
+        && scenario.controller_daemon.cpu_core.is_none()
+    {
+        sim.extend(["--cpu-core".to_string(), cores[0].to_string()]);
+        controller.extend(["--cpu-core".to_string(), cores[1].to_string()]);
+    }
+    (sim, controller)
 }
 
 // ---------------------------------------------------------------------------
@@ -649,6 +697,10 @@ impl Launch {
             // controller waits on the state_ready event instead of sleeping until
             // the next expected period.
             controller_args.extend(["--wait".to_string(), "event".to_string()]);
+        } else if !args.no_rt {
+            let (sim_rt, controller_rt) = realtime_args(scenario, args.quiet);
+            sim_args.extend(sim_rt);
+            controller_args.extend(controller_rt);
         }
         Ok(Launch {
             names: ServiceNames::for_namespace(namespace.clone()),

@@ -15,9 +15,9 @@ use hcc_msgs::{
     MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_SETPOINT_CLIENTS,
     MAX_TASK_DIM, MAX_TRANSITION_S, Rejection, SCHEMA_VERSION, SETPOINT_DAMPING,
     SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
-    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, SYMMETRY_TOLERANCE, ServiceNames, Setpoint,
-    SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings,
-    TorqueCommand, ipc,
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN,
+    SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST,
+    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -133,6 +133,11 @@ fn main() {
             "state_driver_gravity_compensation",
             STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
         ),
+        (
+            "state_driver_polls_commands",
+            STATE_FLAG_DRIVER_POLLS_COMMANDS,
+        ),
+        ("state_flags_known", STATE_FLAGS_KNOWN),
         ("command_gravity_included", COMMAND_FLAG_GRAVITY_INCLUDED),
         ("telemetry_peer_lost", TELEMETRY_FLAG_PEER_LOST),
         ("setpoint_goal", SETPOINT_GOAL),

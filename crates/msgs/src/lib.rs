@@ -148,8 +148,9 @@ pub use setpoint::{
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
     JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
-    STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND,
-    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
+    STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY,
+    TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings,
+    TorqueCommand,
 };
 
 /// Version of this message schema. Bump it on any change of a type's layout

@@ -28,8 +28,14 @@ pub const TELEMETRY: &str = "telemetry";
 /// [`JointState::flags`] bit: the driver itself adds gravity compensation
 /// g(q) to every commanded torque, so commands must NOT contain it.
 pub const STATE_FLAG_DRIVER_GRAVITY_COMPENSATION: u32 = 1 << 0;
+/// [`JointState::flags`] bit: the driver polls the `torque_command` service
+/// for its answer and never waits on `command_ready`, so the controller skips
+/// that notification (a system call, and a wake-up of the other core) for
+/// this state. A driver that blocks on `command_ready` must leave it clear.
+pub const STATE_FLAG_DRIVER_POLLS_COMMANDS: u32 = 1 << 1;
 /// All [`JointState::flags`] bits defined by this schema.
-pub const STATE_FLAGS_KNOWN: u32 = STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
+pub const STATE_FLAGS_KNOWN: u32 =
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION | STATE_FLAG_DRIVER_POLLS_COMMANDS;
 
 /// [`TorqueCommand::flags`] bit: τ already contains the gravity torque g(q)
 /// (term g of the control law, paper Eq. (19)).

@@ -36,7 +36,8 @@ pub use args::{IpcArgs, parse_args, run_main};
 pub use sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns, wait_for_event_until};
 pub use stop::{install_stop_handler, stop_requested};
 pub use thread::{
-    RtReport, RtSettings, available_cores, cleanup_stale_resources, prepare_rt_thread, set_fifo,
+    RtReport, RtSettings, available_cores, cleanup_stale_resources, fifo_permitted,
+    prepare_rt_thread, set_fifo,
 };
 pub use wait::WaitStrategy;
 

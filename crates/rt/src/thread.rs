@@ -135,6 +135,16 @@ pub fn cleanup_stale_resources(file_prefix: Option<&str>) -> Option<String> {
     }
 }
 
+/// Whether a thread of this process may switch to `SCHED_FIFO` at
+/// `priority`: tried on a short-lived thread of its own, so the caller's
+/// scheduling is unchanged. The error says why not (no `CAP_SYS_NICE`, an
+/// `RLIMIT_RTPRIO` below `priority`, a container without real-time budget).
+pub fn fifo_permitted(priority: i32) -> std::io::Result<()> {
+    std::thread::spawn(move || set_fifo(priority))
+        .join()
+        .unwrap_or_else(|_| Err(std::io::Error::other("the probe thread panicked")))
+}
+
 /// Switches the calling thread to `SCHED_FIFO` at `priority`.
 pub fn set_fifo(priority: i32) -> std::io::Result<()> {
     let param = libc::sched_param {

@@ -26,7 +26,10 @@ use hcc_msgs::ipc::{
     self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, SETPOINT_BUFFER,
     Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher,
 };
-use hcc_msgs::{CommandMode, JointState, TelemetryCounters, TelemetryTimings, monotonic_now_ns};
+use hcc_msgs::{
+    CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryCounters, TelemetryTimings,
+    monotonic_now_ns,
+};
 
 use crate::decide::{Answer, Decider};
 use crate::status::Status;
@@ -93,6 +96,9 @@ pub struct CycleSettings {
     pub commanding: hcc_config::commanding::Commanding,
     /// The torque output pipeline (`[output]`).
     pub output: hcc_config::output::Output,
+    /// Publish telemetry for every this many answered states (1: every
+    /// cycle; a peer-lost sample is always published).
+    pub telemetry_every: u32,
 }
 
 impl CycleSettings {
@@ -109,6 +115,7 @@ impl CycleSettings {
             hybrid_spin_ns: 200_000,
             commanding: scenario.commanding.clone(),
             output: scenario.output.clone(),
+            telemetry_every: 1,
         }
     }
 }
@@ -146,6 +153,33 @@ pub struct CycleTimings {
     pub compute: LatencyHistogram,
     /// The control law alone (`Controller::step`, eqs. 3–22), ns.
     pub step: LatencyHistogram,
+    /// Stage: the setpoints taken before the decision (from the start of
+    /// the computation), ns.
+    pub stage_setpoints: LatencyHistogram,
+    /// Stage: the decision (validation, sequence, law, output pipeline), ns.
+    pub stage_decide: LatencyHistogram,
+    /// Stage: the command's publication (`send_copy`), ns.
+    pub stage_send: LatencyHistogram,
+    /// Stage: the `command_ready` notification (0 for a polling driver), ns.
+    pub stage_notify: LatencyHistogram,
+    /// Stage: the telemetry (filled and published; after the command), ns.
+    pub stage_telemetry: LatencyHistogram,
+}
+
+impl CycleTimings {
+    /// Every histogram with its name in the `--stats` report.
+    pub fn named(&self) -> [(&'static str, &LatencyHistogram); 8] {
+        [
+            ("wakeup_latency", &self.wakeup),
+            ("compute_time", &self.compute),
+            ("control_law_time", &self.step),
+            ("stage_setpoints", &self.stage_setpoints),
+            ("stage_decide", &self.stage_decide),
+            ("stage_send", &self.stage_send),
+            ("stage_notify", &self.stage_notify),
+            ("stage_telemetry", &self.stage_telemetry),
+        ]
+    }
 }
 
 /// The controller's loop: the [`Decider`], the receive buffer, the wait
@@ -159,6 +193,12 @@ pub struct Cycle {
     stale_deadline_ns: u64,
     last_wake_ns: u64,
     max_compute_ns: u64,
+    /// Answered states since the last telemetry sample.
+    since_telemetry: u32,
+    /// Send failures not yet counted in telemetry.
+    pending_send_failures: u64,
+    /// `command_ready` notifications skipped for polling drivers.
+    notifications_skipped: u64,
     timings: CycleTimings,
     status: Arc<Status>,
 }
@@ -174,6 +214,9 @@ impl Cycle {
             stale_deadline_ns: u64::MAX,
             last_wake_ns: 0,
             max_compute_ns: 0,
+            since_telemetry: 0,
+            pending_send_failures: 0,
+            notifications_skipped: 0,
             timings: CycleTimings::default(),
             status: Arc::new(Status::default()),
         })
@@ -197,6 +240,12 @@ impl Cycle {
     /// Latency distributions of the answered states so far.
     pub fn timings(&self) -> &CycleTimings {
         &self.timings
+    }
+
+    /// `command_ready` notifications skipped because the state's driver polls
+    /// (`STATE_FLAG_DRIVER_POLLS_COMMANDS`).
+    pub fn notifications_skipped(&self) -> u64 {
+        self.notifications_skipped
     }
 
     /// The control law.
@@ -328,6 +377,7 @@ impl Cycle {
             };
             self.decider.take_setpoint(&setpoint);
         }
+        let taken = monotonic_now_ns();
         let answer = self.decider.decide(&self.state, wake);
         if let Some(step_ns) = self.decider.step_ns() {
             self.timings.step.record(step_ns);
@@ -336,29 +386,54 @@ impl Cycle {
             self.status.publish(&self.decider.counters());
             return Outcome::Duplicate;
         };
-        let command = self.decider.stamp_command(monotonic_now_ns());
+        let decided = monotonic_now_ns();
+        let command = self.decider.stamp_command(decided);
         let mut send_failures = u64::from(ports.commands.send_copy(*command).is_err());
-        send_failures += u64::from(ports.command_ready.notify().is_err());
+        let published = monotonic_now_ns();
+        if self.state.flags & STATE_FLAG_DRIVER_POLLS_COMMANDS == 0 {
+            send_failures += u64::from(ports.command_ready.notify().is_err());
+        } else {
+            self.notifications_skipped += 1;
+        }
         let sent = monotonic_now_ns();
         // The state's notification, consumed now that it is answered.
         let _ = ports.state_ready.try_wait(|_| {});
         let compute_ns = sent.saturating_sub(wake);
         self.max_compute_ns = self.max_compute_ns.max(compute_ns);
         let latency = wake as i64 - self.state.header.stamp_ns as i64;
-        self.timings.compute.record(compute_ns);
-        self.timings.wakeup.record_signed(latency);
+        let t = &mut self.timings;
+        t.compute.record(compute_ns);
+        t.wakeup.record_signed(latency);
+        t.stage_setpoints.record(taken.saturating_sub(wake));
+        t.stage_decide.record(decided.saturating_sub(taken));
+        t.stage_send.record(published.saturating_sub(decided));
+        t.stage_notify.record(sent.saturating_sub(published));
 
-        // Telemetry (never blocks: safe overflow, discard on a full queue).
-        let timings = TelemetryTimings {
-            wakeup_latency_ns: latency,
-            compute_ns,
-            period_ns: period.unwrap_or(0),
-            max_compute_ns: self.max_compute_ns,
-        };
-        let t = self
-            .decider
-            .finish_telemetry(send_failures, timings, monotonic_now_ns());
-        let _ = ports.telemetry.send_copy(*t);
+        // Telemetry (never blocks: safe overflow, discard on a full queue),
+        // for every `telemetry_every`-th answer; the answers to setpoints
+        // and the counters are carried by the next sample.
+        self.since_telemetry += 1;
+        self.pending_send_failures += send_failures;
+        if self.since_telemetry >= self.settings.telemetry_every.max(1) {
+            self.since_telemetry = 0;
+            let timings = TelemetryTimings {
+                wakeup_latency_ns: latency,
+                compute_ns,
+                period_ns: period.unwrap_or(0),
+                max_compute_ns: self.max_compute_ns,
+            };
+            let t = self.decider.finish_telemetry(
+                self.pending_send_failures,
+                timings,
+                monotonic_now_ns(),
+            );
+            self.pending_send_failures = 0;
+            let _ = ports.telemetry.send_copy(*t);
+            let done = monotonic_now_ns();
+            self.timings
+                .stage_telemetry
+                .record(done.saturating_sub(sent));
+        }
         self.status.publish(&self.decider.counters());
         self.status
             .max_compute_ns

@@ -78,6 +78,11 @@ pub struct Args {
     /// compute time histograms, counters, real-time set-up obtained) as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Publish telemetry for every N-th answered state only (default 1: every
+    /// cycle). Setpoint answers and counters reach clients with the next
+    /// sample; `hcc run`'s recorder needs every cycle.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub telemetry_every: u32,
 }
 
 /// Parses `args` (program name first), runs the daemon, maps the result to
@@ -144,6 +149,7 @@ fn load(args: &Args) -> Result<Setup> {
     if let Some(w) = args.wait {
         settings.wait = w;
     }
+    settings.telemetry_every = args.telemetry_every;
     Ok(Setup {
         scenario,
         names,
@@ -311,16 +317,16 @@ fn write_stats(
         run_s: run.as_secs_f64(),
         ..Default::default()
     };
-    for (name, histogram) in [
-        ("wakeup_latency", &t.wakeup),
-        ("compute_time", &t.compute),
-        ("control_law_time", &t.step),
-    ] {
+    for (name, histogram) in t.named() {
         stats.figures.insert(name.into(), histogram.into());
     }
     for (name, _, value) in cycle.decider().counters().entries() {
         stats.counters.insert(name.into(), value);
     }
+    stats.counters.insert(
+        "notifications_skipped".into(),
+        cycle.notifications_skipped(),
+    );
     stats
         .write_json(path)
         .context("--stats: writing the timing report")

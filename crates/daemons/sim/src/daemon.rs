@@ -38,7 +38,9 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::{Scenario, SimMode};
 use hcc_msgs::ipc::{self, Services};
-use hcc_msgs::{JointState, ServiceNames, TorqueCommand, monotonic_now_ns};
+use hcc_msgs::{
+    JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, ServiceNames, TorqueCommand, monotonic_now_ns,
+};
 use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
@@ -97,6 +99,13 @@ pub struct Args {
     /// the answer for a while before blocking.
     #[arg(long, value_enum, default_value_t = WaitStrategy::Event)]
     pub wait: WaitStrategy,
+    /// Real time: wait for each answer by polling the `torque_command`
+    /// service only (never blocking on `command_ready`), and say so in every
+    /// state (`STATE_FLAG_DRIVER_POLLS_COMMANDS`), so that the controller
+    /// skips the notification. Spins up to the answer's deadline: for a
+    /// simulator on a core of its own.
+    #[arg(long)]
+    pub poll_commands: bool,
     /// When stopping, write the loop's timing report (tick lateness and
     /// state → command latency histograms, counters, real-time set-up
     /// obtained) as JSON here.
@@ -145,6 +154,8 @@ pub struct SimLoop<'a> {
     state: JointState,
     shared: &'a Shared,
     wait: WaitStrategy,
+    /// Poll for answers only ([`Args::poll_commands`]).
+    poll_commands: bool,
     /// Real time: lateness of each tick, ns.
     lateness: LatencyHistogram,
     /// Publication of state k → its answer received here, ns.
@@ -168,6 +179,7 @@ impl<'a> SimLoop<'a> {
         wait: WaitStrategy,
     ) -> Self {
         SimLoop {
+            poll_commands: false,
             driver,
             ports,
             newest: None,
@@ -184,6 +196,13 @@ impl<'a> SimLoop<'a> {
         }
     }
 
+    /// Waits for answers by polling only and flags the states
+    /// `STATE_FLAG_DRIVER_POLLS_COMMANDS` ([`Args::poll_commands`]).
+    pub fn with_polling(mut self, poll_commands: bool) -> Self {
+        self.poll_commands = poll_commands;
+        self
+    }
+
     /// The driver.
     pub fn driver(&self) -> &SimDriver {
         &self.driver
@@ -194,6 +213,9 @@ impl<'a> SimLoop<'a> {
         self.published_ns = monotonic_now_ns();
         self.answered = false;
         self.driver.write_state(&mut self.state, self.published_ns);
+        if self.poll_commands {
+            self.state.flags |= STATE_FLAG_DRIVER_POLLS_COMMANDS;
+        }
         let _ = self.ports.states.send_copy(self.state);
         let _ = self.ports.state_ready.notify();
     }
@@ -208,13 +230,25 @@ impl<'a> SimLoop<'a> {
             self.state_to_command
                 .record(now.saturating_sub(self.published_ns));
         }
-        // The notifications are consumed after the receipt time is taken.
-        let _ = self.ports.command_ready.try_wait(|_| {});
+        // The notifications are consumed after the receipt time is taken
+        // (a polling driver gets none).
+        if !self.poll_commands {
+            let _ = self.ports.command_ready.try_wait(|_| {});
+        }
         got
     }
 
     /// Real time: waits for the answer to state k until `deadline_ns`.
     pub fn wait_for_answer(&mut self, deadline_ns: u64) {
+        if self.poll_commands {
+            while monotonic_now_ns() < deadline_ns {
+                if self.take_answer() || rt::stop_requested() {
+                    return;
+                }
+                std::hint::spin_loop();
+            }
+            return;
+        }
         if self.wait == WaitStrategy::Hybrid {
             let poll_until = deadline_ns.min(self.published_ns + HYBRID_POLL_NS);
             while monotonic_now_ns() < poll_until {
@@ -505,7 +539,9 @@ pub fn run(args: Args) -> Result<()> {
             .context("starting the logging thread")?
     };
 
-    let mut lp = SimLoop::new(driver, &ports, &shared, args.wait);
+    let mut lp = SimLoop::new(driver, &ports, &shared, args.wait)
+        // Lockstep blocks on `command_ready` (it has no deadline to spin to).
+        .with_polling(args.poll_commands && mode == SimMode::Realtime);
     let started = std::time::Instant::now();
     let result = {
         let _rt = hcc_rtalloc::RtSection::enter();
