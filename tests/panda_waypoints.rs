@@ -1,7 +1,8 @@
 //! `config/panda-waypoints.toml`: `hcc simulate` applies the scenario's
-//! `[[setpoint]]` schedule and the Panda's TCP reaches each of the four
-//! waypoints to within 1 mm before the next one is sent (the posture goal
-//! and the TCP stiffness change on the way).
+//! `[[setpoint]]` schedule in-process, `hcc run` (real time, the two daemons
+//! over iceoryx2) sends it through the setpoint service; in both the Panda's
+//! TCP reaches each of the four waypoints to within 1 mm before the next one
+//! is sent (the posture goal and the TCP stiffness change on the way).
 
 use hcc_system_tests::*;
 use std::process::Command;
@@ -28,7 +29,95 @@ fn panda_visits_four_waypoints_within_a_millimetre() {
         Duration::from_secs(120),
     );
     assert!(sim.status.success(), "hcc simulate failed\n{}", sim.log());
-    let (header, rows) = read_csv(&dir.path().join("simulate/trajectory.csv"));
+    check_waypoints(&dir.path().join("simulate/trajectory.csv"));
+}
+
+#[test]
+fn hcc_run_in_real_time_sends_the_schedule_and_visits_the_waypoints() {
+    let dir = TempDir::new("panda_waypoints_run");
+    let namespace = unique_namespace("panda_waypoints_run");
+    let prefix = unique_file_prefix();
+    let run = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .env(FILE_PREFIX_ENV, &prefix)
+            .arg("run")
+            .arg(repo_root().join("config/panda-waypoints.toml"))
+            .args(["--namespace", &namespace])
+            .arg("--out")
+            .arg(dir.path().join("run"))
+            .arg("--no-plots")
+            .arg("--quiet"),
+        dir.path(),
+        "run",
+        Duration::from_secs(120),
+    );
+    assert!(run.status.success(), "hcc run failed\n{}", run.log());
+    let metrics = read_json(&dir.path().join("run/metrics.json"));
+    let ipc = &metrics["run"]["settings"]["ipc"];
+    assert_eq!(ipc["mode"], "realtime", "{ipc}");
+    let s = &ipc["scheduled_setpoints"];
+    println!("scheduled setpoints: {s}");
+    assert_eq!(s["sent"], 6, "{s}");
+    assert_eq!(s["answered"], 6, "{s}");
+    assert_eq!(s["rejected"], 0, "{s}");
+    // Sent before the first state, each waits in the controller for its cycle.
+    assert_eq!(s["late"], 0, "{s}");
+    assert!(
+        run.stdout.contains("scheduled setpoints: 6 of 6"),
+        "{}",
+        run.log()
+    );
+    check_waypoints(&dir.path().join("run/trajectory.csv"));
+    assert_clean(&namespace, &prefix);
+
+    // The equilibrium was the waypoint, not the start: the arm is where the
+    // in-process run puts it at the end of every waypoint's window.
+    let sim = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .arg("simulate")
+            .arg(repo_root().join("config/panda-waypoints.toml"))
+            .arg("--out")
+            .arg(dir.path().join("simulate"))
+            .arg("--no-plots"),
+        dir.path(),
+        "simulate",
+        Duration::from_secs(120),
+    );
+    assert!(sim.status.success(), "hcc simulate failed\n{}", sim.log());
+    let (header, a) = read_csv(&dir.path().join("simulate/trajectory.csv"));
+    let (_, b) = read_csv(&dir.path().join("run/trajectory.csv"));
+    let t = header.iter().position(|h| h == "t").unwrap();
+    let q: Vec<usize> = (1..=7)
+        .map(|j| header.iter().position(|h| *h == format!("q{j}")).unwrap())
+        .collect();
+    for &end in &SENT[1..] {
+        let at = |rows: &[Vec<f64>]| {
+            rows.iter()
+                .rfind(|r| r[t] < end - 1e-9)
+                .cloned()
+                .unwrap_or_else(|| panic!("no row before t = {end}"))
+        };
+        let (ra, rb) = (at(&a), at(&b));
+        let dq = q.iter().fold(0.0_f64, |m, &c| m.max((ra[c] - rb[c]).abs()));
+        println!(
+            "t = {:.3} s: |q_run − q_simulate|_max = {dq:.2e} rad",
+            rb[t]
+        );
+        assert!(
+            dq < 1e-3,
+            "at t = {} the arm is {dq} rad from the in-process run",
+            rb[t]
+        );
+    }
+}
+
+/// Each waypoint is reached to within 1 mm (TCP position error against the
+/// equilibrium, which is the waypoint once the transition is over) before
+/// the next one is sent.
+fn check_waypoints(trajectory: &std::path::Path) {
+    let (header, rows) = read_csv(trajectory);
     let col = |name: &str| {
         header
             .iter()
