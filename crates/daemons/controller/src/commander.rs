@@ -291,8 +291,9 @@ impl Commander {
 
     /// Takes, in arrival order, every queued setpoint whose application
     /// point the state `state_seq` has reached. Bounded by
-    /// [`MAX_PENDING_SETPOINTS`]; allocation-free.
-    pub fn apply_due(&mut self, state_seq: u64) {
+    /// [`MAX_PENDING_SETPOINTS`]; allocation-free. Returns how many it took.
+    pub fn apply_due(&mut self, state_seq: u64) -> usize {
+        let mut taken = 0;
         let mut k = 0;
         while k < self.pending.len {
             let slot = self.pending.order[k];
@@ -303,7 +304,9 @@ impl Commander {
             let sp = self.pending.slots[slot];
             self.pending.remove(k);
             self.take_counted(&sp, false);
+            taken += 1;
         }
+        taken
     }
 
     /// Setpoints waiting for their state.

@@ -237,7 +237,9 @@ impl Decider {
     /// [`Decider::setpoint_clock`]): takes the queued setpoints that are due,
     /// in arrival order. Allocation-free.
     pub fn apply_due_setpoints(&mut self, state_seq: u64) {
-        self.commander.apply_due(state_seq);
+        if self.commander.apply_due(state_seq) > 0 {
+            self.commander.fill(&mut self.telemetry);
+        }
     }
 
     /// A setpoint received in the cycle of the state `state_seq`: taken now
