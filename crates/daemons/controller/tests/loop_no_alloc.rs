@@ -64,7 +64,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             .map(|k| {
                 let phase = k as f64 * 1e-3;
                 let goal = [0.90 + 0.01 * phase.sin(), 0.80 + 0.01 * phase.cos()];
-                let at = if k % 3 == 0 { k + 3 } else { 0 };
+                let at = if k.is_multiple_of(3) { k + 3 } else { 0 };
                 let sp = Setpoint::for_level(9, k, 0, 2)
                     .with_goal(&goal)
                     .unwrap()
@@ -118,7 +118,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             // The last answer: this cycle's setpoint, or — when it waits for
             // a later state — the one that waited for this state (after the
             // first pass the indices run behind the states: applied at once).
-            let expected = if k < 2 * WARM_UP && k % 3 == 0 {
+            let expected = if k < 2 * WARM_UP && k.is_multiple_of(3) {
                 k.checked_sub(3)
             } else {
                 Some(k % (2 * WARM_UP))
@@ -253,7 +253,7 @@ fn the_decision_step_allocates_nothing() {
                 .with_velocity(&[0.02 * phase.cos(), -0.02 * phase.sin()])
                 .unwrap()
                 .with_duration(0.01);
-            if k % 5 == 0 {
+            if k.is_multiple_of(5) {
                 // Due two states later: through the queue of waiting setpoints.
                 sp = sp.with_apply_at(k + 2);
             }
