@@ -98,6 +98,13 @@ fn hcc_run_in_real_time_sends_the_schedule_and_visits_the_waypoints() {
         "{}",
         run.log()
     );
+    // The pose level's error norm mixes m and rad: the summary says so and
+    // gives each group in its unit.
+    assert!(
+        run.stdout.contains("(mixed units)") && run.stdout.contains("position rows: final"),
+        "{}",
+        run.log()
+    );
 
     let trajectory = dir.path().join("run/trajectory.csv");
     let windows = waypoints(&trajectory);
