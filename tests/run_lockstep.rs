@@ -117,3 +117,49 @@ fn lockstep_run_with_a_setpoint_schedule_reproduces_hcc_simulate() {
     assert_eq!(s["rejected"], 0, "{s}");
     assert_eq!(s["late"], 0, "{s}");
 }
+
+#[test]
+fn a_rejected_scheduled_setpoint_fails_the_run() {
+    // panda-waypoints with one more entry at t = 0.2 s: a TCP stiffness
+    // above the level's max_stiffness (4 × 300 N/m by default). It passes
+    // the load-time checks (model-free); the controller rejects it.
+    let dir = TempDir::new("run_lockstep_rejected");
+    let namespace = unique_namespace("run_lockstep_rejected");
+    let prefix = unique_file_prefix();
+    let original = repo_root().join("config/panda-waypoints.toml");
+    let urdf = repo_root().join("config/robots/panda/panda.urdf");
+    let text = std::fs::read_to_string(&original).unwrap().replace(
+        "urdf = \"robots/panda/panda.urdf\"",
+        &format!("urdf = {:?}", urdf.display().to_string()),
+    ) + "\n[[setpoint]]\nt = 0.2\nlevel = 1\nstiffness = [5000.0, 5000.0, 5000.0, 20.0, 20.0, 20.0]\n";
+    let config = dir.path().join("rejected.toml");
+    std::fs::write(&config, text).unwrap();
+    let run = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .env(FILE_PREFIX_ENV, &prefix)
+            .arg("run")
+            .arg(&config)
+            .args(["--duration", "1.0", "--lockstep", "--quiet", "--no-plots"])
+            .args(["--namespace", &namespace])
+            .arg("--out")
+            .arg(dir.path().join("run")),
+        dir.path(),
+        "run",
+        Duration::from_secs(120),
+    );
+    assert!(!run.status.success(), "the run should fail\n{}", run.log());
+    assert!(
+        run.stderr.contains("rejected")
+            && run.stderr.contains("t = 0.2 s for level 1")
+            && run.stderr.contains("stiffness_above_limit"),
+        "{}",
+        run.log()
+    );
+    // The results are written all the same, and say what happened.
+    let metrics = read_json(&dir.path().join("run/metrics.json"));
+    let s = &metrics["run"]["settings"]["ipc"]["scheduled_setpoints"];
+    assert_eq!(s["rejected"], 1, "{s}");
+    assert_eq!(s["answered"], 2, "{s}");
+    assert_clean(&namespace, &prefix);
+}

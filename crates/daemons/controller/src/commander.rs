@@ -7,11 +7,13 @@
 //! `[[commanding.level]]` box, by default the ball the chain reaches from its
 //! root) — and, if accepted, starts the level's transition
 //! ([`hcc_control::transition::Transition`]: minimum-jerk equilibrium, slerp
-//! for orientation tasks and a pose level's orientation rows, convex gains). A transition shorter than the level's
-//! speed limit allows is **stretched** to it: the equilibrium's peak speed
-//! 15/8 · |Δx| / T stays ≤ `max_speed` (|Δx| the Euclidean distance, the
-//! rotation angle for orientation, √(|Δp|² + θ²) for a pose). The answer (accepted, or a rejection
-//! code, with the duration in force) is kept per client for telemetry.
+//! for orientation tasks and a pose level's orientation rows, convex gains).
+//! A transition shorter than the level's speed limit allows is
+//! **stretched** to it: the equilibrium's peak speed 15/8 · |Δx| / T stays
+//! ≤ `max_speed` (|Δx| the Euclidean distance, the rotation angle for
+//! orientation, √(|Δp|² + θ²) for a pose). The answer (accepted, or a
+//! rejection code, with the duration in force) is kept per client for
+//! telemetry.
 //!
 //! [`Commander::receive`] is the daemon's entry: a setpoint whose
 //! application point ([`Setpoint::apply_at_state_seq`]) the current state has
