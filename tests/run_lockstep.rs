@@ -10,11 +10,15 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
+/// The tests one after the other (each is two daemons running flat out).
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Runs `config` (for `duration` s, if given) with `hcc simulate` and with
 /// `hcc run --lockstep`, asserts that the trajectories agree to 1e-12 and
 /// that the recorder lost nothing; returns the rows and the run's `ipc`
 /// figures.
 fn compare(test: &str, config: &Path, duration: Option<f64>) -> (usize, serde_json::Value) {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = TempDir::new(test);
     let namespace = unique_namespace(test);
     let prefix = unique_file_prefix();
@@ -120,6 +124,7 @@ fn lockstep_run_with_a_setpoint_schedule_reproduces_hcc_simulate() {
 
 #[test]
 fn a_rejected_scheduled_setpoint_fails_the_run() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     // panda-waypoints with one more entry at t = 0.2 s: a TCP stiffness
     // above the level's max_stiffness (4 × 300 N/m by default). It passes
     // the load-time checks (model-free); the controller rejects it.

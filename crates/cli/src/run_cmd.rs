@@ -95,6 +95,10 @@ pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// A running simulator that publishes nothing for this long is considered hung.
 const STALL_TIMEOUT: Duration = Duration::from_secs(10);
+/// `hcc-sim --lockstep-timeout-ms` of a lockstep run: a command missing
+/// this long is a miss (the simulator falls back and the run is no longer
+/// deterministic), so it is far above any stall of a loaded machine.
+const LOCKSTEP_TIMEOUT_MS: f64 = 5000.0;
 /// Time the controller gets to answer the simulator's last state.
 const FINAL_ANSWER_GRACE: Duration = Duration::from_millis(500);
 
@@ -666,6 +670,13 @@ impl Launch {
             // controller waits on the state_ready event instead of sleeping until
             // the next expected period.
             controller_args.extend(["--wait".to_string(), "event".to_string()]);
+            // A loaded machine may stall the controller for longer than the
+            // simulator's default 100 ms; a lockstep run must stay exact
+            // (the launcher itself notices a dead or hung child).
+            sim_args.extend([
+                "--lockstep-timeout-ms".to_string(),
+                format!("{LOCKSTEP_TIMEOUT_MS:?}"),
+            ]);
         }
         Ok(Launch {
             names: ServiceNames::for_namespace(namespace.clone()),
