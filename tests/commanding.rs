@@ -95,6 +95,50 @@ fn goals_gains_rejections_and_the_monitor() {
             }
         }
 
+        // Without --config the levels are "level N"; with the scenario they
+        // have its names; a scenario of other levels is refused.
+        assert_eq!(
+            sample(&ns, &prefix, dir.path())["levels"][2]["name"],
+            "level 3"
+        );
+        let cfg = config();
+        let named = hcc(
+            &[
+                "monitor",
+                "--json",
+                "--count",
+                "1",
+                "--config",
+                cfg.to_str().unwrap(),
+            ],
+            &ns,
+            &prefix,
+            dir.path(),
+            "named",
+        );
+        assert!(named.status.success(), "{}", named.log());
+        let v: serde_json::Value = serde_json::from_str(named.stdout.trim()).unwrap();
+        let names: Vec<&str> = (0..3)
+            .map(|i| v["levels"][i]["name"].as_str().unwrap())
+            .collect();
+        assert_eq!(names, ["TCP position", "TCP orientation", "posture"], "{v}");
+        let other = repo_root().join("config/paper-sim1.toml");
+        let refused = hcc(
+            &[
+                "monitor",
+                "--count",
+                "1",
+                "--config",
+                other.to_str().unwrap(),
+            ],
+            &ns,
+            &prefix,
+            dir.path(),
+            "refused",
+        );
+        assert!(!refused.status.success(), "{}", refused.log());
+        assert!(refused.stderr.contains("dimensions"), "{}", refused.log());
+
         // A goal 10 cm away, over 1 s: accepted, and the TCP is there (< 1 mm)
         // within the transition plus 2 s.
         let t0 = Instant::now();

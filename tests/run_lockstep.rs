@@ -1,24 +1,37 @@
 //! `hcc run --lockstep`: the two daemons (hcc-sim, hcc-controller) as real
 //! processes over iceoryx2, the simulator waiting for every command, give
 //! the same trajectory as the in-process `hcc simulate` — every column of
-//! every row, to 1e-12.
+//! every row, to 1e-12. With a `[[setpoint]]` schedule too: `hcc run` sends
+//! it through the setpoint service (each entry applied at its cycle), `hcc
+//! simulate` applies it in-process.
 
 use hcc_system_tests::*;
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-#[test]
-fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
-    let dir = TempDir::new("run_lockstep");
-    let namespace = unique_namespace("run_lockstep");
+/// The tests one after the other (each is two daemons running flat out).
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Runs `config` (for `duration` s, if given) with `hcc simulate` and with
+/// `hcc run --lockstep`, asserts that the trajectories agree to 1e-12 and
+/// that the recorder lost nothing; returns the rows and the run's `ipc`
+/// figures.
+fn compare(test: &str, config: &Path, duration: Option<f64>) -> (usize, serde_json::Value) {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = TempDir::new(test);
+    let namespace = unique_namespace(test);
     let prefix = unique_file_prefix();
-    let config = repo_root().join("config/paper-sim1.toml");
+    let duration_args: Vec<String> = duration
+        .map(|d| vec!["--duration".to_string(), format!("{d}")])
+        .unwrap_or_default();
 
     let sim = run_with_timeout(
         Command::new(bin("hcc"))
             .current_dir(repo_root())
             .arg("simulate")
-            .arg(&config)
+            .arg(config)
+            .args(&duration_args)
             .arg("--out")
             .arg(dir.path().join("simulate"))
             .arg("--no-plots"),
@@ -33,7 +46,8 @@ fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
             .current_dir(repo_root())
             .env(FILE_PREFIX_ENV, &prefix)
             .arg("run")
-            .arg(&config)
+            .arg(config)
+            .args(&duration_args)
             .arg("--lockstep")
             .args(["--namespace", &namespace])
             .arg("--out")
@@ -53,7 +67,8 @@ fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
     let b = read_csv(&dir.path().join("run/trajectory.csv"));
     let (worst, column, row) = max_csv_difference(&a, &b);
     println!(
-        "{} rows x {} columns; largest difference {worst:e} (column {column}, row {row})",
+        "{}: {} rows x {} columns; largest difference {worst:e} (column {column}, row {row})",
+        config.display(),
         a.1.len(),
         a.0.len()
     );
@@ -61,11 +76,10 @@ fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
         worst <= 1e-12,
         "hcc run --lockstep differs from hcc simulate by {worst:e} in column {column} at row {row}"
     );
-    assert_eq!(a.1.len(), 3001, "3 s at 1 kHz, both ends included");
 
     // The recorder lost nothing and says so.
     let metrics = read_json(&dir.path().join("run/metrics.json"));
-    let ipc = &metrics["run"]["settings"]["ipc"];
+    let ipc = metrics["run"]["settings"]["ipc"].clone();
     assert_eq!(ipc["mode"], "lockstep", "{ipc}");
     for stream in ["joint_state", "torque_command", "telemetry"] {
         assert_eq!(ipc["recorder_gaps"][stream], 0, "{ipc}");
@@ -73,5 +87,84 @@ fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
     assert_eq!(ipc["rows"], ipc["expected_rows"], "{ipc}");
     assert!(run.stdout.contains("latency"), "{}", run.log());
 
+    assert_clean(&namespace, &prefix);
+    (a.1.len(), ipc)
+}
+
+#[test]
+fn lockstep_run_over_ipc_reproduces_hcc_simulate() {
+    let (rows, ipc) = compare(
+        "run_lockstep",
+        &repo_root().join("config/paper-sim1.toml"),
+        None,
+    );
+    assert_eq!(rows, 3001, "3 s at 1 kHz, both ends included");
+    assert!(ipc.get("scheduled_setpoints").is_none(), "{ipc}");
+}
+
+#[test]
+fn lockstep_run_with_a_setpoint_schedule_reproduces_hcc_simulate() {
+    // The first 8 s of panda-waypoints: two waypoints, the posture change
+    // (t = 5 s) and the stiffness change with the third waypoint (both at
+    // t = 7.5 s, the same level, the same cycle).
+    let (rows, ipc) = compare(
+        "run_lockstep_schedule",
+        &repo_root().join("config/panda-waypoints.toml"),
+        Some(8.0),
+    );
+    assert_eq!(rows, 8001);
+    let s = &ipc["scheduled_setpoints"];
+    assert_eq!(s["entries"], 6, "{s}");
+    assert_eq!(s["due_within_the_run"], 5, "{s}");
+    assert_eq!(s["sent"], 5, "{s}");
+    assert_eq!(s["answered"], 5, "{s}");
+    assert_eq!(s["rejected"], 0, "{s}");
+    assert_eq!(s["late"], 0, "{s}");
+}
+
+#[test]
+fn a_rejected_scheduled_setpoint_fails_the_run() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    // panda-waypoints with one more entry at t = 0.2 s: a TCP stiffness
+    // above the level's max_stiffness (4 × 300 N/m by default). It passes
+    // the load-time checks (model-free); the controller rejects it.
+    let dir = TempDir::new("run_lockstep_rejected");
+    let namespace = unique_namespace("run_lockstep_rejected");
+    let prefix = unique_file_prefix();
+    let original = repo_root().join("config/panda-waypoints.toml");
+    let urdf = repo_root().join("config/robots/panda/panda.urdf");
+    let text = std::fs::read_to_string(&original).unwrap().replace(
+        "urdf = \"robots/panda/panda.urdf\"",
+        &format!("urdf = {:?}", urdf.display().to_string()),
+    ) + "\n[[setpoint]]\nt = 0.2\nlevel = 1\nstiffness = [5000.0, 5000.0, 5000.0, 20.0, 20.0, 20.0]\n";
+    let config = dir.path().join("rejected.toml");
+    std::fs::write(&config, text).unwrap();
+    let run = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .env(FILE_PREFIX_ENV, &prefix)
+            .arg("run")
+            .arg(&config)
+            .args(["--duration", "1.0", "--lockstep", "--quiet", "--no-plots"])
+            .args(["--namespace", &namespace])
+            .arg("--out")
+            .arg(dir.path().join("run")),
+        dir.path(),
+        "run",
+        Duration::from_secs(120),
+    );
+    assert!(!run.status.success(), "the run should fail\n{}", run.log());
+    assert!(
+        run.stderr.contains("rejected")
+            && run.stderr.contains("t = 0.2 s for level 1")
+            && run.stderr.contains("stiffness_above_limit"),
+        "{}",
+        run.log()
+    );
+    // The results are written all the same, and say what happened.
+    let metrics = read_json(&dir.path().join("run/metrics.json"));
+    let s = &metrics["run"]["settings"]["ipc"]["scheduled_setpoints"];
+    assert_eq!(s["rejected"], 1, "{s}");
+    assert_eq!(s["answered"], 2, "{s}");
     assert_clean(&namespace, &prefix);
 }

@@ -19,7 +19,7 @@ import math
 from typing import Any, Sequence
 
 #: Version of the message schema; part of every type name.
-SCHEMA_VERSION: int = 2
+SCHEMA_VERSION: int = 3
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -42,6 +42,10 @@ COMMAND_FLAGS_KNOWN: int = COMMAND_FLAG_GRAVITY_INCLUDED
 TELEMETRY_FLAG_PEER_LOST: int = 1 << 16
 #: Clients whose last answer :class:`Telemetry` carries (the most recent ones).
 MAX_SETPOINT_CLIENTS: int = 8
+#: Setpoints the controller keeps waiting for their application point
+#: (:attr:`Setpoint.apply_at_state_seq`), over all clients; one more is
+#: rejected with :attr:`Rejection.PENDING_FULL`.
+MAX_PENDING_SETPOINTS: int = 32
 
 _Joints = ctypes.c_double * MAX_JOINTS
 
@@ -330,6 +334,8 @@ class SetpointAnswer(ctypes.Structure):
         ("code", ctypes.c_uint32),
         ("level", ctypes.c_uint32),
         ("duration_s", ctypes.c_double),
+        ("rejected", ctypes.c_uint32),
+        ("late", ctypes.c_uint32),
     ]
     #: The client's :attr:`Setpoint.client_id`.
     client_id: int
@@ -344,6 +350,11 @@ class SetpointAnswer(ctypes.Structure):
     #: The transition duration in force, s (stretched to the level's speed
     #: limit if needed; 0 when rejected).
     duration_s: float
+    #: Setpoints of this client rejected so far (of ``answered``).
+    rejected: int
+    #: Setpoints of this client applied late so far (they arrived after the
+    #: state of their :attr:`Setpoint.apply_at_state_seq`).
+    late: int
 
     @staticmethod
     def type_name() -> str:
@@ -362,7 +373,7 @@ class SetpointAnswer(ctypes.Structure):
         return (
             f"SetpointAnswer(client_id={self.client_id:#x}, seq={self.seq}, "
             f"answered={self.answered}, code={self.code}, level={self.level}, "
-            f"duration_s={self.duration_s})"
+            f"duration_s={self.duration_s}, rejected={self.rejected}, late={self.late})"
         )
 
 
@@ -522,7 +533,8 @@ class Rejection(enum.IntEnum):
 
     The codes are stable (they travel in telemetry). :meth:`Setpoint.validate`
     checks codes 1-11 (no model needed); the controller checks 12-16 against
-    its law and model. :attr:`label` is the Rust ``Rejection::name()``
+    its law and model, and 17 against its queue of setpoints waiting for
+    their state. :attr:`label` is the Rust ``Rejection::name()``
     (snake_case, as in ``hcc goal`` and ``hcc monitor --json``), :attr:`reason`
     the text for a person.
     """
@@ -559,6 +571,9 @@ class Rejection(enum.IntEnum):
     JOINT_LIMIT = 15
     #: A position goal lies outside the level's workspace.
     OUTSIDE_WORKSPACE = 16
+    #: The setpoint is due at a later state, but :data:`MAX_PENDING_SETPOINTS`
+    #: setpoints already wait for theirs.
+    PENDING_FULL = 17
 
     @property
     def label(self) -> str:
@@ -599,6 +614,7 @@ _REJECTION_TEXT.update({
     14: "the stiffness exceeds the level's max_stiffness",
     15: "a joint goal lies outside the joint's limits",
     16: "a position goal lies outside the level's workspace",
+    17: "too many setpoints wait for their state sequence number",
 })
 
 
@@ -712,6 +728,7 @@ class Setpoint(ctypes.Structure):
         ("dim", ctypes.c_uint32),
         ("gain_layout", ctypes.c_uint32),
         ("duration_s", ctypes.c_double),
+        ("apply_at_state_seq", ctypes.c_uint64),
         ("goal", _Task),
         ("velocity", _Task),
         ("stiffness", _Gains),
@@ -730,6 +747,10 @@ class Setpoint(ctypes.Structure):
     gain_layout: int
     #: Transition duration, s (0: as fast as the level's speed limit allows).
     duration_s: float
+    #: Apply in the controller cycle of the first joint state whose sequence
+    #: number is ≥ this (0: on receipt); a setpoint arriving later is applied
+    #: on receipt and counted late (:attr:`SetpointAnswer.late`).
+    apply_at_state_seq: int
 
     @staticmethod
     def type_name() -> str:
@@ -821,6 +842,12 @@ class Setpoint(ctypes.Structure):
     def with_duration(self, duration_s: float) -> "Setpoint":
         """Sets the transition duration in s."""
         self.duration_s = float(duration_s)
+        return self
+
+    def with_apply_at(self, state_seq: int) -> "Setpoint":
+        """Sets the application point: the cycle of the first joint state with
+        sequence number ≥ ``state_seq`` (0: on receipt); returns self."""
+        self.apply_at_state_seq = int(state_seq)
         return self
 
     def check(self) -> Rejection | None:

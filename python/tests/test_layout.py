@@ -46,8 +46,8 @@ def test_constants(rust: dict[str, Any]) -> None:
     assert len(flags) == 11, "a flag is not compared"
     setpoint = rust["setpoint"]
     assert set(setpoint) == {
-        "max_setpoint_clients", "max_gain_entries", "max_transition_s", "symmetry_tolerance",
-        "answer_accepted",
+        "max_setpoint_clients", "max_pending_setpoints", "max_gain_entries", "max_transition_s",
+        "symmetry_tolerance", "answer_accepted",
     }
     for key, value in setpoint.items():
         assert getattr(msgs, key.upper()) == value, key
@@ -238,8 +238,10 @@ def test_setpoint_builders_fill_and_size_check() -> None:
         .with_stiffness([[400.0, 10.0], [10.0, 300.0]])
         .with_damping([30.0, 20.0])
         .with_duration(1.5)
+        .with_apply_at(1234)
     )
     assert s.check() is None
+    assert s.apply_at_state_seq == 1234
     assert (s.client_id, s.header.seq, s.level, s.header.schema_version) == (
         7, 3, 1, msgs.SCHEMA_VERSION,
     )

@@ -14,6 +14,7 @@ mod jitter_cmd;
 mod model_cmd;
 mod plot_cmd;
 mod run_cmd;
+mod run_schedule;
 mod simulate_cmd;
 
 #[derive(Parser)]

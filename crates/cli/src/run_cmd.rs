@@ -29,6 +29,20 @@
 //!   consistency check (reported, not used); where the shadow fails, the
 //!   columns that need it are NaN.
 //!
+//! # Scheduled setpoints
+//!
+//! A scenario's `[[setpoint]]` entries are sent by a scheduler thread of the
+//! launcher through the setpoint service, as a client sends them
+//! ([`crate::run_schedule`]): each carries its cycle k as its application
+//! point, the controller takes it in the cycle of state k, and the shadow
+//! controller applies the same schedule at the same cycles (the in-process
+//! `hcc_controller::schedule::Schedule` of `hcc simulate`). A lockstep run
+//! with a schedule therefore equals `hcc simulate`; in real time every entry
+//! that arrives ahead of its state (all of them, normally: they are sent
+//! well ahead) is applied at its exact cycle, a late one on receipt
+//! (counted). A rejected entry makes the run fail after its results are
+//! written.
+//!
 //! # Not disturbing the real-time loops
 //!
 //! Publishers of the contract never block (safe overflow): the recorder's
@@ -71,6 +85,7 @@ use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
     wait_until_controller_listens,
 };
+use crate::run_schedule::Scheduler;
 use crate::simulate_cmd::write_results;
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
@@ -80,6 +95,10 @@ pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// A running simulator that publishes nothing for this long is considered hung.
 const STALL_TIMEOUT: Duration = Duration::from_secs(10);
+/// `hcc-sim --lockstep-timeout-ms` of a lockstep run: a command missing
+/// this long is a miss (the simulator falls back and the run is no longer
+/// deterministic), so it is far above any stall of a loaded machine.
+const LOCKSTEP_TIMEOUT_MS: f64 = 5000.0;
 /// Time the controller gets to answer the simulator's last state.
 const FINAL_ANSWER_GRACE: Duration = Duration::from_millis(500);
 
@@ -228,7 +247,7 @@ impl<'a> RowBuilder<'a> {
             period: 1.0 / s.control_rate_hz,
             traj: recorder.trajectory(cycles + 1)?,
             recorder,
-            shadow: HierarchicalLaw::new(scenario)?,
+            shadow: crate::simulate_cmd::scheduled_law(scenario)?,
             shadow_failures: 0,
             shadow_tau_diff: 0.0,
             q: DVector::zeros(n),
@@ -258,6 +277,8 @@ impl<'a> RowBuilder<'a> {
     fn step_shadow(&mut self, state: &StateRecord, tel: &Telemetry) -> bool {
         self.q.as_mut_slice().copy_from_slice(&state.q);
         self.qd.as_mut_slice().copy_from_slice(&state.qd);
+        // The schedule's cycle k is the state's sequence number.
+        self.shadow.set_next_cycle(state.seq);
         if self.shadow.compute(&self.q, &self.qd).is_err() {
             self.shadow_failures += 1;
             return false;
@@ -697,6 +718,13 @@ impl Launch {
             // controller waits on the state_ready event instead of sleeping until
             // the next expected period.
             controller_args.extend(["--wait".to_string(), "event".to_string()]);
+            // A loaded machine may stall the controller for longer than the
+            // simulator's default 100 ms; a lockstep run must stay exact
+            // (the launcher itself notices a dead or hung child).
+            sim_args.extend([
+                "--lockstep-timeout-ms".to_string(),
+                format!("{LOCKSTEP_TIMEOUT_MS:?}"),
+            ]);
         } else if !args.no_rt {
             let (sim_rt, controller_rt) = realtime_args(scenario, args.quiet);
             sim_args.extend(sim_rt);
@@ -720,8 +748,10 @@ impl Launch {
     }
 
     /// Starts the controller, waits until it listens (so that control starts
-    /// at t = 0: in real time the plant does not wait), then the simulator.
-    fn spawn(&self) -> anyhow::Result<(Daemon, Daemon)> {
+    /// at t = 0: in real time the plant does not wait), starts the scheduler
+    /// of the scenario's `[[setpoint]]`s (if any; its first entries reach the
+    /// controller before the first state), then the simulator.
+    fn spawn(&self, scenario: &Scenario) -> anyhow::Result<(Daemon, Daemon, Option<Scheduler>)> {
         let node = ipc::create_node(
             "hcc-run-probe",
             SignalHandlingMode::Disabled,
@@ -735,13 +765,24 @@ impl Launch {
         )?;
         wait_until_controller_listens(&mut controller, &node, &self.names, 1)?;
         drop(node);
+        let scheduler = if scenario.setpoints.is_empty() {
+            None
+        } else {
+            match Scheduler::start(self.namespace.as_str(), self.file_prefix.clone(), scenario) {
+                Ok(s) => Some(s),
+                Err(e) => {
+                    controller.terminate(TERMINATE_GRACE);
+                    return Err(e);
+                }
+            }
+        };
         let sim = Daemon::spawn(
             "hcc-sim",
             &self.sim_exe,
             &self.sim_args,
             self.file_prefix.as_deref(),
         )?;
-        Ok((controller, sim))
+        Ok((controller, sim, scheduler))
     }
 }
 
@@ -1006,13 +1047,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .set_duration(d)
             .with_context(|| format!("--duration {d}"))?;
     }
-    if !scenario.setpoints.is_empty() {
-        tracing::warn!(
-            "{} scheduled [[setpoint]] entries are not sent by hcc run yet (hcc simulate applies them); \
-             the run keeps the scenario's initial goals",
-            scenario.setpoints.len()
-        );
-    }
     let launch = Launch::new(&args, &scenario)?;
 
     // Subscribe before the children start, so that no sample is missed.
@@ -1026,7 +1060,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             scenario.name, launch.mode, launch.duration, launch.namespace
         );
     }
-    let (controller, sim) = launch.spawn()?;
+    let (controller, sim, scheduler) = launch.spawn(&scenario)?;
     let mut children = Children { controller, sim };
     let started = Instant::now();
     let end = record_run(
@@ -1042,14 +1076,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     }
     // Stop what still runs, collecting the samples published meanwhile.
     let end = children.stop(end);
+    let schedule = scheduler.map(Scheduler::finish);
     receiver.finish(&mut rec)?;
     rec.join(&mut rows, true)?;
 
     let figures = IpcFigures::new(&rec, &scenario);
     let mut description = describe(&scenario);
-    description
-        .settings
-        .insert("ipc".into(), figures.json(&launch, &rec, &rows));
+    let mut ipc_json = figures.json(&launch, &rec, &rows);
+    if let Some(report) = &schedule {
+        ipc_json["scheduled_setpoints"] = report.json(&scenario.setpoints);
+    }
+    description.settings.insert("ipc".into(), ipc_json);
     let written = if rows.traj.n_rows() == 0 {
         None
     } else {
@@ -1064,6 +1101,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         print!("{}", m.summary());
     }
     figures.print(launch.mode, &rec, &rows);
+    if let Some(report) = &schedule {
+        println!("{}", report.line());
+        if report.late > 0 {
+            println!(
+                "  warning: {} scheduled setpoint(s) reached the controller after their cycle and were applied on receipt",
+                report.late
+            );
+        }
+    }
     for line in children
         .sim
         .stdout_lines()
@@ -1077,7 +1123,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if written.is_some() {
         println!("results in {}", launch.out.display());
     }
-    outcome(end, &rec, written.is_some(), &launch.out, started)
+    outcome(end, &rec, written.is_some(), &launch.out, started)?;
+    match &schedule {
+        Some(report) => report.check(&scenario.setpoints),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]

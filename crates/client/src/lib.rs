@@ -109,13 +109,20 @@ impl Client {
     /// its sequence number. Use it for a stream (e.g. goal and velocity
     /// every millisecond).
     pub fn send(&mut self, setpoint: &Setpoint) -> Result<u64, ClientError> {
+        self.publish(setpoint)?;
+        Ok(setpoint.header.seq)
+    }
+
+    /// [`Client::send`], returning how many subscribers (controllers) the
+    /// setpoint reached: 0 means no controller listens yet, and the setpoint
+    /// is lost (the service keeps no history).
+    pub fn publish(&mut self, setpoint: &Setpoint) -> Result<usize, ClientError> {
         setpoint.validate().map_err(ClientError::Invalid)?;
         let mut s = *setpoint;
         s.header.stamp_ns = hcc_msgs::monotonic_now_ns();
         self.publisher
             .send_copy(s)
-            .map_err(|e| ClientError::Send(format!("{e:?}")))?;
-        Ok(s.header.seq)
+            .map_err(|e| ClientError::Send(format!("{e:?}")))
     }
 
     /// Sets level `level`'s goal (its task coordinates, as in the TOML) over

@@ -16,7 +16,11 @@
 //! * Orientation goals (roll, pitch, yaw as in the scenario): interpolated on
 //!   SO(3) by slerp, R_d(t) = R_0 exp(s log(R_0ᵀ R_1)) — the geodesic, not
 //!   per angle — with the world-frame angular velocity
-//!   ω_d = (ds/dt) R_0 log(R_0ᵀ R_1).
+//!   ω_d = (ds/dt) R_0 log(R_0ᵀ R_1). At the end of the transition the
+//!   equilibrium is the target's roll, pitch, yaw exactly as sent.
+//! * 6-D pose goals (x, y, z, roll, pitch, yaw): the position rows as vector
+//!   goals, the orientation rows by slerp as above, on the same profile s(t)
+//!   (ẋ_d = [ṡ Δp; ω_d]).
 //! * Gains: K(t) = (1 − s) K_0 + s K_1 and the same for D. A convex
 //!   combination of symmetric positive definite matrices is symmetric
 //!   positive definite (xᵀ K x = (1 − s) xᵀ K_0 x + s xᵀ K_1 x > 0), so the
@@ -51,6 +55,28 @@ pub enum GoalKind {
     Vector,
     /// Roll, pitch, yaw (3 values), interpolated on SO(3) by slerp.
     RollPitchYaw,
+    /// A 6-D pose: x, y, z componentwise, then roll, pitch, yaw by slerp.
+    Pose,
+}
+
+impl GoalKind {
+    /// The number of values a goal of this kind has, if fixed.
+    pub fn fixed_dim(self) -> Option<usize> {
+        match self {
+            GoalKind::Vector => None,
+            GoalKind::RollPitchYaw => Some(3),
+            GoalKind::Pose => Some(6),
+        }
+    }
+
+    /// The first of the three roll, pitch, yaw rows, if any.
+    pub fn rotation_rows(self) -> Option<usize> {
+        match self {
+            GoalKind::Vector => None,
+            GoalKind::RollPitchYaw => Some(0),
+            GoalKind::Pose => Some(3),
+        }
+    }
 }
 
 /// One level's equilibrium and gains, moving from where they are to a new
@@ -88,14 +114,21 @@ pub struct Target<'a> {
     pub damping: Option<&'a DMatrix<f64>>,
 }
 
+#[cfg(test)]
 fn rpy(v: &DVector<f64>) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_euler_angles(v[0], v[1], v[2])
+    rpy_at(v.as_slice(), 0)
+}
+
+/// The rotation of the roll, pitch, yaw values at `v[o..o + 3]`.
+fn rpy_at(v: &[f64], o: usize) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_euler_angles(v[o], v[o + 1], v[o + 2])
 }
 
 impl Transition {
     /// At rest at `goal` with gains `stiffness`, `damping` (m×m each, m =
-    /// `goal.len()`; 3 for [`GoalKind::RollPitchYaw`]). Allocates. An error
-    /// names a wrong size or a non-finite value.
+    /// `goal.len()`; 3 for [`GoalKind::RollPitchYaw`], 6 for
+    /// [`GoalKind::Pose`]). Allocates. An error names a wrong size or a
+    /// non-finite value.
     pub fn new(
         kind: GoalKind,
         goal: &[f64],
@@ -106,6 +139,11 @@ impl Transition {
         if kind == GoalKind::RollPitchYaw && m != 3 {
             return Err(ControlError::Spec(format!(
                 "an orientation goal has 3 values (roll, pitch, yaw), not {m}"
+            )));
+        }
+        if kind == GoalKind::Pose && m != 6 {
+            return Err(ControlError::Spec(format!(
+                "a pose goal has 6 values (x, y, z, roll, pitch, yaw), not {m}"
             )));
         }
         for (name, g) in [("stiffness", stiffness), ("damping", damping)] {
@@ -124,10 +162,9 @@ impl Transition {
             ));
         }
         let g = DVector::from_column_slice(goal);
-        let r = if kind == GoalKind::RollPitchYaw {
-            rpy(&g)
-        } else {
-            UnitQuaternion::identity()
+        let r = match kind.rotation_rows() {
+            Some(o) => rpy_at(goal, o),
+            None => UnitQuaternion::identity(),
         };
         Ok(Self {
             kind,
@@ -160,25 +197,26 @@ impl Transition {
     }
 
     /// Distance from the current equilibrium to `goal`: Euclidean for
-    /// vector goals, the rotation angle for roll, pitch, yaw.
+    /// vector goals, the rotation angle for roll, pitch, yaw, and for a pose
+    /// √(|Δp|² + θ²) (θ the rotation angle).
     pub fn distance_to(&self, goal: &[f64]) -> f64 {
         if goal.len() != self.dim() {
             return f64::INFINITY;
         }
-        match self.kind {
-            GoalKind::Vector => goal
-                .iter()
-                .zip(self.goal.iter())
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>()
-                .sqrt(),
-            GoalKind::RollPitchYaw => {
-                self.current_rotation()
-                    .angle_to(&UnitQuaternion::from_euler_angles(
-                        goal[0], goal[1], goal[2],
-                    ))
-            }
-        }
+        let vector_rows = match self.kind.rotation_rows() {
+            Some(o) => o,
+            None => self.dim(),
+        };
+        let d2: f64 = goal[..vector_rows]
+            .iter()
+            .zip(self.goal.iter())
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum();
+        let theta = match self.kind.rotation_rows() {
+            Some(o) => self.current_rotation().angle_to(&rpy_at(goal, o)),
+            None => 0.0,
+        };
+        (d2 + theta * theta).sqrt()
     }
 
     /// Sets a velocity feed-forward v (m values): ẋ_d = v from now on
@@ -206,14 +244,15 @@ impl Transition {
         self.goal_from.copy_from(&self.goal);
         self.k_from.copy_from(&self.stiffness);
         self.d_from.copy_from(&self.damping);
-        if self.kind == GoalKind::RollPitchYaw {
+        let rotation_rows = self.kind.rotation_rows();
+        if rotation_rows.is_some() {
             self.rot_from = self.current_rotation();
         }
         if let Some(goal) = target.goal.filter(|g| g.len() == m) {
             self.feed_forward.fill(0.0);
             self.goal_to.as_mut_slice().copy_from_slice(goal);
-            if self.kind == GoalKind::RollPitchYaw {
-                self.rot_to = rpy(&self.goal_to);
+            if let Some(o) = rotation_rows {
+                self.rot_to = rpy_at(goal, o);
             }
         } else {
             self.goal_to.copy_from(&self.goal);
@@ -290,7 +329,7 @@ impl Transition {
     pub fn current_rotation(&self) -> UnitQuaternion<f64> {
         match self.kind {
             GoalKind::Vector => UnitQuaternion::identity(),
-            GoalKind::RollPitchYaw => {
+            GoalKind::RollPitchYaw | GoalKind::Pose => {
                 let (s, _, _) = quintic(self.progress());
                 self.rot_from.slerp(&self.rot_to, s)
             }
@@ -306,26 +345,34 @@ impl Transition {
         } else {
             0.0
         };
-        match self.kind {
-            GoalKind::Vector => {
-                for j in 0..self.dim() {
-                    let delta = self.goal_to[j] - self.goal_from[j];
-                    self.goal[j] = self.goal_from[j] + s * delta;
-                    self.goal_velocity[j] = ds_dt * delta;
-                }
+        let rotation_rows = self.kind.rotation_rows();
+        for j in 0..self.dim() {
+            if rotation_rows.is_some_and(|o| (o..o + 3).contains(&j)) {
+                continue;
             }
-            GoalKind::RollPitchYaw => {
+            let delta = self.goal_to[j] - self.goal_from[j];
+            self.goal[j] = self.goal_from[j] + s * delta;
+            self.goal_velocity[j] = ds_dt * delta;
+        }
+        if let Some(o) = rotation_rows {
+            if sigma >= 1.0 {
+                // At rest on the target: its roll, pitch, yaw as sent.
+                for j in o..o + 3 {
+                    self.goal[j] = self.goal_to[j];
+                    self.goal_velocity[j] = 0.0;
+                }
+            } else {
                 let r = self.rot_from.slerp(&self.rot_to, s);
                 let (roll, pitch, yaw) = r.euler_angles();
-                self.goal[0] = roll;
-                self.goal[1] = pitch;
-                self.goal[2] = yaw;
+                self.goal[o] = roll;
+                self.goal[o + 1] = pitch;
+                self.goal[o + 2] = yaw;
                 // ω = ṡ R_0 log(R_0ᵀ R_1), constant direction along the geodesic.
                 let log: Vector3<f64> = (self.rot_from.inverse() * self.rot_to).scaled_axis();
                 let omega = self.rot_from * log * ds_dt;
-                self.goal_velocity
-                    .as_mut_slice()
-                    .copy_from_slice(omega.as_slice());
+                for a in 0..3 {
+                    self.goal_velocity[o + a] = omega[a];
+                }
             }
         }
         if self.feed_forward.iter().any(|&v| v != 0.0) {
@@ -523,6 +570,76 @@ mod tests {
             assert!((r.angle_to(&rb) - (1.0 - s) * theta).abs() < 1e-9);
         }
         assert!(t.current_rotation().angle_to(&rb) < 1e-12);
+    }
+
+    #[test]
+    fn a_pose_moves_its_position_linearly_and_its_orientation_on_the_geodesic() {
+        let k = diag(&[100.0; 6]);
+        let from = [0.4, 0.0, 0.5, 3.0, -0.2, 0.1];
+        let to = [0.5, 0.1, 0.3, -2.0, 0.6, -1.2];
+        let mut t = Transition::new(GoalKind::Pose, &from, &k, &k).unwrap();
+        t.start(
+            Target {
+                goal: Some(&to),
+                ..Target::default()
+            },
+            1.0,
+        );
+        let (ra, rb) = (rpy_at(&from, 3), rpy_at(&to, 3));
+        let theta = ra.angle_to(&rb);
+        let axis = (ra.inverse() * rb).axis().unwrap();
+        assert!(theta > 1.0, "a large rotation: {theta}");
+        let mut last_angle = 0.0;
+        let steps = 200;
+        for k in 1..=steps {
+            t.advance(1.0 / steps as f64);
+            let (s, ds, _) = quintic(k as f64 / steps as f64);
+            let g = t.goal();
+            // Position rows: the straight line, at s.
+            for a in 0..3 {
+                assert!((g[a] - (from[a] + s * (to[a] - from[a]))).abs() < 1e-12);
+                assert!((t.goal_velocity()[a] - ds * (to[a] - from[a])).abs() < 1e-9);
+            }
+            // Orientation rows: on the geodesic — the angle to the start grows
+            // monotonically (as s·θ), the axis of R_0ᵀ R(t) stays that of R_0ᵀ R_1.
+            let r = rpy_at(g, 3);
+            let angle = ra.angle_to(&r);
+            assert!(angle >= last_angle - 1e-12, "monotone at step {k}");
+            assert!((angle - s * theta).abs() < 1e-9, "s·θ at step {k}");
+            if angle > 1e-6 {
+                let ax = (ra.inverse() * r).axis().unwrap();
+                assert!(
+                    (ax.into_inner() - axis.into_inner()).norm() < 1e-9,
+                    "axis at step {k}"
+                );
+            }
+            // ω_d along the world-frame axis R_0 n, of size ṡ θ.
+            let w = Vector3::new(
+                t.goal_velocity()[3],
+                t.goal_velocity()[4],
+                t.goal_velocity()[5],
+            );
+            let expected = ra * axis.into_inner() * (ds * theta);
+            if k < steps {
+                assert!((w - expected).norm() < 1e-9, "ω at step {k}: {w:?}");
+            }
+            last_angle = angle;
+        }
+        assert!(!t.is_moving());
+        assert_eq!(t.goal(), &to, "at rest on the target as sent");
+        assert_eq!(t.goal_velocity(), &[0.0; 6]);
+        // The distance for the speed limit: √(|Δp|² + θ²).
+        let back = t.distance_to(&from);
+        let dp: f64 = (0..3).map(|a| (to[a] - from[a]).powi(2)).sum();
+        assert!((back - (dp + theta * theta).sqrt()).abs() < 1e-9);
+        let e = Transition::new(
+            GoalKind::Pose,
+            &[0.0; 3],
+            &diag(&[1.0; 3]),
+            &diag(&[1.0; 3]),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("6 values"), "{e}");
     }
 
     #[test]

@@ -12,9 +12,9 @@ use std::mem::{align_of, offset_of, size_of};
 use hcc_msgs::{
     ANSWER_ACCEPTED, COMMAND_FLAG_GRAVITY_INCLUDED, EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED,
     GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, Header, JointState,
-    MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_SETPOINT_CLIENTS,
-    MAX_TASK_DIM, MAX_TRANSITION_S, Rejection, SCHEMA_VERSION, SETPOINT_DAMPING,
-    SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
+    MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_PENDING_SETPOINTS,
+    MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S, Rejection, SCHEMA_VERSION,
+    SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
     STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN,
     SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST,
     Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
@@ -78,7 +78,7 @@ fn main() {
         ),
         (
             "SetpointAnswer",
-            fields!(SetpointAnswer: client_id, seq, answered, code, level, duration_s),
+            fields!(SetpointAnswer: client_id, seq, answered, code, level, duration_s, rejected, late),
         ),
         (
             "Telemetry",
@@ -90,7 +90,7 @@ fn main() {
         (
             "Setpoint",
             fields!(Setpoint: header, client_id, level, fields, dim, gain_layout, duration_s,
-                goal, velocity, stiffness, damping),
+                apply_at_state_seq, goal, velocity, stiffness, damping),
         ),
     ];
     let body: Vec<String> = structs
@@ -151,6 +151,7 @@ fn main() {
     ]);
     let setpoint = object(&[
         ("max_setpoint_clients", MAX_SETPOINT_CLIENTS.to_string()),
+        ("max_pending_setpoints", MAX_PENDING_SETPOINTS.to_string()),
         ("max_gain_entries", MAX_GAIN_ENTRIES.to_string()),
         ("max_transition_s", format!("{MAX_TRANSITION_S:?}")),
         ("symmetry_tolerance", format!("{SYMMETRY_TOLERANCE:?}")),

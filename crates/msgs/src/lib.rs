@@ -101,7 +101,7 @@
 //! ## Versions
 //!
 //! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
-//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema2`), so
+//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema3`), so
 //! iceoryx2 itself refuses to connect peers of different schemas when a
 //! service is opened (`IncompatibleTypes`; size and alignment are compared
 //! too). iceoryx2's own version must match exactly between peers as well:
@@ -117,7 +117,11 @@
 //! the controller checks the rest against its law and model. Every setpoint
 //! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
 //! numbers) in [`Telemetry::setpoint_answers`]; that extension of
-//! the telemetry layout is schema 2.
+//! the telemetry layout is schema 2. Schema 3 adds the setpoint's
+//! application point ([`Setpoint::apply_at_state_seq`]: the controller keeps
+//! the setpoint until the cycle of that joint-state sequence number, which
+//! makes scheduled setpoints over IPC exact) and per-client counts of
+//! rejected and late setpoints in [`SetpointAnswer`].
 //!
 //! ## Real-time use
 //!
@@ -142,8 +146,9 @@ pub use service::{
 };
 pub use setpoint::{
     ANSWER_ACCEPTED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, MAX_GAIN_ENTRIES,
-    MAX_TRANSITION_S, Rejection, SETPOINT, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL,
-    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SYMMETRY_TOLERANCE, Setpoint, answer_code,
+    MAX_PENDING_SETPOINTS, MAX_TRANSITION_S, Rejection, SETPOINT, SETPOINT_DAMPING,
+    SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
+    SYMMETRY_TOLERANCE, Setpoint, answer_code,
 };
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
@@ -157,7 +162,9 @@ pub use types::{
 /// or meaning, together with the `@schema<N>` suffix of every `type_name`
 /// (a unit test checks they agree). Schema 2: [`Telemetry`] answers
 /// setpoints (active goals and gains, transition progress, per-client answers).
-pub const SCHEMA_VERSION: u32 = 2;
+/// Schema 3: [`Setpoint::apply_at_state_seq`], [`SetpointAnswer::rejected`]
+/// and [`SetpointAnswer::late`], [`STATE_FLAG_DRIVER_POLLS_COMMANDS`].
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// Joint capacity. 32 covers single and dual 7-DOF arms, mobile manipulators
 /// and humanoid upper bodies, and keeps [`JointState`] (816 B) and

@@ -54,6 +54,12 @@ pub const GAIN_LAYOUT_KNOWN: u32 = GAIN_STIFFNESS_FULL | GAIN_DAMPING_FULL;
 /// Capacity of one full gain matrix (m×m with m ≤ [`MAX_TASK_DIM`]).
 pub const MAX_GAIN_ENTRIES: usize = MAX_TASK_DIM * MAX_TASK_DIM;
 
+/// Setpoints the controller keeps waiting for their application point
+/// ([`Setpoint::apply_at_state_seq`] ahead of the current state), over all
+/// clients. A setpoint that finds them all taken is rejected
+/// ([`Rejection::PendingFull`]).
+pub const MAX_PENDING_SETPOINTS: usize = 32;
+
 /// Longest transition a setpoint may ask for, in s (one hour). Longer ones
 /// are almost certainly a unit error (ms or ns sent as s).
 pub const MAX_TRANSITION_S: f64 = 3600.0;
@@ -77,7 +83,8 @@ pub const ANSWER_ACCEPTED: u32 = 0;
 /// `LevelCapacity`, `DimensionCapacity`, `NonFinite`, `BadDuration`,
 /// `NotSymmetric`, `NotPositiveDefinite`. Checked by the controller against
 /// its law and model: `UnknownLevel`, `DimensionMismatch`,
-/// `StiffnessAboveLimit`, `JointLimit`, `OutsideWorkspace`.
+/// `StiffnessAboveLimit`, `JointLimit`, `OutsideWorkspace`; and by its
+/// queue of setpoints that wait for their state: `PendingFull`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum Rejection {
@@ -114,11 +121,14 @@ pub enum Rejection {
     JointLimit = 15,
     /// A position goal lies outside the level's workspace.
     OutsideWorkspace = 16,
+    /// The setpoint is due at a later state, but
+    /// [`MAX_PENDING_SETPOINTS`] setpoints already wait for theirs.
+    PendingFull = 17,
 }
 
 impl Rejection {
     /// Every rejection, in code order.
-    pub const ALL: [Rejection; 16] = [
+    pub const ALL: [Rejection; 17] = [
         Self::SchemaMismatch,
         Self::UnknownFields,
         Self::NothingSet,
@@ -135,6 +145,7 @@ impl Rejection {
         Self::StiffnessAboveLimit,
         Self::JointLimit,
         Self::OutsideWorkspace,
+        Self::PendingFull,
     ];
 
     /// The stable code (never [`ANSWER_ACCEPTED`]).
@@ -170,6 +181,7 @@ impl Rejection {
             Self::StiffnessAboveLimit => "stiffness_above_limit",
             Self::JointLimit => "joint_limit",
             Self::OutsideWorkspace => "outside_workspace",
+            Self::PendingFull => "pending_full",
         }
     }
 
@@ -196,6 +208,7 @@ impl Rejection {
             Self::StiffnessAboveLimit => "the stiffness exceeds the level's max_stiffness",
             Self::JointLimit => "a joint goal lies outside the joint's limits",
             Self::OutsideWorkspace => "a position goal lies outside the level's workspace",
+            Self::PendingFull => "too many setpoints wait for their state sequence number",
         }
     }
 }
@@ -228,11 +241,23 @@ pub const fn answer_code(result: Result<(), Rejection>) -> u32 {
 ///
 /// `header.seq` is the client's own sequence number (+1 per setpoint; the
 /// controller echoes it with its answer), `header.stamp_ns` the send time,
-/// `header.n_joints` is unused (writers set 0). Entries beyond what
+/// `header.n_joints` is unused (writers set 0).
+///
+/// `apply_at_state_seq` = k defines when the setpoint takes effect: in the
+/// controller cycle that answers the first joint state whose sequence number
+/// is ≥ k (taken before that cycle's transitions advance and its law steps).
+/// 0, or any k the current state has reached, means at once (the cycle that
+/// receives it). A setpoint that arrives after its state is applied on
+/// receipt and counted late ([`crate::SetpointAnswer::late`]). The
+/// controller answers a setpoint when it applies it; the model-free checks
+/// ([`Setpoint::validate`]) reject at receipt. With a driver that numbers its
+/// states k = 0, 1, … per control period (hcc-sim), k is the cycle index
+/// of t_k = k · T, so a schedule sent ahead is applied exactly as
+/// `hcc simulate` applies it in-process. Entries beyond what
 /// `fields`, `dim` and `gain_layout` select are ignored (writers keep them
 /// zero).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Setpoint@schema2")]
+#[type_name("hcc_msgs::Setpoint@schema3")]
 #[repr(C)]
 pub struct Setpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.
@@ -252,6 +277,9 @@ pub struct Setpoint {
     /// Transition duration in s (0: as fast as the level's speed limit
     /// allows; shorter transitions are stretched to that limit).
     pub duration_s: f64,
+    /// Apply in the cycle of the first joint state with sequence number ≥
+    /// this (0: on receipt); see the type's docs.
+    pub apply_at_state_seq: u64,
     /// Goal x_{i,d}, first `dim` entries (with [`SETPOINT_GOAL`]).
     pub goal: [f64; MAX_TASK_DIM],
     /// Velocity feed-forward ẋ_{i,d} at the goal, first `dim` entries (with
@@ -274,6 +302,7 @@ impl Setpoint {
             dim: 0,
             gain_layout: 0,
             duration_s: 0.0,
+            apply_at_state_seq: 0,
             goal: [0.0; MAX_TASK_DIM],
             velocity: [0.0; MAX_TASK_DIM],
             stiffness: [0.0; MAX_GAIN_ENTRIES],
@@ -388,6 +417,13 @@ impl Setpoint {
     /// Sets the transition duration in s.
     pub fn with_duration(mut self, duration_s: f64) -> Self {
         self.duration_s = duration_s;
+        self
+    }
+
+    /// Sets the application point: the cycle of the first joint state with
+    /// sequence number ≥ `state_seq` (0: on receipt).
+    pub fn with_apply_at(mut self, state_seq: u64) -> Self {
+        self.apply_at_state_seq = state_seq;
         self
     }
 
@@ -600,13 +636,14 @@ mod tests {
             assert!(r.to_string().contains(r.name()));
         }
         assert_eq!(Rejection::from_code(ANSWER_ACCEPTED), None);
-        assert_eq!(Rejection::from_code(17), None);
+        assert_eq!(Rejection::from_code(18), None);
         assert_eq!(Rejection::from_code(u32::MAX), None);
         // The published numbers (docs and other-language clients rely on them).
         assert_eq!(Rejection::SchemaMismatch.code(), 1);
         assert_eq!(Rejection::NonFinite.code(), 8);
         assert_eq!(Rejection::NotPositiveDefinite.code(), 11);
         assert_eq!(Rejection::OutsideWorkspace.code(), 16);
+        assert_eq!(Rejection::PendingFull.code(), 17);
         assert_eq!(answer_code(Ok(())), 0);
         assert_eq!(answer_code(Err(Rejection::JointLimit)), 15);
     }

@@ -44,7 +44,7 @@ fn layout_has_no_hidden_padding() {
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
     assert_eq!(size_of::<TelemetryCounters>(), 11 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
-    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8);
+    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 2 * 4);
     for a in [
         align_of::<JointState>(),
         align_of::<TorqueCommand>(),
@@ -52,14 +52,14 @@ fn layout_has_no_hidden_padding() {
     ] {
         assert_eq!(a, 8);
     }
-    // Header, client id, level, fields, dim, layout, duration, goal,
-    // velocity, two full gain matrices.
+    // Header, client id, level, fields, dim, layout, duration, apply-at,
+    // goal, velocity, two full gain matrices.
     assert_eq!(
         size_of::<Setpoint>(),
-        24 + 8 + 4 * 4 + 8 + 8 * MAX_TASK_DIM * 2 + 8 * MAX_GAIN_ENTRIES * 2
+        24 + 8 + 4 * 4 + 8 + 8 + 8 * MAX_TASK_DIM * 2 + 8 * MAX_GAIN_ENTRIES * 2
     );
-    assert_eq!(size_of::<Setpoint>(), 16_952);
-    assert_eq!(offset_of!(Setpoint, goal), 56);
+    assert_eq!(size_of::<Setpoint>(), 16_960);
+    assert_eq!(offset_of!(Setpoint, goal), 64);
     assert_eq!(align_of::<Setpoint>(), 8);
     // The torque path fits in a page each.
     assert!(size_of::<JointState>() <= 4096 && size_of::<TorqueCommand>() <= 4096);

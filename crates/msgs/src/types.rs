@@ -52,7 +52,7 @@ pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
 
 /// Header shared by all messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@schema2")]
+#[type_name("hcc_msgs::Header@schema3")]
 #[repr(C)]
 pub struct Header {
     /// [`SCHEMA_VERSION`] of the writer.
@@ -266,7 +266,7 @@ fn set_n(
 /// Units: q in rad (prismatic: m), q̇ in rad/s (m/s), τ in N·m (N).
 /// Joint order: the URDF chain order from root to tip (actuated joints only).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::JointState@schema2")]
+#[type_name("hcc_msgs::JointState@schema3")]
 #[repr(C)]
 pub struct JointState {
     /// `seq`: state counter (+1 per cycle); `stamp_ns`: sampling instant.
@@ -413,7 +413,7 @@ impl Default for JointState {
 
 /// Torque command, published by the controller once per received state.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::TorqueCommand@schema2")]
+#[type_name("hcc_msgs::TorqueCommand@schema3")]
 #[repr(C)]
 pub struct TorqueCommand {
     /// `seq`: command counter (+1 per command); `stamp_ns`: when τ was computed.
@@ -571,7 +571,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@schema2")]
+    #[type_name("hcc_msgs::TelemetryCounters@schema3")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -601,7 +601,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@schema2")]
+#[type_name("hcc_msgs::TelemetryTimings@schema3")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -621,7 +621,7 @@ pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
 /// The controller's answer to the last setpoint of one client.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@schema2")]
+#[type_name("hcc_msgs::SetpointAnswer@schema3")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -637,6 +637,11 @@ pub struct SetpointAnswer {
     /// The transition duration in force for it, in s (stretched to the
     /// level's speed limit if needed; 0 when rejected).
     pub duration_s: f64,
+    /// Setpoints of this client rejected so far (of `answered`).
+    pub rejected: u32,
+    /// Setpoints of this client applied late so far: they arrived after the
+    /// state of their [`crate::Setpoint::apply_at_state_seq`].
+    pub late: u32,
 }
 
 /// Per-cycle diagnostics of the controller, published at the control rate.
@@ -645,7 +650,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@schema2")]
+#[type_name("hcc_msgs::Telemetry@schema3")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -736,6 +741,8 @@ impl Telemetry {
                 code: 0,
                 level: 0,
                 duration_s: 0.0,
+                rejected: 0,
+                late: 0,
             }; MAX_SETPOINT_CLIENTS],
         }
     }

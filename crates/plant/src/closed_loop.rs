@@ -242,6 +242,14 @@ impl HierarchicalLaw {
         self
     }
 
+    /// Sets the index k of the next cycle (its [`Commands::before_step`]
+    /// gets k; afterwards k counts on by one per cycle). For a law fed with
+    /// a driver's numbered states (t_k = k · T), e.g. `hcc run`'s shadow
+    /// controller, which sees the states the controller answered.
+    pub fn set_next_cycle(&mut self, k: u64) {
+        self.cycle = k;
+    }
+
     /// The wrapped controller.
     pub fn controller(&self) -> &Controller {
         &self.controller

@@ -330,8 +330,13 @@ impl Metrics {
             self.run.scenario, self.samples, self.duration_s
         );
         for l in &self.levels {
-            let u = l.unit.label();
-            let _ = writeln!(
+            // A level of mixed units (a 6-D pose: m and rad rows) has a
+            // norm of no single unit: say so, and give each group's figures.
+            let u = match l.unit {
+                ErrorUnit::Mixed => "(mixed units)",
+                unit => unit.label(),
+            };
+            let _ = write!(
                 s,
                 "  level {} ({}): |e0| = {:.4e} {u}, 5 %: {}, 1 %: {}, abs {}: {}, final |e| = {:.3e} {u}",
                 l.level,
@@ -347,6 +352,21 @@ impl Metrics {
                 fmt_t(l.time_below_abs_s),
                 l.final_error_norm,
             );
+            for g in &l.by_unit {
+                let (what, threshold) = match g.unit {
+                    ErrorUnit::Meter => ("position", "1 mm"),
+                    ErrorUnit::Radian => ("angle", "1 mrad"),
+                    ErrorUnit::Mixed => ("other", "-"),
+                };
+                let _ = write!(
+                    s,
+                    "; {what} rows: final {:.3e} {}, abs {threshold}: {}",
+                    g.final_error_norm,
+                    g.unit.label(),
+                    fmt_t(g.time_below_abs_s)
+                );
+            }
+            let _ = writeln!(s);
         }
         let torques: Vec<String> = self
             .max_abs_torque

@@ -7,11 +7,21 @@
 //! `[[commanding.level]]` box, by default the ball the chain reaches from its
 //! root) — and, if accepted, starts the level's transition
 //! ([`hcc_control::transition::Transition`]: minimum-jerk equilibrium, slerp
-//! for orientation, convex gains). A transition shorter than the level's
-//! speed limit allows is **stretched** to it: the equilibrium's peak speed
-//! 15/8 · |Δx| / T stays ≤ `max_speed` (|Δx| the Euclidean distance, the
-//! rotation angle for orientation). The answer (accepted, or a rejection
-//! code, with the duration in force) is kept per client for telemetry.
+//! for orientation tasks and a pose level's orientation rows, convex gains).
+//! A transition shorter than the level's speed limit allows is
+//! **stretched** to it: the equilibrium's peak speed 15/8 · |Δx| / T stays
+//! ≤ `max_speed` (|Δx| the Euclidean distance, the rotation angle for
+//! orientation, √(|Δp|² + θ²) for a pose). The answer (accepted, or a
+//! rejection code, with the duration in force) is kept per client for
+//! telemetry.
+//!
+//! [`Commander::receive`] is the daemon's entry: a setpoint whose
+//! application point ([`Setpoint::apply_at_state_seq`]) the current state has
+//! reached is taken at once; one due later waits in a preallocated queue of
+//! [`MAX_PENDING_SETPOINTS`] (arrival order) until [`Commander::apply_due`]
+//! finds its state, and is answered then. The model-free checks reject at
+//! receipt; a full queue rejects with [`Rejection::PendingFull`]. A setpoint
+//! that arrives after its state is taken at once and counted late.
 //!
 //! [`Commander::advance`] moves every transition by one period and hands
 //! x_{i,d}(t), K_i(t), D_i(t) and — with `relative_damping` — ẋ_{i,d}(t) to
@@ -23,8 +33,9 @@ use hcc_config::commanding::Commanding;
 use hcc_control::transition::{GoalKind, Target, Transition};
 use hcc_control::{Controller, TaskSpec};
 use hcc_msgs::{
-    MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Rejection, SETPOINT_DAMPING, SETPOINT_GOAL,
-    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer, Telemetry, answer_code,
+    ANSWER_ACCEPTED, MAX_LEVELS, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM,
+    Rejection, SETPOINT_DAMPING, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint,
+    SetpointAnswer, Telemetry, answer_code,
 };
 use nalgebra::DMatrix;
 
@@ -59,6 +70,57 @@ struct LevelState {
     d: DMatrix<f64>,
 }
 
+/// Setpoints waiting for their state: fixed slots (allocated and written
+/// at construction, so the loop neither allocates nor faults pages) and
+/// their arrival order.
+struct Pending {
+    slots: Box<[Setpoint]>,
+    /// Slot indices of the waiting setpoints, in arrival order.
+    order: [usize; MAX_PENDING_SETPOINTS],
+    len: usize,
+    /// Free slot indices (a stack).
+    free: [usize; MAX_PENDING_SETPOINTS],
+    free_len: usize,
+}
+
+impl Pending {
+    fn new() -> Pending {
+        let mut free = [0; MAX_PENDING_SETPOINTS];
+        for (k, f) in free.iter_mut().enumerate() {
+            *f = MAX_PENDING_SETPOINTS - 1 - k;
+        }
+        Pending {
+            slots: vec![Setpoint::zeroed(); MAX_PENDING_SETPOINTS].into_boxed_slice(),
+            order: [0; MAX_PENDING_SETPOINTS],
+            len: 0,
+            free,
+            free_len: MAX_PENDING_SETPOINTS,
+        }
+    }
+
+    /// Queues a copy of `sp`; false when every slot is taken.
+    fn push(&mut self, sp: &Setpoint) -> bool {
+        if self.free_len == 0 || self.len == MAX_PENDING_SETPOINTS {
+            return false;
+        }
+        self.free_len -= 1;
+        let slot = self.free[self.free_len];
+        self.slots[slot] = *sp;
+        self.order[self.len] = slot;
+        self.len += 1;
+        true
+    }
+
+    /// Removes the `k`-th waiting setpoint (arrival order) and frees its slot.
+    fn remove(&mut self, k: usize) {
+        let slot = self.order[k];
+        self.order.copy_within(k + 1..self.len, k);
+        self.len -= 1;
+        self.free[self.free_len] = slot;
+        self.free_len += 1;
+    }
+}
+
 /// The setpoint side of the controller (see the module docs).
 pub struct Commander {
     levels: Vec<LevelState>,
@@ -70,6 +132,7 @@ pub struct Commander {
     heard: [u64; MAX_SETPOINT_CLIENTS],
     count: u64,
     zeros: [f64; MAX_TASK_DIM],
+    pending: Pending,
 }
 
 /// Radius and centre of the ball the chain reaches, for `frame`.
@@ -118,11 +181,12 @@ impl Commander {
             let target = controller
                 .level_target(i)
                 .ok_or_else(|| CycleError::Shape(format!("no level {i}")))?;
-            // A single orientation task moves on SO(3) (slerp); every other
-            // level, stacked ones included, row by row (a pose level's roll,
-            // pitch and yaw rows too: smooth, but not a slerp).
+            // An orientation task and a pose level's roll, pitch, yaw rows
+            // move on SO(3) (slerp); every other level, stacked ones
+            // included, row by row.
             let kind = match spec.tasks.as_slice() {
                 [TaskSpec::Orientation { .. }] => GoalKind::RollPitchYaw,
+                [TaskSpec::Pose { .. }] => GoalKind::Pose,
                 _ => GoalKind::Vector,
             };
             let transition = Transition::new(kind, target.goal, target.stiffness, target.damping)
@@ -182,20 +246,74 @@ impl Commander {
             heard: [0; MAX_SETPOINT_CLIENTS],
             count: 0,
             zeros: [0.0; MAX_TASK_DIM],
+            pending: Pending::new(),
         })
     }
 
     /// Checks `setpoint`, starts its transition if accepted, and records the
-    /// answer for its client. Returns the answer code. Allocation-free.
+    /// answer for its client, now (whatever its application point). Returns
+    /// the answer code. Allocation-free.
     pub fn take(&mut self, setpoint: &Setpoint) -> u32 {
+        self.take_counted(setpoint, false)
+    }
+
+    fn take_counted(&mut self, setpoint: &Setpoint, late: bool) -> u32 {
         let result = self.check(setpoint);
         let duration = match result {
             Ok(()) => self.start(setpoint),
             Err(_) => 0.0,
         };
         let code = answer_code(result);
-        self.record(setpoint, code, duration);
+        self.record(setpoint, code, duration, late);
         code
+    }
+
+    /// A setpoint received in the cycle of the state with sequence number
+    /// `state_seq` (module docs): taken now when due (`Some(code)`), or
+    /// queued until [`Commander::apply_due`] reaches its state (`None`).
+    /// Rejected at once by the model-free checks or a full queue.
+    /// Allocation-free.
+    pub fn receive(&mut self, setpoint: &Setpoint, state_seq: u64) -> Option<u32> {
+        if let Err(r) = setpoint.validate() {
+            self.record(setpoint, r.code(), 0.0, false);
+            return Some(r.code());
+        }
+        let at = setpoint.apply_at_state_seq;
+        if at <= state_seq {
+            // Late: its state has already been answered.
+            return Some(self.take_counted(setpoint, at < state_seq));
+        }
+        if self.pending.push(setpoint) {
+            return None;
+        }
+        let code = Rejection::PendingFull.code();
+        self.record(setpoint, code, 0.0, false);
+        Some(code)
+    }
+
+    /// Takes, in arrival order, every queued setpoint whose application
+    /// point the state `state_seq` has reached. Bounded by
+    /// [`MAX_PENDING_SETPOINTS`]; allocation-free. Returns how many it took.
+    pub fn apply_due(&mut self, state_seq: u64) -> usize {
+        let mut taken = 0;
+        let mut k = 0;
+        while k < self.pending.len {
+            let slot = self.pending.order[k];
+            if self.pending.slots[slot].apply_at_state_seq > state_seq {
+                k += 1;
+                continue;
+            }
+            let sp = self.pending.slots[slot];
+            self.pending.remove(k);
+            self.take_counted(&sp, false);
+            taken += 1;
+        }
+        taken
+    }
+
+    /// Setpoints waiting for their state.
+    pub fn pending(&self) -> usize {
+        self.pending.len
     }
 
     /// The law-side checks (module docs), after the model-free ones.
@@ -279,7 +397,7 @@ impl Commander {
     }
 
     /// Keeps the answer in the client's slot (or the least recently heard one).
-    fn record(&mut self, sp: &Setpoint, code: u32, duration_s: f64) {
+    fn record(&mut self, sp: &Setpoint, code: u32, duration_s: f64, late: bool) {
         self.count += 1;
         let slot = self
             .answers
@@ -290,18 +408,22 @@ impl Commander {
                     .min_by_key(|&k| self.heard[k])
                     .unwrap_or(0)
             });
-        let answered = if self.answers[slot].client_id == sp.client_id {
-            self.answers[slot].answered + 1
-        } else {
-            1
-        };
+        let (answered, rejected, late_count) =
+            if self.answers[slot].answered > 0 && self.answers[slot].client_id == sp.client_id {
+                let a = &self.answers[slot];
+                (a.answered, a.rejected, a.late)
+            } else {
+                (0, 0, 0)
+            };
         self.answers[slot] = SetpointAnswer {
             client_id: sp.client_id,
             seq: sp.header.seq,
-            answered,
+            answered: answered + 1,
             code,
             level: sp.level,
             duration_s,
+            rejected: rejected.saturating_add(u32::from(code != ANSWER_ACCEPTED)),
+            late: late_count.saturating_add(u32::from(late)),
         };
         self.heard[slot] = self.count;
     }

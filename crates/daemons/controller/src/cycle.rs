@@ -58,12 +58,15 @@ pub struct Ports {
 impl Ports {
     /// Creates the controller's ports on the opened services.
     pub fn open(services: &Services) -> Result<Ports, IpcError> {
+        // The setpoint subscriber before the state subscriber: a launcher
+        // that sees the controller listening for states can already send it
+        // setpoints (a schedule due at the first state).
+        let setpoints = services.setpoint_subscriber(SETPOINT_BUFFER)?;
         let commands = services.torque_command_publisher()?;
         let telemetry = services.telemetry_publisher()?;
         let command_ready = services.command_ready_notifier()?;
         let states = services.joint_state_subscriber(LATEST_BUFFER)?;
         let state_ready = services.state_ready_listener()?;
-        let setpoints = services.setpoint_subscriber(SETPOINT_BUFFER)?;
         Ok(Ports {
             setpoints,
             commands,
@@ -370,12 +373,16 @@ impl Cycle {
             .is_some()
             .then(|| wake.saturating_sub(self.last_wake_ns));
         self.note_state(wake);
-        // Every queued setpoint (at most the queue's length: bounded work).
+        // Setpoints waiting for this state first (they arrived earlier), then
+        // every newly queued one (at most the queue's length: bounded work),
+        // in arrival order: the order in which a client sent them.
+        let clock = self.decider.setpoint_clock(&self.state);
+        self.decider.apply_due_setpoints(clock);
         for _ in 0..SETPOINT_BUFFER {
             let Ok(Some(setpoint)) = ports.setpoints.receive() else {
                 break;
             };
-            self.decider.take_setpoint(&setpoint);
+            self.decider.receive_setpoint(&setpoint, clock);
         }
         let taken = monotonic_now_ns();
         let answer = self.decider.decide(&self.state, wake);

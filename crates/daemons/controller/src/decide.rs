@@ -126,6 +126,8 @@ pub struct Decider {
     step_ns: Option<u64>,
     /// Setpoints: checks, transitions, answers.
     commander: Commander,
+    /// State sequence number of the last well-formed state (setpoint timing).
+    clock_seq: u64,
     /// Rate limit and low-pass between the law and the saturation.
     output: OutputPipeline,
 }
@@ -175,6 +177,7 @@ impl Decider {
             last_accepted_ns: 0,
             peer_lost: false,
             step_ns: None,
+            clock_seq: 0,
         })
     }
 
@@ -210,13 +213,48 @@ impl Decider {
         self.peer_lost
     }
 
-    /// Takes a client's setpoint (checked against the law, applied through
-    /// its transition from the next decision on); the answer goes into the
-    /// next telemetry sample. Returns the answer code. Allocation-free.
+    /// Takes a client's setpoint now, whatever its application point
+    /// (checked against the law, applied through its transition from the
+    /// next decision on); the answer goes into the next telemetry sample.
+    /// Returns the answer code. Allocation-free.
     pub fn take_setpoint(&mut self, setpoint: &Setpoint) -> u32 {
         let code = self.commander.take(setpoint);
         self.commander.fill(&mut self.telemetry);
         code
+    }
+
+    /// The state sequence number that setpoints are timed against in the
+    /// cycle of `state` ([`Setpoint::apply_at_state_seq`]): its own when it
+    /// is well-formed, else that of the last well-formed state.
+    pub fn setpoint_clock(&mut self, state: &JointState) -> u64 {
+        if state.validate(self.n).is_ok() {
+            self.clock_seq = state.header.seq;
+        }
+        self.clock_seq
+    }
+
+    /// Before the decision of the state `state_seq` (see
+    /// [`Decider::setpoint_clock`]): takes the queued setpoints that are due,
+    /// in arrival order. Allocation-free.
+    pub fn apply_due_setpoints(&mut self, state_seq: u64) {
+        if self.commander.apply_due(state_seq) > 0 {
+            self.commander.fill(&mut self.telemetry);
+        }
+    }
+
+    /// A setpoint received in the cycle of the state `state_seq`: taken now
+    /// when due, else queued until its state (then answered); see
+    /// [`crate::commander::Commander::receive`]. `Some(code)` when answered
+    /// now. Allocation-free.
+    pub fn receive_setpoint(&mut self, setpoint: &Setpoint, state_seq: u64) -> Option<u32> {
+        let code = self.commander.receive(setpoint, state_seq);
+        self.commander.fill(&mut self.telemetry);
+        code
+    }
+
+    /// Setpoints waiting for their state.
+    pub fn pending_setpoints(&self) -> usize {
+        self.commander.pending()
     }
 
     /// Decides the answer to `state`, received at `wake_ns` (CLOCK_MONOTONIC,

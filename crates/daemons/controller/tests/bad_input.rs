@@ -146,8 +146,8 @@ fn every_kind_of_bad_joint_state_gets_the_safe_command_and_is_counted() {
                 s.header.n_joints = 1000
             }),
             ("zero joints", |s| s.header.n_joints = 0),
-            ("schema 3", |s| s.header.schema_version = 3),
-            ("schema 1", |s| s.header.schema_version = 1),
+            ("schema 4", |s| s.header.schema_version = 4),
+            ("schema 2", |s| s.header.schema_version = 2),
             ("schema 0", |s| s.header.schema_version = 0),
             ("unknown status", |s| s.status = 99),
             ("unknown flag", |s| s.flags = 1 << 7),
@@ -347,7 +347,7 @@ fn random_states_never_panic_or_command_a_torque_spike() {
             let mut s = rig.valid();
             for _ in 0..1 + rng.next() % 3 {
                 match rng.next() % 10 {
-                    0 => s.header.schema_version = rng.pick(&[0, 1, u32::MAX]),
+                    0 => s.header.schema_version = rng.pick(&[0, 1, 2, u32::MAX]),
                     1 => s.header.n_joints = rng.pick(&[0, 1, 3, 5, 32, 33, u32::MAX]),
                     2 => s.header.seq = rng.next(),
                     3 => s.header.seq = s.header.seq.saturating_sub(rng.next() % 4),

@@ -159,3 +159,107 @@ fn a_workspace_box_and_the_velocity_feed_forward() {
     let v = d.controller().level_target(0).unwrap().goal_velocity;
     assert_eq!(v, [0.0; 3]);
 }
+
+/// The application point: a setpoint due at a later state waits in the
+/// queue (unanswered) and is applied in that state's cycle, before its
+/// transition advances; arrival order is kept for setpoints due together; a
+/// late one is applied on receipt and counted; a full queue rejects; a
+/// malformed one is rejected at receipt.
+#[test]
+fn setpoints_wait_for_their_state() {
+    let sc = scenario();
+    let mut d = decider(&sc);
+    let id = 77;
+    let goal = |seq: u64, y: f64, at: u64| {
+        Setpoint::for_level(id, seq, 0, 3)
+            .with_goal(&[0.55, y, 0.30])
+            .unwrap()
+            .with_duration(1.0)
+            .with_apply_at(at)
+    };
+    // Cycle of state 0: a stiffness change and two goals, all for state 5
+    // (applied in arrival order: the last goal wins).
+    let clock = d.setpoint_clock(&state(&sc, 0));
+    assert_eq!(clock, 0);
+    d.apply_due_setpoints(clock);
+    let k = Setpoint::for_level(id, 1, 0, 3)
+        .with_stiffness(&[300.0, 300.0, 300.0])
+        .unwrap()
+        .with_duration(0.0)
+        .with_apply_at(5);
+    assert_eq!(d.receive_setpoint(&k, clock), None);
+    assert_eq!(d.receive_setpoint(&goal(2, 0.25, 5), clock), None);
+    assert_eq!(d.receive_setpoint(&goal(3, 0.30, 5), clock), None);
+    assert_eq!(d.pending_setpoints(), 3);
+    d.decide(&state(&sc, 0), PERIOD);
+    assert!(d.telemetry().answer_for(id).is_none(), "not answered yet");
+    for seq in 1..5 {
+        let clock = d.setpoint_clock(&state(&sc, seq));
+        d.apply_due_setpoints(clock);
+        d.decide(&state(&sc, seq), (seq + 1) * PERIOD);
+        let g = d.controller().level_target(0).unwrap().goal.to_vec();
+        assert_eq!(g, [0.55, 0.20, 0.30], "nothing before state 5");
+    }
+    let clock = d.setpoint_clock(&state(&sc, 5));
+    d.apply_due_setpoints(clock);
+    assert_eq!(d.pending_setpoints(), 0);
+    let a = *d
+        .telemetry()
+        .answer_for(id)
+        .expect("answered in the cycle of state 5");
+    assert_eq!(
+        (a.seq, a.answered, a.code, a.rejected, a.late),
+        (3, 3, 0, 0, 0)
+    );
+    d.decide(&state(&sc, 5), 6 * PERIOD);
+    let target = d.controller().level_target(0).unwrap();
+    // The equilibrium moved one period towards 0.30 (the last goal), and
+    // the stiffness is the new one (at once, then held).
+    assert!(
+        target.goal[1] > 0.20 && target.goal[1] < 0.2001,
+        "{}",
+        target.goal[1]
+    );
+    assert_eq!(d.telemetry().goal[0][1], target.goal[1]);
+    assert_eq!(target.stiffness[(0, 0)], 300.0);
+
+    // Late: state 3 is past; applied on receipt and counted.
+    let clock = d.setpoint_clock(&state(&sc, 6));
+    assert_eq!(
+        d.receive_setpoint(&goal(4, 0.25, 3), clock),
+        Some(ANSWER_ACCEPTED)
+    );
+    let a = *d.telemetry().answer_for(id).unwrap();
+    assert_eq!((a.seq, a.answered, a.late), (4, 4, 1));
+    // Malformed: rejected at receipt, not queued.
+    let mut bad = goal(5, 0.25, 100);
+    bad.goal[0] = f64::NAN;
+    assert_eq!(
+        d.receive_setpoint(&bad, clock),
+        Some(Rejection::NonFinite.code())
+    );
+    assert_eq!(d.pending_setpoints(), 0);
+    // A full queue rejects with pending_full and changes nothing.
+    for k in 0..hcc_msgs::MAX_PENDING_SETPOINTS as u64 {
+        assert_eq!(
+            d.receive_setpoint(&goal(6 + k, 0.25, 1000 + k), clock),
+            None
+        );
+    }
+    assert_eq!(
+        d.receive_setpoint(&goal(99, 0.25, 5000), clock),
+        Some(Rejection::PendingFull.code())
+    );
+    let a = *d.telemetry().answer_for(id).unwrap();
+    assert_eq!((a.code, a.rejected), (Rejection::PendingFull.code(), 2));
+    // They drain in order as their states come.
+    d.apply_due_setpoints(1000 + 9);
+    assert_eq!(d.pending_setpoints(), hcc_msgs::MAX_PENDING_SETPOINTS - 10);
+    assert_eq!(d.telemetry().answer_for(id).unwrap().seq, 6 + 9);
+    d.apply_due_setpoints(u64::MAX);
+    assert_eq!(d.pending_setpoints(), 0);
+    // A malformed state does not move the setpoint clock.
+    let mut broken = state(&sc, 1_000_000);
+    broken.q[0] = f64::NAN;
+    assert_eq!(d.setpoint_clock(&broken), 6);
+}
