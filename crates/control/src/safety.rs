@@ -42,9 +42,26 @@
 //! their first derivative at p = 0: no torque jump and no torque-rate jump at
 //! activation. The spring has the potential k p³/3 (in [`SafetyOutput::guard_potential`]).
 //!
-//! **Velocity limits: the governor.** The joint speeds come from the levels' springs
-//! (a large task error pulls hard): near a velocity limit the springs stop driving
-//! the motion. With x_k = (|q̇_k| − f_on v_k) / ((f_full − f_on) v_k) (f_on =
+//! **Velocity limits: the spring saturation.** A large task error pulls hard, and
+//! the damper D_i lets a level settle at the task speed D_i⁻¹ ∂V_i/∂x_i. Each level's
+//! potential is therefore replaced beyond the radius r_0,i by its linear extension
+//! (a Huber function of r = √(2 V_i)):
+//!
+//! V_i,sat = V_i for r ≤ r_0,  r_0 r − r_0²/2 beyond,  ∂V_i,sat/∂x_i = min(1, r_0/r) ∂V_i/∂x_i,
+//!
+//! with r_0,i = d_min(D_i) v_i / √λ_max(K_i), so that ‖∂V_i,sat/∂x_i‖ ≤ d_min v_i:
+//! the speed the damper settles at is at most v_i, the task speed whose
+//! least-squares joint velocity J_i⁺ ẋ_i keeps every joint within f_full of its
+//! velocity limit at the initial configuration (computed at construction).
+//! V_i,sat is a potential (the force keeps its direction and is its gradient), so
+//! the paper's passivity argument holds unchanged with S_i built on V_i,sat, and
+//! the equilibria are the law's. It is C¹ in the state (no torque jump; at t = 0
+//! it only lowers the initial torque). Without a finite velocity limit (the
+//! paper's planar arm) r_0 = ∞ and nothing changes.
+//!
+//! **Velocity limits: the governor.** The dynamics can still carry a joint faster
+//! (inertia shifting between joints, several levels adding up): near a velocity
+//! limit the springs stop driving the motion. With x_k = (|q̇_k| − f_on v_k) / ((f_full − f_on) v_k) (f_on =
 //! `velocity_limit_fraction`, f_full = `velocity_limit_full_fraction`, v_k the URDF
 //! velocity limit), the gain g = 1 − Π_k (1 − s(x_k)) ∈ [0, 1] (0 below f_on, 1 as
 //! soon as one joint is at f_full) scales the spring force of each level,
@@ -62,9 +79,9 @@
 //! no torque jump and no torque-rate jump. The equilibria are the law's (σ_i = 1 at
 //! rest), and below f_on of every limit nothing changes (bit for bit).
 //!
-//! **Velocity limits: the damping (opt-in).** With `velocity_damping` > 0 a joint in
-//! the band is also damped, −s(x_k) · `velocity_damping` · m_k q̇_k: dissipative and
-//! C¹ at the onset.
+//! **Velocity limits: the damping.** A joint in the band is also damped,
+//! −s(x_k) · `velocity_damping` · m_k q̇_k (default 50 1/s, 0 switches it off):
+//! dissipative and C¹ at the onset.
 //!
 //! Allocation-free after [`Safety::new`].
 
@@ -100,8 +117,7 @@ pub struct SafetySpec {
     /// the levels' springs stop driving the motion (module docs).
     pub velocity_governor: bool,
     /// Velocity-limit joint damping rate (1/s; the torque is this times m_k q̇_k
-    /// at f_full), ≥ 0; 0 (the default) switches it off (the governor alone
-    /// keeps the speeds).
+    /// at f_full), ≥ 0; 0 switches it off.
     pub velocity_damping: f64,
     /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
     pub null_space_damping: f64,

@@ -41,8 +41,6 @@ struct Sample {
     governor_tau: f64,
     /// Largest |d(τ − τ_twin)/dt| over the joints (N·m/s).
     governor_rate: f64,
-    /// The fade's energy tank (J).
-    tank: f64,
     /// Per level: its conditioning (`Output::conditioning`).
     conditioning: Vec<f64>,
 }
@@ -90,7 +88,6 @@ impl ControlLaw for Logged {
             saturated: out.safety.spring_saturated,
             governor_tau,
             governor_rate,
-            tank: out.safety.tank,
             conditioning: out.conditioning.clone(),
         });
         Ok(())
@@ -205,9 +202,16 @@ fn energy_plot(name: &str, title: &str, log: &[Sample]) {
     std::fs::create_dir_all(&dir).unwrap();
     let t: Vec<f64> = log.iter().map(|s| s.t).collect();
     let e: Vec<f64> = log.iter().map(|s| s.energy).collect();
+    let end = log.last().map_or(0.0, |s| s.energy);
     let late: Vec<f64> = log
         .iter()
-        .map(|s| if s.t >= 2.0 { s.energy } else { f64::NAN })
+        .map(|s| {
+            if s.t >= 2.0 {
+                1e3 * (s.energy - end)
+            } else {
+                f64::NAN
+            }
+        })
         .collect();
     let speed: Vec<f64> = log
         .iter()
@@ -230,7 +234,12 @@ fn energy_plot(name: &str, title: &str, log: &[Sample]) {
                 "E",
                 e,
             ),
-            panel("E from t = 2 s (zoom)", "E [J]", "E", late),
+            panel(
+                &format!("E from t = 2 s, relative to its final value {end:.4} J"),
+                "E - E(end) [mJ]",
+                "E - E(end)",
+                late,
+            ),
             panel(
                 "Largest joint speed",
                 "log10 max |qd| [rad/s]",
@@ -279,12 +288,6 @@ fn conflicting_levels_the_arm_comes_to_rest() {
 /// (the safety layer's defaults).
 fn panda(tcp: [f64; 3], posture: &[f64]) -> Scenario {
     let mut s = load("panda-pose-posture.toml");
-    if let Some(v) = std::env::var("XVD").ok().and_then(|v| v.parse().ok()) {
-        s.spec.safety.velocity_damping = v;
-    }
-    if let Some(v) = std::env::var("XSAT").ok().and_then(|v| v.parse().ok()) {
-        s.spec.safety.spring_saturation = v;
-    }
     s.spec.levels[0].goal = DVector::from_row_slice(&tcp);
     s.spec.levels[2].goal = DVector::from_row_slice(posture);
     s
@@ -444,12 +447,15 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             if std::env::var_os("SWEEP_DETAIL").is_some() {
                 let at = |t: f64| log.iter().find(|s| s.t >= t).unwrap_or(last);
                 println!(
-                    "goal {g}: tcp {tcp:.3?} posture {posture:.2?}; |q̇| at 1/2/3 s {:.3}/{:.3}/{:.3}; errors {:.4?}; conditioning {:.2e}; faded {} guard {} governor {:.2}; q {:.3?}; q̇ {:.3?}",
+                    "goal {g}: tcp {tcp:.3?} posture {posture:.2?}; |q̇| at 1/2/3 s {:.3}/{:.3}/{:.3}; errors {:.4?}; conditioning {:?}; faded {} guard {} governor {:.2}; q {:.3?}; q̇ {:.3?}",
                     at(1.0).qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
                     at(2.0).qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
                     last.qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
                     last.errors,
-                    DVector::from_row_slice(&last.conditioning).transpose(),
+                    last.conditioning
+                        .iter()
+                        .map(|c| format!("{c:.2e}"))
+                        .collect::<Vec<_>>(),
                     last.faded,
                     last.guard,
                     last.governor,
