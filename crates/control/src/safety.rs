@@ -214,7 +214,7 @@ pub struct SafetyOutput {
     pub null_space_damping_active: bool,
     /// Cycles in which the guard acted, since construction.
     pub joint_limit_cycles: u64,
-    /// Cycles in which the velocity damping acted, since construction.
+    /// Cycles in which the governor or the velocity damping acted, since construction.
     pub velocity_limit_cycles: u64,
     /// Cycles in which a fade-in was held back by an empty tank, since construction.
     pub fade_in_limited_cycles: u64,
