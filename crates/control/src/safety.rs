@@ -391,13 +391,14 @@ impl Safety {
     pub(crate) fn set_task_speeds(&mut self, jacobians: &[&DMatrix<f64>]) {
         for (i, &j) in jacobians.iter().enumerate() {
             let mut v = f64::INFINITY;
-            if self.spec.enabled && self.spec.spring_saturation {
-                if let Ok(pinv) = j.clone().pseudo_inverse(1e-9) {
-                    for (k, &vk) in self.velocity_limit.iter().enumerate() {
-                        let row = pinv.row(k).norm();
-                        if vk.is_finite() && row > 0.0 {
-                            v = v.min(self.spec.velocity_limit_full_fraction * vk / row);
-                        }
+            if self.spec.enabled
+                && self.spec.spring_saturation
+                && let Ok(pinv) = j.clone().pseudo_inverse(1e-9)
+            {
+                for (k, &vk) in self.velocity_limit.iter().enumerate() {
+                    let row = pinv.row(k).norm();
+                    if vk.is_finite() && row > 0.0 {
+                        v = v.min(self.spec.velocity_limit_full_fraction * vk / row);
                     }
                 }
             }

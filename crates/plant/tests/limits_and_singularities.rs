@@ -369,7 +369,9 @@ impl Rng {
 /// 0.3 m to 1.4 m from the shoulder (within and beyond reach), posture goals up
 /// to 0.5 rad beyond the limits of every joint. `SWEEP_GOALS` goals (default 100
 /// here; `SWEEP_GOALS=500 cargo test --release -p hcc-plant --test
-/// limits_and_singularities sweep -- --nocapture` runs the full sweep).
+/// limits_and_singularities sweep -- --nocapture` runs the full sweep;
+/// `SWEEP_SECONDS` sets the time per goal, `SWEEP_DETAIL` prints every goal not
+/// settled and every one over a velocity limit).
 #[test]
 fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
     let goals: usize = std::env::var("SWEEP_GOALS")
@@ -474,9 +476,10 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
 /// The paper's scenarios never reach a limit or a singularity: the safety layer never
 /// acts there (their torques are the paper's law bit for bit) and the plant's end stops
 /// are never touched. The Panda scenario as shipped reaches no position limit and no
-/// singularity either, but without the velocity governor its wrist would reach 1.5 ×
-/// its URDF velocity limit: there the governor acts (and only it), and the plant sees
-/// no joint over its velocity limit.
+/// singularity either, but without the velocity limits its wrist went over its URDF
+/// velocity limit: there the velocity limits act (spring saturation, governor,
+/// damping — and nothing else), the plant sees no joint over its velocity limit, and
+/// the governor's and damping's torque rate stays under 1000 N·m/s.
 #[test]
 fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
     for name in [
