@@ -54,9 +54,10 @@
 //! least-squares joint velocity J_i⁺ ẋ_i keeps every joint within f_full of its
 //! velocity limit at the initial configuration (computed at construction).
 //! V_i,sat is a potential (the force keeps its direction and is its gradient), so
-//! the paper's passivity argument holds unchanged with S_i built on V_i,sat, and
-//! the equilibria are the law's. It is C¹ in the state (no torque jump; at t = 0
-//! it only lowers the initial torque). Without a finite velocity limit (the
+//! the paper's passivity argument holds unchanged with S_i (eqs. 26, 28) built on V_i,sat, and
+//! the equilibria are the law's. V_i,sat is C¹ and its force continuous in the
+//! state (no torque jump; crossing r_0 only bends the torque's rate; at t = 0 it
+//! only lowers the initial torque). Without a finite velocity limit (the
 //! paper's planar arm) r_0 = ∞ and nothing changes.
 //!
 //! **Velocity limits: the governor.** The dynamics can still carry a joint faster
@@ -66,7 +67,7 @@
 //! velocity limit), the gain g = 1 − Π_k (1 − s(x_k)) ∈ [0, 1] (0 below f_on, 1 as
 //! soon as one joint is at f_full) scales the spring force of each level,
 //!
-//! F_i = σ_i ∂V_i/∂x_i + D_i ẋ_i,  σ_i = 1 − g · s(c_i / c_0),
+//! F_i = σ_i ∂V_i/∂x_i + D_i ẋ_i (in τ_i of eqs. 20, 21),  σ_i = 1 − g · s(c_i / c_0),
 //!
 //! where c_i = −q̇ᵀ J_iᵀ ∂V_i/∂x_i / (‖J_iᵀ ∂V_i/∂x_i‖ ‖q̇‖) is the cosine between the
 //! motion and the spring's torque ([`GOVERNOR_COSINE`] = c_0): only a spring that
