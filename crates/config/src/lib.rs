@@ -1097,6 +1097,11 @@ fn safety_spec(
         velocity_limit_fraction: s
             .velocity_limit_fraction
             .unwrap_or(d.velocity_limit_fraction),
+        velocity_limit_full_fraction: s
+            .velocity_limit_full_fraction
+            .unwrap_or(d.velocity_limit_full_fraction),
+        spring_saturation: s.spring_saturation.unwrap_or(d.spring_saturation),
+        velocity_governor: s.velocity_governor.unwrap_or(d.velocity_governor),
         velocity_damping: s.velocity_damping.unwrap_or(d.velocity_damping),
         null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
         fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),

@@ -386,9 +386,15 @@ pub struct SafetySection {
     pub joint_limit_torque: Option<f64>,
     /// Damping ratio of the guard at full penetration.
     pub joint_limit_damping_ratio: Option<f64>,
-    /// Fraction of the URDF velocity limit above which a joint is damped.
+    /// Fraction of the URDF velocity limit at which the velocity governor comes in.
     pub velocity_limit_fraction: Option<f64>,
-    /// Velocity-limit damping rate, 1/s.
+    /// Fraction of the URDF velocity limit at which the velocity governor is fully on.
+    pub velocity_limit_full_fraction: Option<f64>,
+    /// The spring saturation (each level's spring force capped from the velocity limits).
+    pub spring_saturation: Option<bool>,
+    /// The velocity governor (the springs stop driving a joint near its velocity limit).
+    pub velocity_governor: Option<bool>,
+    /// Velocity-limit joint damping rate, 1/s (default 0: off).
     pub velocity_damping: Option<f64>,
     /// Null-space damping rate of faded levels, 1/s.
     pub null_space_damping: Option<f64>,

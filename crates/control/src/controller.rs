@@ -94,7 +94,7 @@ impl Output {
             fade: vec![1.0; r],
             fade_mu: 1.0,
             coriolis: DVector::zeros(n),
-            safety: crate::safety::SafetyOutput::new(n),
+            safety: crate::safety::SafetyOutput::new(n, r),
         }
     }
 }
@@ -445,9 +445,16 @@ impl Controller {
             out,
         };
         c.check_initial(q0)?;
+        // Safety layer: the spring saturation's task speeds from the Jacobians at q0.
+        let jacobians: Vec<&DMatrix<f64>> = c.levels.iter().map(|l| &l.j).collect();
+        c.safety.set_task_speeds(&jacobians);
+        for i in 0..r {
+            let l = &c.levels[i];
+            c.safety.set_spring_radius(i, &l.stiffness, &l.damping);
+        }
         c.reset();
         // Safety layer: the checks' cycle counts for nothing.
-        c.out.safety = crate::safety::SafetyOutput::new(n);
+        c.out.safety = crate::safety::SafetyOutput::new(n, r);
         Ok(c)
     }
 
@@ -630,6 +637,7 @@ impl Controller {
         if let Some(d) = damping {
             l.damping.copy_from(d);
         }
+        self.safety.set_spring_radius(i, &l.stiffness, &l.damping);
         Ok(())
     }
 
@@ -709,8 +717,14 @@ impl Controller {
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
         self.frames.invalidate();
+        self.out.safety.spring_saturated = false;
+        // Safety layer: the velocity governor's gain from the joint speeds
+        // (crate::safety; 0, and the springs untouched, below the velocity band).
+        let governor = self.safety.governor_gain(qd);
+        self.out.safety.velocity_governor = governor;
+        let speed = if governor > 0.0 { qd.norm() } else { 0.0 };
         for i in 0..r {
-            self.evaluate_task(i, q, qd);
+            self.evaluate_task(i, q, qd, governor, speed);
         }
 
         // The levels above the lowest, stacked: Y = J M⁻¹ (by solves, M⁻¹ is never
@@ -733,6 +747,7 @@ impl Controller {
             .map(|&c| fade_factor(c, eps))
             .product();
 
+        self.out.safety.spring_saturated_cycles += u64::from(self.out.safety.spring_saturated);
         self.level_torques(qd);
         self.coriolis_cancellation(qd)?;
         // Safety layer: null-space damping of faded levels, joint position and
@@ -1053,8 +1068,17 @@ impl Controller {
         Ok(())
     }
 
-    /// x̃_i, J_i, J̇_i, the potential V_i and its gradient, ẋ_i and F_i.
-    fn evaluate_task(&mut self, i: usize, q: &DVector<f64>, qd: &DVector<f64>) {
+    /// x̃_i, J_i, J̇_i, the potential V_i and its gradient, ẋ_i and F_i; the
+    /// spring part scaled by the velocity governor (gain `governor`, `speed` = ‖q̇‖;
+    /// crate::safety) where it drives the motion near a velocity limit.
+    fn evaluate_task(
+        &mut self,
+        i: usize,
+        q: &DVector<f64>,
+        qd: &DVector<f64>,
+        governor: f64,
+        speed: f64,
+    ) {
         let l = &mut self.levels[i];
         let tasks = &self.spec.levels[i].tasks;
         let (model, data) = (&self.model, &self.data);
@@ -1077,6 +1101,13 @@ impl Controller {
             &mut l.err,
             &mut l.grad,
         );
+        // Safety layer: the spring saturation (crate::safety): beyond r_0 the
+        // gradient of the saturated potential, which replaces V_i.
+        let (v_sat, scale) = self.safety.saturate_spring(i, l.potential, &mut l.grad);
+        l.potential = v_sat;
+        if scale < 1.0 {
+            self.out.safety.spring_saturated = true;
+        }
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
         if l.goal_moving {
             // A moving equilibrium: damp the velocity relative to it.
@@ -1084,6 +1115,18 @@ impl Controller {
         }
         // F_i = (∂V_i/∂x_i)ᵀ + D_i (ẋ_i − ẋ_{i,d}), ẋ_{i,d} = 0 for a fixed goal.
         l.f.copy_from(&l.grad);
+        let mut sigma = 1.0;
+        if governor > 0.0 {
+            // Velocity governor: σ_i from the spring's power and the cosine between
+            // q̇ and −J_iᵀ ∂V_i/∂x_i (crate::safety).
+            gemv_t(&mut self.tmp_n, 1.0, &l.j, &l.grad, 0.0);
+            let power = self.tmp_n.dot(qd);
+            sigma = crate::safety::spring_scale(governor, power, self.tmp_n.norm(), speed);
+            if sigma < 1.0 {
+                l.f *= sigma;
+            }
+        }
+        self.out.safety.spring_scale[i] = sigma;
         gemv(&mut l.f, 1.0, &l.damping, &l.xdot, 1.0);
     }
 

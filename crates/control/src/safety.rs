@@ -42,9 +42,47 @@
 //! their first derivative at p = 0: no torque jump and no torque-rate jump at
 //! activation. The spring has the potential k p³/3 (in [`SafetyOutput::guard_potential`]).
 //!
-//! **Velocity limits.** Above `velocity_limit_fraction` of a joint's URDF velocity
-//! limit the joint is damped, −s(x) · `velocity_damping` · m_k q̇_k with
-//! x = (|q̇_k| − f v_max) / ((1 − f) v_max) clamped to [0, 1]: dissipative and continuous.
+//! **Velocity limits: the spring saturation.** A large task error pulls hard, and
+//! the damper D_i lets a level settle at the task speed D_i⁻¹ ∂V_i/∂x_i. Each level's
+//! potential is therefore replaced beyond the radius r_0,i by its linear extension
+//! (a Huber function of r = √(2 V_i)):
+//!
+//! V_i,sat = V_i for r ≤ r_0,  r_0 r − r_0²/2 beyond,  ∂V_i,sat/∂x_i = min(1, r_0/r) ∂V_i/∂x_i,
+//!
+//! with r_0,i = d_min(D_i) v_i / √λ_max(K_i), so that ‖∂V_i,sat/∂x_i‖ ≤ d_min v_i:
+//! the speed the damper settles at is at most v_i, the task speed whose
+//! least-squares joint velocity J_i⁺ ẋ_i keeps every joint within f_full of its
+//! velocity limit at the initial configuration (computed at construction).
+//! V_i,sat is a potential (the force keeps its direction and is its gradient), so
+//! the paper's passivity argument holds unchanged with S_i (eqs. 26, 28) built on V_i,sat, and
+//! the equilibria are the law's. V_i,sat is C¹ and its force continuous in the
+//! state (no torque jump; crossing r_0 only bends the torque's rate; at t = 0 it
+//! only lowers the initial torque). Without a finite velocity limit (the
+//! paper's planar arm) r_0 = ∞ and nothing changes.
+//!
+//! **Velocity limits: the governor.** The dynamics can still carry a joint faster
+//! (inertia shifting between joints, several levels adding up): near a velocity
+//! limit the springs stop driving the motion. With x_k = (|q̇_k| − f_on v_k) / ((f_full − f_on) v_k) (f_on =
+//! `velocity_limit_fraction`, f_full = `velocity_limit_full_fraction`, v_k the URDF
+//! velocity limit), the gain g = 1 − Π_k (1 − s(x_k)) ∈ [0, 1] (0 below f_on, 1 as
+//! soon as one joint is at f_full) scales the spring force of each level,
+//!
+//! F_i = σ_i ∂V_i/∂x_i + D_i ẋ_i (in τ_i of eqs. 20, 21),  σ_i = 1 − g · s(c_i / c_0),
+//!
+//! where c_i = −q̇ᵀ J_iᵀ ∂V_i/∂x_i / (‖J_iᵀ ∂V_i/∂x_i‖ ‖q̇‖) is the cosine between the
+//! motion and the spring's torque ([`GOVERNOR_COSINE`] = c_0): only a spring that
+//! drives the motion (its potential falls, ẋ_iᵀ ∂V_i/∂x_i < 0) is scaled, one that
+//! brakes or acts across the motion is kept. What the spring no longer puts into
+//! motion, (1 − σ_i) ẋ_iᵀ ∂V_i/∂x_i ≤ 0, leaves the storage Σ S_i (for level 1
+//! exactly: d/dt (½ q̇ᵀMq̇ + V_1) gains (1 − σ_1) ẋ_1ᵀ ∂V_1/∂x_1 ≤ 0); it goes to the
+//! fade's tank with the dampers' dissipation. The dampers D_i are untouched and
+//! brake. s is the smoothstep, so σ_i is C¹ in q̇ with σ_i = 1, σ̇_i = 0 at the onset:
+//! no torque jump and no torque-rate jump. The equilibria are the law's (σ_i = 1 at
+//! rest), and below f_on of every limit nothing changes (bit for bit).
+//!
+//! **Velocity limits: the damping.** A joint in the band is also damped,
+//! −s(x_k) · `velocity_damping` · m_k q̇_k (default 50 1/s, 0 switches it off):
+//! dissipative and C¹ at the onset.
 //!
 //! Allocation-free after [`Safety::new`].
 
@@ -66,13 +104,21 @@ pub struct SafetySpec {
     pub joint_limit_torque: Option<f64>,
     /// Damping ratio ζ of the guard at full penetration, ≥ 0.
     pub joint_limit_damping_ratio: f64,
-    /// Fraction f of the URDF velocity limit above which a joint is damped, in (0, 1).
+    /// Fraction f_on of the URDF velocity limit at which the velocity governor
+    /// (and the velocity damping) comes in, in (0, 1).
     pub velocity_limit_fraction: f64,
-    /// Velocity-limit damping rate (1/s; the torque is this times m_k q̇_k), ≥ 0;
-    /// 0 (the default) switches it off. 500 (half the 1 kHz control rate) holds
-    /// the Panda near its limits, but its onset steps the torque by up to
-    /// 13.7 N·m in one cycle on the shipped Panda scenario: opt in only where
-    /// the output pipeline's rate limit smooths it.
+    /// Fraction f_full of the URDF velocity limit at which the velocity governor
+    /// (and the velocity damping) is fully on, in (f_on, 1].
+    pub velocity_limit_full_fraction: f64,
+    /// The spring saturation: each level's spring force is capped so that the speed
+    /// its damper settles at stays under f_on of the joint velocity limits (module
+    /// docs).
+    pub spring_saturation: bool,
+    /// The velocity governor: between f_on and f_full of a joint's velocity limit
+    /// the levels' springs stop driving the motion (module docs).
+    pub velocity_governor: bool,
+    /// Velocity-limit joint damping rate (1/s; the torque is this times m_k q̇_k
+    /// at f_full), ≥ 0; 0 switches it off.
     pub velocity_damping: f64,
     /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
     pub null_space_damping: f64,
@@ -89,8 +135,11 @@ impl Default for SafetySpec {
             joint_limit_margin: 0.1,
             joint_limit_torque: None,
             joint_limit_damping_ratio: 1.0,
-            velocity_limit_fraction: 0.8,
-            velocity_damping: 0.0,
+            velocity_limit_fraction: 0.6,
+            velocity_limit_full_fraction: 0.9,
+            spring_saturation: true,
+            velocity_governor: true,
+            velocity_damping: 50.0,
             null_space_damping: 20.0,
             fade_tank_max: 5.0,
             control_period_s: 1e-3,
@@ -118,6 +167,14 @@ impl SafetySpec {
         if !(self.velocity_limit_fraction > 0.0 && self.velocity_limit_fraction < 1.0) {
             return bad("velocity_limit_fraction", "must be in (0, 1)");
         }
+        if !(self.velocity_limit_full_fraction > self.velocity_limit_fraction
+            && self.velocity_limit_full_fraction <= 1.0)
+        {
+            return bad(
+                "velocity_limit_full_fraction",
+                "must be in (velocity_limit_fraction, 1]",
+            );
+        }
         if !nonneg(self.velocity_damping) {
             return bad("velocity_damping", "must be non-negative");
         }
@@ -143,13 +200,22 @@ pub struct SafetyOutput {
     pub active: bool,
     /// The joint-limit guard acted (a joint within the margin of a limit).
     pub joint_limit_active: bool,
-    /// The velocity damping acted (a joint above the fraction of its velocity limit).
+    /// The velocity governor scaled a spring or the velocity damping acted (a joint
+    /// above f_on of its velocity limit).
     pub velocity_limit_active: bool,
+    /// A level's spring force was capped by the spring saturation in this cycle.
+    pub spring_saturated: bool,
+    /// Cycles in which the spring saturation acted, since construction.
+    pub spring_saturated_cycles: u64,
+    /// The governor's gain g ∈ [0, 1] of this cycle (0: the springs untouched).
+    pub velocity_governor: f64,
+    /// Per level: the factor σ_i its spring force was scaled by (1: untouched).
+    pub spring_scale: Vec<f64>,
     /// A faded level's null-space damping acted.
     pub null_space_damping_active: bool,
     /// Cycles in which the guard acted, since construction.
     pub joint_limit_cycles: u64,
-    /// Cycles in which the velocity damping acted, since construction.
+    /// Cycles in which the governor or the velocity damping acted, since construction.
     pub velocity_limit_cycles: u64,
     /// Cycles in which a fade-in was held back by an empty tank, since construction.
     pub fade_in_limited_cycles: u64,
@@ -164,12 +230,16 @@ pub struct SafetyOutput {
 }
 
 impl SafetyOutput {
-    pub(crate) fn new(n: usize) -> SafetyOutput {
+    pub(crate) fn new(n: usize, levels: usize) -> SafetyOutput {
         SafetyOutput {
             tau: DVector::zeros(n),
             active: false,
             joint_limit_active: false,
             velocity_limit_active: false,
+            spring_saturated: false,
+            spring_saturated_cycles: 0,
+            velocity_governor: 0.0,
+            spring_scale: vec![1.0; levels],
             null_space_damping_active: false,
             joint_limit_cycles: 0,
             velocity_limit_cycles: 0,
@@ -210,6 +280,10 @@ pub(crate) struct Safety {
     velocity_limit: Vec<f64>,
     /// Guard spring constant per joint.
     k_guard: Vec<f64>,
+    /// Per level: the task speed v_i its damper may settle at (∞: no saturation) and
+    /// the radius r_0,i of the saturated potential (module docs).
+    task_speed: Vec<f64>,
+    spring_radius: Vec<f64>,
     /// Rows of J_aug above each level (Σ_{j<i} m_j; only i ≥ 1 is used).
     k_above: Vec<usize>,
     /// G, its damped inverse and workspace per level (k_i × k_i).
@@ -229,6 +303,27 @@ pub(crate) struct Safety {
 
 /// Fastest rise of an effective fade β_i (1/s).
 pub const FADE_IN_RATE: f64 = 1.0;
+
+/// Cosine between q̇ and a level's spring torque −J_iᵀ ∂V_i/∂x_i at which the
+/// velocity governor scales that spring fully (module docs).
+pub const GOVERNOR_COSINE: f64 = 0.25;
+
+/// The velocity governor's factor σ_i = 1 − g · s(c_i / [`GOVERNOR_COSINE`]) of a
+/// level's spring force (module docs): `g` the governor's gain, `power` =
+/// ẋ_iᵀ ∂V_i/∂x_i = q̇ᵀ J_iᵀ ∂V_i/∂x_i (the rate of V_i), `torque_norm` =
+/// ‖J_iᵀ ∂V_i/∂x_i‖, `speed` = ‖q̇‖, c_i = −power / (torque_norm · speed).
+/// 1 exactly when g = 0 or the spring does not drive the motion (power ≥ 0).
+pub(crate) fn spring_scale(g: f64, power: f64, torque_norm: f64, speed: f64) -> f64 {
+    // `!(power < 0.0)` also catches a NaN power.
+    if g <= 0.0 || power >= 0.0 || power.is_nan() {
+        return 1.0;
+    }
+    let denom = torque_norm * speed;
+    if denom.is_nan() || denom <= 0.0 {
+        return 1.0;
+    }
+    1.0 - g * smoothstep(-power / denom / GOVERNOR_COSINE)
+}
 
 /// Smoothstep 3x² − 2x³ on [0, 1] (0 below, 1 above).
 fn smoothstep(x: f64) -> f64 {
@@ -271,6 +366,8 @@ impl Safety {
             upper: model.joints.iter().map(|j| j.upper).collect(),
             velocity_limit: model.joints.iter().map(|j| j.velocity_limit).collect(),
             k_guard,
+            task_speed: vec![f64::INFINITY; r],
+            spring_radius: vec![f64::INFINITY; r],
             g: k_above.iter().map(|&k| DMatrix::zeros(k, k)).collect(),
             g_inv: k_above.iter().map(|&k| DMatrix::zeros(k, k)).collect(),
             spd: k_above.iter().map(|&k| SpdWork::new(k)).collect(),
@@ -285,6 +382,85 @@ impl Safety {
             e: DVector::zeros(model.nq()),
             spec: s,
         })
+    }
+
+    /// The spring saturation's task speed of each level from its Jacobian `j` at the
+    /// initial configuration: v_i = f_full · min_k v_k / ‖(J_i⁺)_k‖, the largest task
+    /// speed whose least-squares joint velocity J_i⁺ ẋ_i keeps every joint k within
+    /// f_full of its velocity limit v_k, whatever the direction of ẋ_i (∞ without a
+    /// finite velocity limit or with the saturation off). Allocates (construction).
+    pub(crate) fn set_task_speeds(&mut self, jacobians: &[&DMatrix<f64>]) {
+        for (i, &j) in jacobians.iter().enumerate() {
+            let mut v = f64::INFINITY;
+            if self.spec.enabled
+                && self.spec.spring_saturation
+                && let Ok(pinv) = j.clone().pseudo_inverse(1e-9)
+            {
+                for (k, &vk) in self.velocity_limit.iter().enumerate() {
+                    let row = pinv.row(k).norm();
+                    if vk.is_finite() && row > 0.0 {
+                        v = v.min(self.spec.velocity_limit_full_fraction * vk / row);
+                    }
+                }
+            }
+            self.task_speed[i] = v;
+        }
+    }
+
+    /// r_0,i = F_max,i / √λ_max(K_i) with F_max,i = d_min(D_i) · v_i, for the gains
+    /// `stiffness`, `damping` of level `i` (λ_max bounded by the largest absolute row
+    /// sum, d_min the smallest diagonal entry). Allocation-free (also for
+    /// `set_gains`).
+    pub(crate) fn set_spring_radius(
+        &mut self,
+        i: usize,
+        stiffness: &DMatrix<f64>,
+        damping: &DMatrix<f64>,
+    ) {
+        let v = self.task_speed[i];
+        if !v.is_finite() {
+            self.spring_radius[i] = f64::INFINITY;
+            return;
+        }
+        let m = stiffness.nrows();
+        let mut kmax: f64 = 0.0;
+        for a in 0..m {
+            let mut row = 0.0;
+            for b in 0..m {
+                row += stiffness[(a, b)].abs();
+            }
+            kmax = kmax.max(row);
+        }
+        let dmin = (0..damping.nrows())
+            .map(|a| damping[(a, a)])
+            .fold(f64::INFINITY, f64::min);
+        self.spring_radius[i] = if kmax > 0.0 && dmin > 0.0 {
+            dmin * v / kmax.sqrt()
+        } else {
+            f64::INFINITY
+        };
+    }
+
+    /// The spring saturation of level `i` (module docs): with r = √(2 V_i) beyond
+    /// r_0,i, the gradient `grad` is scaled by r_0/r in place and the saturated
+    /// potential r_0 r − r_0²/2 returned; else V_i unchanged. Returns (V, scale).
+    pub(crate) fn saturate_spring(
+        &self,
+        i: usize,
+        potential: f64,
+        grad: &mut DVector<f64>,
+    ) -> (f64, f64) {
+        let r0 = self.spring_radius[i];
+        if !r0.is_finite() {
+            return (potential, 1.0);
+        }
+        let r = (2.0 * potential.max(0.0)).sqrt();
+        if r <= r0 {
+            return (potential, 1.0);
+        }
+        let scale = r0 / r;
+        *grad *= scale;
+        (r0 * r - 0.5 * r0 * r0, scale)
     }
 
     /// Forgets the fade memory (the next cycle takes β(q) as it is) and empties the tank.
@@ -378,6 +554,8 @@ impl Safety {
                 || out.joint_limit_active
                 || out.velocity_limit_active;
             out.power = out.tau.dot(c.qd);
+            // The governor scaled a spring (in the levels' F_i, not in τ_safety).
+            out.velocity_limit_active |= out.spring_scale.iter().any(|&s| s < 1.0);
         }
         out.joint_limit_cycles += u64::from(out.joint_limit_active);
         out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
@@ -452,10 +630,40 @@ impl Safety {
         1.0 / self.e[k]
     }
 
+    /// Position of |q̇_k| in the velocity band: 0 at f_on · v_max, 1 at f_full · v_max
+    /// (not clamped; 0 for a joint without a velocity limit).
+    fn speed_band(&self, k: usize, qd: f64) -> f64 {
+        let vmax = self.velocity_limit[k];
+        if !vmax.is_finite() {
+            return 0.0;
+        }
+        let (on, full) = (
+            self.spec.velocity_limit_fraction,
+            self.spec.velocity_limit_full_fraction,
+        );
+        (qd.abs() - on * vmax) / ((full - on) * vmax)
+    }
+
+    /// The velocity governor's gain g = 1 − Π_k (1 − s(x_k)) of this cycle (module
+    /// docs): 0 while every joint is below f_on of its velocity limit (or the
+    /// governor is off), 1 once one is at f_full; C¹ in q̇.
+    pub(crate) fn governor_gain(&self, qd: &DVector<f64>) -> f64 {
+        if !self.spec.enabled || !self.spec.velocity_governor {
+            return 0.0;
+        }
+        let mut keep = 1.0;
+        for k in 0..qd.len() {
+            let x = self.speed_band(k, qd[k]);
+            if x > 0.0 {
+                keep *= 1.0 - smoothstep(x);
+            }
+        }
+        1.0 - keep
+    }
+
     /// The joint-limit guard and the velocity damping.
     fn joint_limits(&mut self, c: &CycleTerms, out: &mut SafetyOutput) {
         let margin = self.spec.joint_limit_margin;
-        let f = self.spec.velocity_limit_fraction;
         for k in 0..c.q.len() {
             let (q, qd) = (c.q[k], c.qd[k]);
             // Penetration into the margin (positive: towards the upper limit).
@@ -468,15 +676,9 @@ impl Safety {
             } else {
                 (0.0, 0.0)
             };
-            let vmax = self.velocity_limit[k];
-            let x = if vmax.is_finite() {
-                (qd.abs() - f * vmax) / ((1.0 - f) * vmax)
-            } else {
-                0.0
-            };
             // The velocity damping acts only when switched on (rate > 0).
             let x = if self.spec.velocity_damping > 0.0 {
-                x
+                self.speed_band(k, qd)
             } else {
                 0.0
             };

@@ -9,9 +9,12 @@ use nalgebra::{DMatrix, DVector};
 const Q0: [f64; 7] = [0.1, -0.2, 0.05, -2.0, 0.1, 1.9, 0.7];
 const QD: [f64; 7] = [0.1, -0.2, 0.15, 0.1, -0.3, 0.2, 0.25];
 
+/// The law of eqs. (20)/(21) as the paper states it: without the safety layer's
+/// spring saturation, which caps the doubled spring below.
 fn controller() -> Controller {
     let model = panda();
-    let spec = panda_spec(&model);
+    let mut spec = panda_spec(&model);
+    spec.safety.spring_saturation = false;
     Controller::new(&model, spec, &DVector::from_vec(Q0.to_vec())).expect("controller")
 }
 

@@ -330,7 +330,8 @@ pub fn simulate_law(scenario: &Scenario, mut law: HierarchicalLaw) -> Result<Run
     let safety = &law.controller().output().safety;
     for (key, value) in [
         ("joint_limit_guard_cycles", safety.joint_limit_cycles),
-        ("velocity_damping_cycles", safety.velocity_limit_cycles),
+        ("velocity_limit_cycles", safety.velocity_limit_cycles),
+        ("spring_saturation_cycles", safety.spring_saturated_cycles),
     ] {
         if value > 0 {
             run.description.settings.insert(key.into(), value.into());

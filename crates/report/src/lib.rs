@@ -22,7 +22,7 @@ pub mod trajectory;
 
 pub use metrics::{ErrorUnit, LevelDescription, LevelMetrics, Metrics, RunDescription};
 pub use percentiles::{PercentileCurve, plot_percentiles};
-pub use plots::plot_all;
+pub use plots::{TimePanel, plot_all, plot_time_series};
 pub use trajectory::Trajectory;
 
 use std::path::{Path, PathBuf};

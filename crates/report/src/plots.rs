@@ -169,6 +169,41 @@ fn draw_panels(path: &Path, title: &str, t: &[f64], panels: &[Panel]) -> Result<
     Ok(())
 }
 
+/// One panel of [`plot_time_series`]: a title, the y axis label and the
+/// (label, values) of its lines, one value per time sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimePanel {
+    pub title: String,
+    pub y_label: String,
+    pub series: Vec<(String, Vec<f64>)>,
+}
+
+/// Draws stacked `panels` over the time axis `t` into `path` (PNG, 1200 wide,
+/// 280 per panel), in the style of the run plots; non-finite values are skipped.
+pub fn plot_time_series(
+    path: &Path,
+    title: &str,
+    t: &[f64],
+    panels: &[TimePanel],
+) -> Result<(), ReportError> {
+    let panels: Vec<Panel> = panels
+        .iter()
+        .map(|p| Panel {
+            title: p.title.clone(),
+            y_label: p.y_label.clone(),
+            series: p
+                .series
+                .iter()
+                .map(|(label, values)| Series {
+                    label: label.clone(),
+                    values: values.clone(),
+                })
+                .collect(),
+        })
+        .collect();
+    draw_panels(path, title, t, &panels)
+}
+
 /// The plot context: the run's table, its time column and description.
 struct Plotter<'a> {
     dir: &'a Path,
