@@ -35,6 +35,22 @@ def env_with_prefix() -> dict[str, str]:
     return dict(os.environ, HCC_IPC_FILE_PREFIX=f"{unique('hccrec')}_"[:32])
 
 
+def start_recorder(ns: str, out: pathlib.Path, env: dict[str, str], **kw) -> subprocess.Popen:
+    """``hcc record`` on ``ns``, returned once it has subscribed (it creates
+    its file after its subscribers), so that it sees the run from its start."""
+    p = subprocess.Popen(
+        [str(binary("hcc")), "record", "--namespace", ns, "--out", str(out),
+         "--config", str(CONFIG), "--quiet"],
+        cwd=ROOT, env=env, **kw,
+    )
+    deadline = time.monotonic() + 60
+    while not out.exists():
+        assert p.poll() is None, "hcc record ended before it subscribed"
+        assert time.monotonic() < deadline, "hcc record did not start within 60 s"
+        time.sleep(0.05)
+    return p
+
+
 def hcc(*args: str, env: dict[str, str], timeout: float = 300.0) -> subprocess.CompletedProcess:
     return subprocess.run(
         [str(binary("hcc")), *args], cwd=ROOT, env=env, capture_output=True, text=True,
@@ -136,11 +152,8 @@ def recorded_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     env = env_with_prefix()
     ns = unique("rec")
     rec_file = tmp / "record.mcap"
-    record = subprocess.Popen(
-        [str(binary("hcc")), "record", "--namespace", ns, "--out", str(rec_file),
-         "--config", str(CONFIG), "--quiet"],
-        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )
+    record = start_recorder(ns, rec_file, env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
     try:
         run = hcc("run", str(CONFIG), "--duration", "4", "--namespace", ns,
                   "--out", str(tmp / "run"), "--no-plots", "--quiet", env=env)
@@ -185,15 +198,12 @@ def test_sigkill_of_the_recorder_leaves_a_readable_file(tmp_path: pathlib.Path) 
     env = env_with_prefix()
     ns = unique("kill")
     rec_file = tmp_path / "killed.mcap"
+    record = start_recorder(ns, rec_file, env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
     run = subprocess.Popen(
         [str(binary("hcc")), "run", str(CONFIG), "--duration", "8", "--namespace", ns,
          "--out", str(tmp_path / "run"), "--no-plots", "--quiet"],
         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )
-    record = subprocess.Popen(
-        [str(binary("hcc")), "record", "--namespace", ns, "--out", str(rec_file),
-         "--config", str(CONFIG), "--quiet"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
     try:
         # Let it record a few chunks (the file grows once per second), then kill it.
@@ -219,7 +229,9 @@ def test_sigkill_of_the_recorder_leaves_a_readable_file(tmp_path: pathlib.Path) 
     error = None
     with open(rec_file, "rb") as f:
         try:
-            for _schema, channel, _message in NonSeekingReader(f).iter_messages():
+            for _schema, channel, _message in NonSeekingReader(f).iter_messages(
+                log_time_order=False
+            ):
                 counts[channel.topic] = counts.get(channel.topic, 0) + 1
         except (McapError, EOFError, ValueError) as e:
             error = e

@@ -9,7 +9,9 @@
 
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
-use hcc_msgs::{JointState, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry, TorqueCommand};
+use hcc_msgs::{
+    JointState, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry, TorqueCommand,
+};
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use iceoryx2::prelude::SignalHandlingMode;
 use std::collections::BTreeMap;
@@ -278,7 +280,8 @@ impl StreamRecorder {
             }
             Received::Setpoint(s) => {
                 // A bounded map: ids beyond 64 clients share one checker.
-                let key = if self.setpoints.len() < 64 || self.setpoints.contains_key(&s.client_id) {
+                let key = if self.setpoints.len() < 64 || self.setpoints.contains_key(&s.client_id)
+                {
                     s.client_id
                 } else {
                     u64::MAX
@@ -354,7 +357,10 @@ pub fn stats_line(m: &RecorderMsg) -> String {
             t.push_str(&format!(" ({} lost in {} gaps)", x.gaps, x.gap_events));
         }
         if x.duplicates + x.backwards > 0 {
-            t.push_str(&format!(" ({} out of sequence)", x.duplicates + x.backwards));
+            t.push_str(&format!(
+                " ({} out of sequence)",
+                x.duplicates + x.backwards
+            ));
         }
         t
     };
@@ -370,12 +376,19 @@ pub fn stats_line(m: &RecorderMsg) -> String {
 
 /// The run metadata common to every recorder: versions, the recorder, the
 /// namespace, the start time.
-pub fn run_metadata(recorder: &str, namespace: &str, clock: (u64, u64)) -> BTreeMap<String, String> {
+pub fn run_metadata(
+    recorder: &str,
+    namespace: &str,
+    clock: (u64, u64),
+) -> BTreeMap<String, String> {
     let mut m = BTreeMap::new();
     m.insert("recorder".into(), recorder.into());
     m.insert("hcc_version".into(), env!("CARGO_PKG_VERSION").into());
     m.insert("iceoryx2_version".into(), ICEORYX2_VERSION.into());
-    m.insert("msgs_schema_version".into(), hcc_msgs::SCHEMA_VERSION.to_string());
+    m.insert(
+        "msgs_schema_version".into(),
+        hcc_msgs::SCHEMA_VERSION.to_string(),
+    );
     m.insert("namespace".into(), namespace.into());
     m.insert("start_unix_ns".into(), clock.0.to_string());
     m.insert("start_monotonic_ns".into(), clock.1.to_string());

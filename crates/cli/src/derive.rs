@@ -358,8 +358,8 @@ pub fn scenario_of(path: &Path, config: Option<&Path>) -> anyhow::Result<Scenari
             path.display()
         ),
     };
-    let mut scenario = Scenario::load(&config)
-        .with_context(|| format!("the scenario of {}", path.display()))?;
+    let mut scenario =
+        Scenario::load(&config).with_context(|| format!("the scenario of {}", path.display()))?;
     if let Some(hash) = recorded.and_then(|m| m.get("urdf_sha256"))
         && let Ok(urdf) = std::fs::read(&scenario.urdf_path)
         && &mcap_log::sha256_hex(&urdf) != hash
@@ -415,7 +415,10 @@ pub fn derive<'a>(path: &Path, scenario: &'a Scenario) -> anyhow::Result<Derived
     let expected_rows = run_meta
         .contains_key("duration_s")
         .then(|| (s.duration_s * s.control_rate_hz).round() as u64 + 1);
-    let mode = run_meta.get("mode").cloned().unwrap_or_else(|| "unknown".into());
+    let mode = run_meta
+        .get("mode")
+        .cloned()
+        .unwrap_or_else(|| "unknown".into());
     let mut d = Derived {
         rows,
         rec,

@@ -162,7 +162,10 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         capture::stats_line(&stats)
     );
     if last_telemetry.is_none() {
-        bail!("{end}");
+        bail!(
+            "no telemetry from namespace {} was recorded (stopped by: {end})",
+            args.namespace
+        );
     }
     Ok(())
 }

@@ -70,7 +70,7 @@ impl Replay {
     fn advance(&mut self, flush: bool) -> anyhow::Result<()> {
         while let Some(tel) = self.pending.front() {
             let stale = tel.flags & TELEMETRY_FLAG_PEER_LOST != 0;
-            if !stale && !self.inputs_read(tel) {
+            if !stale && !self.inputs_read(tel, flush) {
                 if !flush {
                     // The cycle's command or setpoints come later in the file
                     // (the streams are drained one after the other).
@@ -99,13 +99,18 @@ impl Replay {
     }
 
     /// Whether the inputs of `tel`'s cycle have been read: a later state
-    /// (so its own state is in), its command, and the setpoints it answered.
-    fn inputs_read(&self, tel: &Telemetry) -> bool {
-        self.last_state_seq.is_some_and(|s| s > tel.state_seq)
+    /// (so its own state is in; at the end of the file, its own state), its
+    /// command, and the setpoints it answered.
+    fn inputs_read(&self, tel: &Telemetry, end: bool) -> bool {
+        self.last_state_seq
+            .is_some_and(|s| s > tel.state_seq || (end && s == tel.state_seq))
             && self.commands.contains_key(&tel.command_seq)
             && tel.setpoint_answers.iter().all(|a| {
                 let before = self.answered.get(&a.client_id).copied().unwrap_or(0);
-                let queued = self.setpoints.get(&a.client_id).map_or(0, |q| q.len() as u64);
+                let queued = self
+                    .setpoints
+                    .get(&a.client_id)
+                    .map_or(0, |q| q.len() as u64);
                 a.answered <= before + queued
             })
     }
@@ -184,7 +189,12 @@ impl Replay {
         }
         let (a, b) = (recorded.tau(), replayed.tau());
         if a.len() != self.n || b.len() != self.n {
-            bail!("cycle {}: commands of {} and {} joints", tel.header.seq, a.len(), b.len());
+            bail!(
+                "cycle {}: commands of {} and {} joints",
+                tel.header.seq,
+                a.len(),
+                b.len()
+            );
         }
         if let Some(j) = (0..self.n).find(|&j| a[j].to_bits() != b[j].to_bits()) {
             self.first_difference = Some(differ(format!(

@@ -420,14 +420,8 @@ fn outcome(
     }
 }
 
-
 /// The metadata of a run's recording.
-fn run_info(
-    scenario: &Scenario,
-    launch: &Launch,
-    recorder: &str,
-    clock: (u64, u64),
-) -> RunInfo {
+fn run_info(scenario: &Scenario, launch: &Launch, recorder: &str, clock: (u64, u64)) -> RunInfo {
     let mut run = capture::run_metadata(recorder, launch.namespace.as_str(), clock);
     run.insert("mode".into(), launch.mode.into());
     run.insert("duration_s".into(), format!("{:?}", launch.duration));

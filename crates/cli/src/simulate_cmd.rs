@@ -14,16 +14,16 @@ use anyhow::Context;
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_controller::schedule::Schedule;
-use hcc_plant::SimError;
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, DriverStatus, JointState, MAX_LEVELS, MAX_TASK_DIM,
     Telemetry, TorqueCommand,
 };
+use hcc_plant::SimError;
 use hcc_plant::closed_loop::{self, Commands, ControlLaw, HierarchicalLaw};
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
+use hcc_report::{Metrics, RunDescription, Trajectory};
 use nalgebra::DVector;
 use std::collections::BTreeMap;
-use hcc_report::{Metrics, RunDescription, Trajectory};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
@@ -237,7 +237,10 @@ impl SimLog {
             t.tau_level[i][..n].copy_from_slice(law.level_torque(i).as_slice());
             t.task_error[i][..m].copy_from_slice(law.task_error(i).as_slice());
             t.storage[i] = law.level_energy(i);
-            t.min_singular_value[i] = out.conditioning.get(i).map_or(f64::NAN, |c| c.max(0.0).sqrt());
+            t.min_singular_value[i] = out
+                .conditioning
+                .get(i)
+                .map_or(f64::NAN, |c| c.max(0.0).sqrt());
             if out.singular.get(i).copied().unwrap_or(false) {
                 t.singular_levels |= 1 << i;
             }
@@ -262,7 +265,11 @@ impl SimLog {
         };
         let cycles = self.last_k as u64 + 1;
         let mut stats = RecorderMsg::default();
-        for s in [&mut stats.joint_state, &mut stats.torque_command, &mut stats.telemetry] {
+        for s in [
+            &mut stats.joint_state,
+            &mut stats.torque_command,
+            &mut stats.telemetry,
+        ] {
             s.received = cycles;
             s.recorded = cycles;
         }

@@ -19,8 +19,13 @@ fn state(k: u64) -> JointState {
     s.set_n_joints(4).unwrap();
     // Values whose shortest decimal form is long, a negative zero, a subnormal.
     let x = k as f64;
-    s.set_q(&[0.1 * x, -0.0, f64::MIN_POSITIVE / 3.0, (x + 1.0).sqrt() / 7.0])
-        .unwrap();
+    s.set_q(&[
+        0.1 * x,
+        -0.0,
+        f64::MIN_POSITIVE / 3.0,
+        (x + 1.0).sqrt() / 7.0,
+    ])
+    .unwrap();
     s.set_qd(&[1.0 / 3.0, f64::MAX, -1e-300, std::f64::consts::PI * x])
         .unwrap();
     s

@@ -10,8 +10,8 @@
 
 use hcc_msgs::{
     CommandMode, DriverStatus, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS,
-    MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Setpoint, SetpointAnswer, Telemetry,
-    TelemetryCounters, TelemetryTimings, TorqueCommand,
+    MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Setpoint, SetpointAnswer, Telemetry, TelemetryCounters,
+    TelemetryTimings, TorqueCommand,
 };
 use serde::{Deserialize, Deserializer, Serialize};
 use std::collections::BTreeMap;
@@ -463,7 +463,11 @@ impl SetpointMsg {
         s.duration_s = self.duration_s;
         fill(&mut s.goal, &self.goal, "goal")?;
         fill(&mut s.velocity, &self.velocity, "velocity")?;
-        fill(&mut s.stiffness[..MAX_GAIN_ENTRIES], &self.stiffness, "stiffness")?;
+        fill(
+            &mut s.stiffness[..MAX_GAIN_ENTRIES],
+            &self.stiffness,
+            "stiffness",
+        )?;
         fill(&mut s.damping[..MAX_GAIN_ENTRIES], &self.damping, "damping")?;
         Ok(s)
     }

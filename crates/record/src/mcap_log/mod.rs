@@ -513,9 +513,9 @@ pub fn read<E: From<LogError>>(
                             TOPIC_JOINT_STATE => {
                                 Entry::JointState(serde_json::from_slice(&data).map_err(decode)?)
                             }
-                            TOPIC_TORQUE_COMMAND => Entry::TorqueCommand(
-                                serde_json::from_slice(&data).map_err(decode)?,
-                            ),
+                            TOPIC_TORQUE_COMMAND => {
+                                Entry::TorqueCommand(serde_json::from_slice(&data).map_err(decode)?)
+                            }
                             TOPIC_TELEMETRY => {
                                 Entry::Telemetry(serde_json::from_slice(&data).map_err(decode)?)
                             }
@@ -552,4 +552,3 @@ pub fn read_metadata(path: &Path) -> Result<BTreeMap<String, BTreeMap<String, St
     })?;
     Ok(out)
 }
-
