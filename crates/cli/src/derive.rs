@@ -460,7 +460,6 @@ impl Derived<'_> {
             "states_received": rec.states.received,
             "commands_received": rec.commands.received,
             "telemetry_received": rec.telemetry.received,
-            "setpoints_received": rec.setpoints,
             "recorder_gaps": {
                 "joint_state": rec.states.checker.missed(),
                 "torque_command": rec.commands.checker.missed(),
@@ -520,6 +519,9 @@ impl Derived<'_> {
             rec.unmatched_telemetry,
             rec.unanswered_states
         );
+        if rec.setpoints > 0 {
+            println!("  setpoints recorded: {}", rec.setpoints);
+        }
         if self.rows.shadow_failures > 0 {
             println!(
                 "  warning: the shadow controller failed on {} states (acc, accv and S_kin/S_pot are NaN there)",

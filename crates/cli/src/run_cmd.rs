@@ -357,9 +357,6 @@ impl Children {
 
 /// Records until the run ends (the simulator finished, a child failed, or
 /// Ctrl-C), with a progress line per second unless `quiet`.
-
-/// Records until the run ends (the simulator finished, a child failed, or
-/// Ctrl-C), with a progress line per second unless `quiet`.
 fn record_run(
     receiver: &Receiver,
     recorder: &mut StreamRecorder,
