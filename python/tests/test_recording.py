@@ -247,3 +247,18 @@ def test_sigkill_of_the_recorder_leaves_a_readable_file(tmp_path: pathlib.Path) 
     lines = (out / "trajectory.csv").read_text().splitlines()
     assert len(lines) > 1000
     assert list(out.glob("*.png"))
+
+
+def test_replay_with_a_changed_gain_names_the_first_difference(
+    recorded_run: dict, tmp_path: pathlib.Path
+) -> None:
+    # The same scenario with K3 changed by one part in a million.
+    text = CONFIG.read_text()
+    assert "stiffness = 2400.0" in text
+    (tmp_path / "changed.toml").write_text(text.replace("stiffness = 2400.0", "stiffness = 2400.0024"))
+    (tmp_path / URDF.name).write_bytes(URDF.read_bytes())
+    r = hcc("replay", str(recorded_run["run_file"]), "--config", str(tmp_path / "changed.toml"),
+            env=recorded_run["env"])
+    print(r.stdout)
+    assert r.returncode != 0
+    assert "differs from the recording at cycle" in r.stdout and "joint" in r.stdout
