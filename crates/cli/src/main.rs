@@ -8,11 +8,15 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod capture;
 mod command_cmd;
 mod daemons;
+mod derive;
 mod jitter_cmd;
 mod model_cmd;
 mod plot_cmd;
+mod record_cmd;
+mod replay_cmd;
 mod run_cmd;
 mod run_schedule;
 mod simulate_cmd;
@@ -40,8 +44,17 @@ enum Command {
     Jitter(jitter_cmd::JitterArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
     Model(model_cmd::ModelArgs),
-    /// Redraw the plots of a results directory from its trajectory.csv and metrics.json.
+    /// Derive trajectory.csv, metrics.json and the plots from a recording (FILE.mcap), or
+    /// redraw the plots of a results directory from its trajectory.csv and metrics.json.
     Plot(plot_cmd::PlotArgs),
+    /// Record a running namespace (joint states, commands, telemetry, setpoints) into an
+    /// MCAP file, as a pure subscriber.
+    Record(record_cmd::RecordArgs),
+    /// Write a recording's derived table (the columns of trajectory.csv) as CSV.
+    Export(plot_cmd::ExportArgs),
+    /// Feed a recording's joint states and setpoints through the controller again and
+    /// check that every torque command is bit-identical.
+    Replay(replay_cmd::ReplayArgs),
     /// Set a level's goal on a running controller (exit 0 once it accepted it).
     Goal(command_cmd::GoalArgs),
     /// Set a level's stiffness and/or damping on a running controller.
@@ -75,6 +88,9 @@ fn main() -> ExitCode {
         Command::Jitter(args) => jitter_cmd::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),
+        Command::Record(args) => record_cmd::run(args),
+        Command::Export(args) => plot_cmd::export(args),
+        Command::Replay(args) => replay_cmd::run(args),
         Command::Goal(args) => command_cmd::goal(args),
         Command::Gains(args) => command_cmd::gains(args),
         Command::Monitor(args) => command_cmd::monitor(args),

@@ -139,8 +139,23 @@ impl<L: ControlLaw> LawTerms for Sampled<'_, L> {
     }
 }
 
+/// A per-cycle observer of [`simulate_observed`]: cycle k, its time t_k,
+/// the sampled state (q, q̇) and the law after its step at that state.
+pub type Observer<'a, L> =
+    dyn FnMut(usize, f64, &DVector<f64>, &DVector<f64>, &L) -> Result<(), SimError> + 'a;
+
 /// Runs the closed loop of `scenario` with the control law `law`.
 pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<Run, SimError> {
+    simulate_observed(scenario, law, &mut |_, _, _, _, _| Ok(()))
+}
+
+/// [`simulate_with`], calling `observe` after the law's step of every cycle
+/// (e.g. to record the cycle's messages).
+pub fn simulate_observed<L: ControlLaw>(
+    scenario: &Scenario,
+    law: &mut L,
+    observe: &mut Observer<'_, L>,
+) -> Result<Run, SimError> {
     let s = &scenario.simulation;
     let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
     let timing = LoopTiming {
@@ -153,9 +168,10 @@ pub fn simulate_with<L: ControlLaw>(scenario: &Scenario, law: &mut L) -> Result<
     let record_err = |e: RecordError| SimError::Invalid(e.to_string());
     let mut traj = recorder.trajectory(cycles + 1).map_err(record_err)?;
 
-    run_zoh(&mut plant, timing, |_k, t, q, qd, tau| {
+    run_zoh(&mut plant, timing, |k, t, q, qd, tau| {
         law.compute(q, qd)
             .map_err(|e| SimError::Invalid(format!("t = {t} s: {e}")))?;
+        observe(k, t, q, qd, &*law)?;
         tau.copy_from(law.tau());
         if let Some(j) = tau.iter().position(|x| !x.is_finite()) {
             return Err(SimError::Invalid(format!(
@@ -320,8 +336,17 @@ pub fn simulate(scenario: &Scenario) -> Result<Run, SimError> {
 }
 
 /// [`simulate`] with a given law (e.g. one with [`Commands`]).
-pub fn simulate_law(scenario: &Scenario, mut law: HierarchicalLaw) -> Result<Run, SimError> {
-    let mut run = simulate_with(scenario, &mut law)?;
+pub fn simulate_law(scenario: &Scenario, law: HierarchicalLaw) -> Result<Run, SimError> {
+    simulate_law_observed(scenario, law, &mut |_, _, _, _, _| Ok(()))
+}
+
+/// [`simulate_law`] with a per-cycle observer (see [`simulate_observed`]).
+pub fn simulate_law_observed(
+    scenario: &Scenario,
+    mut law: HierarchicalLaw,
+    observe: &mut Observer<'_, HierarchicalLaw>,
+) -> Result<Run, SimError> {
+    let mut run = simulate_observed(scenario, &mut law, observe)?;
     run.description.settings.insert(
         "saturated_cycles".into(),
         serde_json::json!(law.saturated_cycles()),

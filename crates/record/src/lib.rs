@@ -41,6 +41,7 @@
 //! ```
 
 mod layout;
+pub mod mcap_log;
 mod recorder;
 
 pub use layout::{column_names, describe};

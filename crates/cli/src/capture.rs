@@ -1,0 +1,444 @@
+//! Capturing a namespace's streams into an MCAP recording, as a pure
+//! subscriber: the receiver thread copies every joint state, torque command,
+//! telemetry sample and setpoint out of the iceoryx2 queues (the largest
+//! queues the services allow, drained every 100 µs, so that publishers —
+//! which never block — lose nothing to the recorder), and the
+//! [`StreamRecorder`] writes them into the file as they arrive, counting
+//! sequence gaps and drops per stream with [`SequenceChecker`]s. Used by
+//! `hcc record` and `hcc run` alike.
+
+use anyhow::{Context, bail};
+use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
+use hcc_msgs::{
+    JointState, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry, TorqueCommand,
+};
+use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
+use iceoryx2::prelude::SignalHandlingMode;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, mpsc};
+use std::time::{Duration, Instant};
+
+/// A sample copied out of shared memory by the receiver thread.
+pub enum Received {
+    State(Box<JointState>),
+    Command(Box<TorqueCommand>),
+    Telemetry(Box<Telemetry>),
+    Setpoint(Box<Setpoint>),
+    /// The receiver failed and stopped.
+    Failed(String),
+}
+
+/// The subscribers, on a thread of their own that does nothing but copy
+/// samples out of the queues into a channel, so that writing the file never
+/// delays the draining (in lockstep the daemons run much faster than real
+/// time).
+pub struct Receiver {
+    handle: Option<std::thread::JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
+    rx: mpsc::Receiver<Received>,
+}
+
+struct Subscribers {
+    states: ipc::StateSubscriber,
+    commands: ipc::CommandSubscriber,
+    telemetry: ipc::TelemetrySubscriber,
+    setpoints: ipc::SetpointSubscriber,
+}
+
+impl Subscribers {
+    /// Reads every queued sample into `tx`; returns how many.
+    fn drain_into(&self, tx: &mpsc::Sender<Received>) -> Result<usize, String> {
+        let mut k = 0;
+        // Setpoints and states first: a command or telemetry always follows them.
+        while let Some(s) = self
+            .setpoints
+            .receive()
+            .map_err(|e| format!("receive setpoint: {e:?}"))?
+        {
+            let _ = tx.send(Received::Setpoint(Box::new(*s)));
+            k += 1;
+        }
+        while let Some(s) = self
+            .states
+            .receive()
+            .map_err(|e| format!("receive joint_state: {e:?}"))?
+        {
+            let _ = tx.send(Received::State(Box::new(*s)));
+            k += 1;
+        }
+        while let Some(c) = self
+            .commands
+            .receive()
+            .map_err(|e| format!("receive torque_command: {e:?}"))?
+        {
+            let _ = tx.send(Received::Command(Box::new(*c)));
+            k += 1;
+        }
+        while let Some(t) = self
+            .telemetry
+            .receive()
+            .map_err(|e| format!("receive telemetry: {e:?}"))?
+        {
+            let _ = tx.send(Received::Telemetry(Box::new(*t)));
+            k += 1;
+        }
+        Ok(k)
+    }
+}
+
+impl Receiver {
+    /// Subscribes (on the new thread, node `node_name`) and returns once the
+    /// subscribers exist.
+    pub fn start(
+        node_name: &str,
+        file_prefix: Option<String>,
+        names: ServiceNames,
+    ) -> anyhow::Result<Receiver> {
+        let (tx, rx) = mpsc::channel();
+        let (ready_tx, ready_rx) = mpsc::sync_channel::<Result<(), String>>(1);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = stop.clone();
+        let node_name = node_name.to_string();
+        let handle = std::thread::Builder::new()
+            .name("hcc-receiver".into())
+            .spawn(move || {
+                let setup = || -> anyhow::Result<_> {
+                    let node = ipc::create_node(
+                        &node_name,
+                        SignalHandlingMode::Disabled,
+                        file_prefix.as_deref(),
+                    )?;
+                    let services = Services::open(&node, &names)?;
+                    let subs = Subscribers {
+                        states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+                        commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+                        telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+                        setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
+                    };
+                    Ok((node, services, subs))
+                };
+                let (node, services, subs) = match setup() {
+                    Ok(x) => {
+                        let _ = ready_tx.send(Ok(()));
+                        x
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        return;
+                    }
+                };
+                loop {
+                    // Read the flag before draining: after a stop request
+                    // one more complete drain happens.
+                    let last = stop_flag.load(Ordering::SeqCst);
+                    match subs.drain_into(&tx) {
+                        Ok(0) if last => break,
+                        Ok(0) => std::thread::sleep(Duration::from_micros(100)),
+                        Ok(_) => {}
+                        Err(e) => {
+                            let _ = tx.send(Received::Failed(e));
+                            break;
+                        }
+                    }
+                }
+                drop(subs);
+                drop(services);
+                drop(node);
+            })
+            .context("cannot start the receiver thread")?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(Receiver {
+                handle: Some(handle),
+                stop,
+                rx,
+            }),
+            Ok(Err(e)) => {
+                let _ = handle.join();
+                bail!(e)
+            }
+            Err(_) => bail!("the receiver thread ended during start-up"),
+        }
+    }
+
+    /// Hands the samples received so far to `f` (waiting up to `wait` for
+    /// the first one); returns how many.
+    pub fn pump(
+        &self,
+        wait: Duration,
+        mut f: impl FnMut(Received) -> anyhow::Result<()>,
+    ) -> anyhow::Result<usize> {
+        let mut k = 0;
+        let mut next = self.rx.recv_timeout(wait).ok();
+        while let Some(m) = next {
+            if let Received::Failed(e) = m {
+                bail!("recorder: {e}");
+            }
+            f(m)?;
+            k += 1;
+            next = self.rx.try_recv().ok();
+        }
+        Ok(k)
+    }
+
+    /// Stops the thread after a last drain, hands everything to `f` and
+    /// closes the subscribers (and the node).
+    pub fn finish(
+        mut self,
+        mut f: impl FnMut(Received) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+        while self.pump(Duration::ZERO, &mut f)? > 0 {}
+        Ok(())
+    }
+}
+
+impl Drop for Receiver {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Sequence bookkeeping of one stream.
+#[derive(Default)]
+struct Stream {
+    checker: SequenceChecker,
+    stats: StreamStats,
+}
+
+impl Stream {
+    fn observe(&mut self, seq: u64) -> SeqEvent {
+        self.stats.received += 1;
+        let e = self.checker.observe(seq);
+        if let SeqEvent::Gap { .. } = e {
+            self.stats.gap_events += 1;
+        }
+        self.stats.gaps = self.checker.missed();
+        self.stats.duplicates = self.checker.duplicates();
+        self.stats.backwards = self.checker.backwards();
+        e
+    }
+}
+
+/// Writes received samples into an MCAP recording and counts what was lost.
+/// Every received sample is written (duplicates too: the file is the log of
+/// what was on the wire); the `/recorder` channel carries the counts once
+/// per second.
+pub struct StreamRecorder {
+    writer: McapWriter,
+    states: Stream,
+    commands: Stream,
+    telemetry: Stream,
+    /// Setpoints are numbered per client.
+    setpoints: BTreeMap<u64, Stream>,
+    setpoint_stats: StreamStats,
+    started: Instant,
+    next_report: Instant,
+}
+
+impl StreamRecorder {
+    /// Creates the recording at `path` with the metadata `info`.
+    pub fn create(path: &Path, info: &RunInfo, clock: (u64, u64)) -> anyhow::Result<Self> {
+        let writer = McapWriter::create(path, info, clock)?;
+        let now = Instant::now();
+        Ok(StreamRecorder {
+            writer,
+            states: Stream::default(),
+            commands: Stream::default(),
+            telemetry: Stream::default(),
+            setpoints: BTreeMap::new(),
+            setpoint_stats: StreamStats::default(),
+            started: now,
+            next_report: now + Duration::from_secs(1),
+        })
+    }
+
+    /// Writes one received sample.
+    pub fn record(&mut self, m: &Received) -> anyhow::Result<()> {
+        match m {
+            Received::State(s) => {
+                self.states.observe(s.header.seq);
+                self.writer.joint_state(s)?;
+                self.states.stats.recorded += 1;
+            }
+            Received::Command(c) => {
+                self.commands.observe(c.header.seq);
+                self.writer.torque_command(c)?;
+                self.commands.stats.recorded += 1;
+            }
+            Received::Telemetry(t) => {
+                self.telemetry.observe(t.header.seq);
+                self.writer.telemetry(t)?;
+                self.telemetry.stats.recorded += 1;
+            }
+            Received::Setpoint(s) => {
+                // A bounded map: ids beyond 64 clients share one checker.
+                let key = if self.setpoints.len() < 64 || self.setpoints.contains_key(&s.client_id)
+                {
+                    s.client_id
+                } else {
+                    u64::MAX
+                };
+                let stream = self.setpoints.entry(key).or_default();
+                stream.observe(s.header.seq);
+                self.writer.setpoint(s)?;
+                self.setpoint_stats.recorded += 1;
+            }
+            Received::Failed(_) => {}
+        }
+        Ok(())
+    }
+
+    /// The counts so far.
+    pub fn stats(&self) -> RecorderMsg {
+        let mut sp = StreamStats {
+            recorded: self.setpoint_stats.recorded,
+            ..StreamStats::default()
+        };
+        for s in self.setpoints.values() {
+            sp.received += s.stats.received;
+            sp.gaps += s.stats.gaps;
+            sp.gap_events += s.stats.gap_events;
+            sp.duplicates += s.stats.duplicates;
+            sp.backwards += s.stats.backwards;
+        }
+        let mut m = RecorderMsg {
+            elapsed_s: self.started.elapsed().as_secs_f64(),
+            joint_state: self.states.stats,
+            torque_command: self.commands.stats,
+            telemetry: self.telemetry.stats,
+            setpoint: sp,
+            total_gaps: 0,
+            last: false,
+        };
+        m.update_total();
+        m
+    }
+
+    /// Once per second: the counts into `/recorder`; and the chunk flush
+    /// when due (also without new samples). Returns the counts when it
+    /// wrote them.
+    pub fn tick(&mut self) -> anyhow::Result<Option<RecorderMsg>> {
+        let now = Instant::now();
+        let mut out = None;
+        if now >= self.next_report {
+            let m = self.stats();
+            self.writer.recorder(&m, hcc_msgs::monotonic_now_ns())?;
+            self.next_report += Duration::from_secs(1);
+            if self.next_report < now {
+                self.next_report = now + Duration::from_secs(1);
+            }
+            out = Some(m);
+        }
+        self.writer.flush_if_due()?;
+        Ok(out)
+    }
+
+    /// Writes the final counts and `end` and closes the file.
+    pub fn finish(self, end: BTreeMap<String, String>) -> anyhow::Result<RecorderMsg> {
+        let m = self.stats();
+        self.writer.finish(&m, end)?;
+        Ok(m)
+    }
+}
+
+/// One line on the counts: received and lost per stream.
+pub fn stats_line(m: &RecorderMsg) -> String {
+    let s = |x: &StreamStats| {
+        let mut t = format!("{}", x.received);
+        if x.gaps > 0 {
+            t.push_str(&format!(" ({} lost in {} gaps)", x.gaps, x.gap_events));
+        }
+        if x.duplicates + x.backwards > 0 {
+            t.push_str(&format!(
+                " ({} out of sequence)",
+                x.duplicates + x.backwards
+            ));
+        }
+        t
+    };
+    format!(
+        "joint_state {}, torque_command {}, telemetry {}, setpoint {}; lost {}",
+        s(&m.joint_state),
+        s(&m.torque_command),
+        s(&m.telemetry),
+        s(&m.setpoint),
+        m.total_gaps
+    )
+}
+
+/// The run metadata common to every recorder: versions, the recorder, the
+/// namespace, the start time.
+pub fn run_metadata(
+    recorder: &str,
+    namespace: &str,
+    clock: (u64, u64),
+) -> BTreeMap<String, String> {
+    let mut m = BTreeMap::new();
+    m.insert("recorder".into(), recorder.into());
+    m.insert("hcc_version".into(), env!("CARGO_PKG_VERSION").into());
+    m.insert("iceoryx2_version".into(), ICEORYX2_VERSION.into());
+    m.insert(
+        "msgs_schema_version".into(),
+        hcc_msgs::SCHEMA_VERSION.to_string(),
+    );
+    m.insert("namespace".into(), namespace.into());
+    m.insert("start_unix_ns".into(), clock.0.to_string());
+    m.insert("start_monotonic_ns".into(), clock.1.to_string());
+    m.insert("start_time".into(), rfc3339(clock.0));
+    m.insert("host_pid".into(), std::process::id().to_string());
+    m
+}
+
+/// The iceoryx2 version all peers are built against (the workspace pins it).
+pub const ICEORYX2_VERSION: &str = "0.10.0";
+
+/// The machine facts `hcc jitter` reports, as metadata.
+pub fn machine_metadata() -> BTreeMap<String, String> {
+    let info = hcc_timing::machine::MachineInfo::read();
+    hcc_record::mcap_log::json_entries(&serde_json::to_value(info).unwrap_or_default())
+}
+
+/// `YYYY-MM-DDTHH:MM:SS.mmmZ` of Unix ns (UTC).
+pub fn rfc3339(unix_ns: u64) -> String {
+    let secs = (unix_ns / 1_000_000_000) as i64;
+    let ms = (unix_ns / 1_000_000) % 1000;
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let y = yoe + era * 400;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = if m <= 2 { y + 1 } else { y };
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{ms:03}Z",
+        rem / 3600,
+        (rem % 3600) / 60,
+        rem % 60
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rfc3339_of_known_instants() {
+        assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
+        // 2000-02-29T12:34:56.789Z
+        assert_eq!(rfc3339(951_827_696_789_000_000), "2000-02-29T12:34:56.789Z");
+    }
+}

@@ -1,0 +1,171 @@
+//! `hcc record --namespace NS [--duration S] [--out FILE.mcap] [--config FILE]`:
+//! records a running namespace into an MCAP file as a pure subscriber — it
+//! never publishes and never waits on the loop; the daemons' publishers do
+//! not block on it (safe overflow), and what it could not keep up with is
+//! counted as gaps, printed and stored in the file (module `capture`).
+//!
+//! It stops on Ctrl-C or SIGTERM, after `--duration` seconds, or when the
+//! controller is gone (no telemetry for `--idle-timeout` seconds after it
+//! was heard), and then closes the file cleanly (summary, index, final
+//! counts). Killed with SIGKILL, it leaves a file readable up to its last
+//! chunk (at most a second old).
+
+use anyhow::{Context, bail};
+use hcc_config::Scenario;
+use hcc_msgs::{ServiceNames, ipc};
+use hcc_record::mcap_log::{self, RunInfo};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use crate::capture::{self, Received, Receiver, StreamRecorder};
+use crate::daemons::{install_signal_handlers, interrupted};
+
+#[derive(clap::Args, Debug)]
+pub struct RecordArgs {
+    /// Namespace of the running controller and driver.
+    #[arg(long)]
+    pub namespace: String,
+    /// Stop after this many seconds (default: until Ctrl-C or the controller is gone).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// The recording (default: hcc-<namespace>-<start time>.mcap).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The scenario the controller runs: stored in the file (TOML text, URDF
+    /// hash), so that `hcc plot` and `hcc replay` find it.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// iceoryx2 file prefix of the daemons (default: HCC_IPC_FILE_PREFIX, else iceoryx2's).
+    #[arg(long)]
+    pub file_prefix: Option<String>,
+    /// The controller is gone when its telemetry stops for this long, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub idle_timeout: f64,
+    /// Give up when no telemetry arrives within this many seconds of the start.
+    #[arg(long, default_value_t = 30.0)]
+    pub wait: f64,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn positive(what: &str, v: f64) -> anyhow::Result<Duration> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("{what} must be a positive number of seconds, not {v}");
+    }
+    Ok(Duration::from_secs_f64(v))
+}
+
+pub fn run(args: RecordArgs) -> anyhow::Result<()> {
+    let names = ServiceNames::new(&args.namespace).context("--namespace")?;
+    let duration = args
+        .duration
+        .map(|d| positive("--duration", d))
+        .transpose()?;
+    let idle = positive("--idle-timeout", args.idle_timeout)?;
+    let wait = positive("--wait", args.wait)?;
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let scenario = args
+        .config
+        .as_ref()
+        .map(Scenario::load)
+        .transpose()
+        .context("--config")?;
+    let clock = mcap_log::clock_pair();
+    let out = args.out.clone().unwrap_or_else(|| {
+        let stamp: String = capture::rfc3339(clock.0)
+            .chars()
+            .filter(|c| c.is_ascii_digit())
+            .take(14)
+            .collect();
+        PathBuf::from(format!("hcc-{}-{stamp}.mcap", args.namespace))
+    });
+
+    let mut run = capture::run_metadata("hcc record", &args.namespace, clock);
+    if let Some(s) = &scenario {
+        run.insert(
+            "control_rate_hz".into(),
+            s.simulation.control_rate_hz.to_string(),
+        );
+    }
+    let info = RunInfo {
+        run,
+        scenario: scenario
+            .as_ref()
+            .map(RunInfo::describe_scenario)
+            .unwrap_or_default(),
+        machine: capture::machine_metadata(),
+    };
+    let node = format!("hcc-record-{}", std::process::id());
+    let receiver = Receiver::start(&node, file_prefix, names)?;
+    let mut recorder = StreamRecorder::create(&out, &info, clock)?;
+    install_signal_handlers()?;
+    if !args.quiet {
+        eprintln!(
+            "hcc record: namespace {} into {} (Ctrl-C to stop)",
+            args.namespace,
+            out.display()
+        );
+    }
+    let started = Instant::now();
+    let mut last_telemetry: Option<Instant> = None;
+    let end = loop {
+        receiver.pump(Duration::from_millis(1), |m| {
+            if let Received::Telemetry(_) = m {
+                last_telemetry = Some(Instant::now());
+            }
+            recorder.record(&m)
+        })?;
+        if let Some(stats) = recorder.tick()?
+            && !args.quiet
+        {
+            eprintln!(
+                "hcc record: {:.0} s, {}",
+                stats.elapsed_s,
+                capture::stats_line(&stats)
+            );
+        }
+        if interrupted() {
+            break "interrupted".to_string();
+        }
+        if duration.is_some_and(|d| started.elapsed() >= d) {
+            break "duration".to_string();
+        }
+        match last_telemetry {
+            Some(t) if t.elapsed() >= idle => {
+                break format!(
+                    "the controller is gone (no telemetry for {:.1} s)",
+                    idle.as_secs_f64()
+                );
+            }
+            None if started.elapsed() >= wait => {
+                break format!(
+                    "no telemetry within {:.1} s (is hcc-controller running in namespace {}?)",
+                    wait.as_secs_f64(),
+                    args.namespace
+                );
+            }
+            _ => {}
+        }
+    };
+    receiver.finish(|m| recorder.record(&m))?;
+    let mut end_meta = BTreeMap::new();
+    end_meta.insert("end".into(), end.clone());
+    let stats = recorder.finish(end_meta)?;
+    println!(
+        "recorded {:.1} s into {} ({}): {}",
+        started.elapsed().as_secs_f64(),
+        out.display(),
+        end,
+        capture::stats_line(&stats)
+    );
+    if last_telemetry.is_none() {
+        bail!(
+            "no telemetry from namespace {} was recorded (stopped by: {end})",
+            args.namespace
+        );
+    }
+    Ok(())
+}

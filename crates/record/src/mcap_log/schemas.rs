@@ -1,0 +1,205 @@
+//! The JSON Schema of each channel (what Foxglove and PlotJuggler show as
+//! the message's fields). Numbers may be `null` where the value was NaN or ±∞.
+
+use serde_json::{Value, json};
+
+fn number(description: &str) -> Value {
+    json!({"type": ["number", "null"], "description": description})
+}
+
+fn numbers(description: &str) -> Value {
+    json!({"type": "array", "items": {"type": ["number", "null"]}, "description": description})
+}
+
+fn integer(description: &str) -> Value {
+    json!({"type": "integer", "description": description})
+}
+
+fn text(description: &str) -> Value {
+    json!({"type": "string", "description": description})
+}
+
+fn object(title: &str, description: &str, properties: Value) -> Value {
+    let required: Vec<String> = properties
+        .as_object()
+        .map(|o| o.keys().cloned().collect())
+        .unwrap_or_default();
+    json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": properties,
+        "required": required,
+    })
+}
+
+fn stream_stats() -> Value {
+    json!({
+        "type": "object",
+        "properties": {
+            "received": integer("samples received"),
+            "recorded": integer("samples written to this file"),
+            "gaps": integer("samples lost (sum of the sequence gaps)"),
+            "gap_events": integer("sequence gaps"),
+            "duplicates": integer("duplicate sequence numbers"),
+            "backwards": integer("sequence numbers that went backwards"),
+        }
+    })
+}
+
+fn joint_state() -> Value {
+    object(
+        "hcc.JointState",
+        "A joint state of the driver (hcc-msgs JointState)",
+        json!({
+            "seq": integer("sequence number, +1 per state"),
+            "stamp_ns": integer("sampling instant, CLOCK_MONOTONIC ns"),
+            "schema_version": integer("hcc-msgs schema"),
+            "status": text("driver status: ok, fallback_active, stopping, stopped"),
+            "status_code": integer("driver status code"),
+            "flags": integer("STATE_FLAG_* bits"),
+            "missed_commands": integer("periods without an applicable command (total)"),
+            "fallback_cycles": integer("periods in the driver's fallback (total)"),
+            "q": numbers("joint positions q, rad (m for prismatic joints)"),
+            "qd": numbers("joint velocities q̇, rad/s"),
+            "tau_measured": numbers("measured joint torques, N·m"),
+        }),
+    )
+}
+
+fn torque_command() -> Value {
+    object(
+        "hcc.TorqueCommand",
+        "A torque command of the controller (hcc-msgs TorqueCommand)",
+        json!({
+            "seq": integer("sequence number, +1 per command"),
+            "stamp_ns": integer("end of the computation, CLOCK_MONOTONIC ns"),
+            "state_seq": integer("seq of the joint state it answers"),
+            "state_stamp_ns": integer("stamp of the joint state it answers"),
+            "mode": text("normal, safe_hold, singular, stop"),
+            "mode_code": integer("command mode code"),
+            "flags": integer("COMMAND_FLAG_* bits (1: gravity included)"),
+            "tau": numbers("commanded torque τ, eq. (19), N·m"),
+        }),
+    )
+}
+
+fn telemetry() -> Value {
+    let level = json!({
+        "type": "object",
+        "properties": {
+            "level": integer("level i, 1-based (1 = highest priority)"),
+            "error": numbers("task error x̃_i = x_i − x_i,d"),
+            "error_norm": number("‖x̃_i‖"),
+            "S": number("storage function S_i, eqs. (26)/(28), J"),
+            "tau": numbers("torque τ_i of the level, eqs. (20)/(21), N·m"),
+            "sigma_min": number("smallest singular value of the level's projected Jacobian"),
+            "singular": {"type": "boolean", "description": "σ_min below the threshold"},
+            "goal": numbers("active goal x_i,d(t)"),
+            "stiffness": numbers("diagonal of the active stiffness K_i(t)"),
+            "damping": numbers("diagonal of the active damping D_i(t)"),
+            "transition_progress": number("progress of the goal transition, 0..1"),
+        }
+    });
+    let answer = json!({
+        "type": "object",
+        "properties": {
+            "slot": integer("answer slot"),
+            "client_id": integer("the client"),
+            "seq": integer("seq of its last setpoint"),
+            "answered": integer("setpoints answered for it"),
+            "code": integer("0: accepted, else the rejection code"),
+            "level": integer("level addressed, 0-based"),
+            "duration_s": number("transition duration in force, s"),
+            "rejected": integer("setpoints of this client rejected so far"),
+            "late": integer("setpoints of this client applied after their state"),
+        }
+    });
+    object(
+        "hcc.Telemetry",
+        "One cycle of the hierarchical compliance controller (hcc-msgs Telemetry)",
+        json!({
+            "seq": integer("controller cycle counter"),
+            "stamp_ns": integer("publication time, CLOCK_MONOTONIC ns"),
+            "state_seq": integer("seq of the joint state of this cycle"),
+            "command_seq": integer("seq of the command of this cycle"),
+            "mode": text("mode of the command sent"),
+            "mode_code": integer("command mode code"),
+            "flags": integer("COMMAND_FLAG_* bits; 65536: peer lost"),
+            "singular_levels": integer("bit i: level i+1 singular"),
+            "tau": numbers("total torque τ = Σ τ_i + τ_μ + g, eq. (19), N·m"),
+            "tau_mu": numbers("coupling compensation τ_μ, eq. (22), N·m"),
+            "tau_gravity": numbers("gravity torque g(q), N·m"),
+            "P_mu": number("power of τ_μ, P_μ = τ_μᵀ q̇ (≈ 0), W"),
+            "levels": {"type": "array", "items": level, "description": "per hierarchy level"},
+            "counters": {
+                "type": "object",
+                "additionalProperties": {"type": "integer"},
+                "description": "event counters of the controller since its start"
+            },
+            "timings": {
+                "type": "object",
+                "properties": {
+                    "wakeup_latency_ns": integer("wake-up minus state stamp"),
+                    "compute_ns": integer("state read → command sent"),
+                    "period_ns": integer("time since the previous wake-up"),
+                    "max_compute_ns": integer("worst compute_ns so far"),
+                }
+            },
+            "setpoint_answers": {"type": "array", "items": answer},
+        }),
+    )
+}
+
+fn setpoint() -> Value {
+    object(
+        "hcc.Setpoint",
+        "A client's setpoint to the controller (hcc-msgs Setpoint)",
+        json!({
+            "seq": integer("the client's sequence number"),
+            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
+            "schema_version": integer("hcc-msgs schema"),
+            "n_joints": integer("header n_joints"),
+            "client_id": integer("the client"),
+            "level": integer("target level, 0-based"),
+            "fields": integer("SETPOINT_* bits: 1 goal, 2 velocity, 4 stiffness, 8 damping"),
+            "dim": integer("task dimension of the values"),
+            "gain_layout": integer("GAIN_*_FULL bits"),
+            "duration_s": number("transition duration, s"),
+            "apply_at_state_seq": integer("applied in the cycle of the first state with seq ≥ this (0: on receipt)"),
+            "goal": numbers("goal x_i,d"),
+            "velocity": numbers("velocity feed-forward"),
+            "stiffness": numbers("K_i: diagonal, or full row-major"),
+            "damping": numbers("D_i: diagonal, or full row-major"),
+        }),
+    )
+}
+
+fn recorder() -> Value {
+    object(
+        "hcc.Recorder",
+        "What the recorder received and lost so far",
+        json!({
+            "elapsed_s": number("wall time since the recording started, s"),
+            "joint_state": stream_stats(),
+            "torque_command": stream_stats(),
+            "telemetry": stream_stats(),
+            "setpoint": stream_stats(),
+            "total_gaps": integer("samples lost on all streams"),
+            "last": {"type": "boolean", "description": "the final count of a clean end"},
+        }),
+    )
+}
+
+/// Schema name and JSON Schema text of a topic's channel.
+pub(crate) fn schema(topic: &str) -> (&'static str, String) {
+    let (name, value) = match topic {
+        super::TOPIC_JOINT_STATE => ("hcc.JointState", joint_state()),
+        super::TOPIC_TORQUE_COMMAND => ("hcc.TorqueCommand", torque_command()),
+        super::TOPIC_TELEMETRY => ("hcc.Telemetry", telemetry()),
+        super::TOPIC_SETPOINT => ("hcc.Setpoint", setpoint()),
+        _ => ("hcc.Recorder", recorder()),
+    };
+    (name, value.to_string())
+}
