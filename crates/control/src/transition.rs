@@ -80,12 +80,19 @@ impl GoalKind {
 }
 
 /// One level's equilibrium and gains, moving from where they are to a new
-/// target over a transition.
+/// target over a transition. The goal and the gains have clocks of their
+/// own: a setpoint that sets only one of them restarts only its clock, so a
+/// stiffness change sent while the goal moves leaves the goal's motion as it
+/// was (and a new goal leaves a running gain transition on its way).
 #[derive(Debug, Clone)]
 pub struct Transition {
     kind: GoalKind,
+    /// The goal's transition: duration and time elapsed, s.
     duration: f64,
     elapsed: f64,
+    /// The gains' transition: duration and time elapsed, s.
+    gain_duration: f64,
+    gain_elapsed: f64,
     goal_from: DVector<f64>,
     goal_to: DVector<f64>,
     rot_from: UnitQuaternion<f64>,
@@ -117,6 +124,15 @@ pub struct Target<'a> {
 #[cfg(test)]
 fn rpy(v: &DVector<f64>) -> UnitQuaternion<f64> {
     rpy_at(v.as_slice(), 0)
+}
+
+/// σ = t / T clamped to [0, 1]; 1 for T = 0.
+fn sigma(elapsed: f64, duration: f64) -> f64 {
+    if duration > 0.0 {
+        (elapsed / duration).clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
 }
 
 /// The rotation of the roll, pitch, yaw values at `v[o..o + 3]`.
@@ -170,6 +186,8 @@ impl Transition {
             kind,
             duration: 0.0,
             elapsed: 0.0,
+            gain_duration: 0.0,
+            gain_elapsed: 0.0,
             goal_from: g.clone(),
             goal_to: g.clone(),
             rot_from: r,
@@ -241,37 +259,42 @@ impl Transition {
     /// ignored for that part. Allocation-free.
     pub fn start(&mut self, target: Target<'_>, duration: f64) {
         let m = self.dim();
-        self.goal_from.copy_from(&self.goal);
-        self.k_from.copy_from(&self.stiffness);
-        self.d_from.copy_from(&self.damping);
+        let duration = if duration.is_finite() {
+            duration.max(0.0)
+        } else {
+            0.0
+        };
         let rotation_rows = self.kind.rotation_rows();
-        if rotation_rows.is_some() {
-            self.rot_from = self.current_rotation();
-        }
         if let Some(goal) = target.goal.filter(|g| g.len() == m) {
+            // From where the equilibrium is now.
+            if rotation_rows.is_some() {
+                self.rot_from = self.current_rotation();
+            }
+            self.goal_from.copy_from(&self.goal);
             self.feed_forward.fill(0.0);
             self.goal_to.as_mut_slice().copy_from_slice(goal);
             if let Some(o) = rotation_rows {
                 self.rot_to = rpy_at(goal, o);
             }
-        } else {
-            self.goal_to.copy_from(&self.goal);
-            self.rot_to = self.rot_from;
+            self.duration = duration;
+            self.elapsed = 0.0;
         }
-        match target.stiffness.filter(|k| k.shape() == (m, m)) {
-            Some(k) => self.k_to.copy_from(k),
-            None => self.k_to.copy_from(&self.stiffness),
+        let k = target.stiffness.filter(|k| k.shape() == (m, m));
+        let d = target.damping.filter(|d| d.shape() == (m, m));
+        if k.is_some() || d.is_some() {
+            // From the gains in force now; a gain not set keeps the target
+            // of a transition still under way.
+            self.k_from.copy_from(&self.stiffness);
+            self.d_from.copy_from(&self.damping);
+            if let Some(k) = k {
+                self.k_to.copy_from(k);
+            }
+            if let Some(d) = d {
+                self.d_to.copy_from(d);
+            }
+            self.gain_duration = duration;
+            self.gain_elapsed = 0.0;
         }
-        match target.damping.filter(|d| d.shape() == (m, m)) {
-            Some(d) => self.d_to.copy_from(d),
-            None => self.d_to.copy_from(&self.damping),
-        }
-        self.duration = if duration.is_finite() {
-            duration.max(0.0)
-        } else {
-            0.0
-        };
-        self.elapsed = 0.0;
         self.update();
     }
 
@@ -280,17 +303,25 @@ impl Transition {
     pub fn advance(&mut self, dt: f64) {
         if dt.is_finite() && dt > 0.0 {
             self.elapsed = (self.elapsed + dt).min(self.duration);
+            self.gain_elapsed = (self.gain_elapsed + dt).min(self.gain_duration);
         }
         self.update();
     }
 
-    /// Progress σ = t / T in [0, 1] (1 when no transition runs).
+    /// Progress σ = t / T in [0, 1] of the goal's transition (1 when none runs).
+    pub fn goal_progress(&self) -> f64 {
+        sigma(self.elapsed, self.duration)
+    }
+
+    /// Progress σ = t / T in [0, 1] of the gains' transition (1 when none runs).
+    pub fn gain_progress(&self) -> f64 {
+        sigma(self.gain_elapsed, self.gain_duration)
+    }
+
+    /// Progress σ in [0, 1] of the slower of the goal's and the gains'
+    /// transitions (1 when neither runs).
     pub fn progress(&self) -> f64 {
-        if self.duration > 0.0 {
-            (self.elapsed / self.duration).clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
+        self.goal_progress().min(self.gain_progress())
     }
 
     /// Whether a transition is under way.
@@ -330,14 +361,14 @@ impl Transition {
         match self.kind {
             GoalKind::Vector => UnitQuaternion::identity(),
             GoalKind::RollPitchYaw | GoalKind::Pose => {
-                let (s, _, _) = quintic(self.progress());
+                let (s, _, _) = quintic(self.goal_progress());
                 self.rot_from.slerp(&self.rot_to, s)
             }
         }
     }
 
     fn update(&mut self) {
-        let sigma = self.progress();
+        let sigma = self.goal_progress();
         let (s, ds_dsigma, _) = quintic(sigma);
         // ds/dt = (ds/dσ) / T; zero once the transition is over.
         let ds_dt = if self.duration > 0.0 && sigma < 1.0 {
@@ -382,6 +413,7 @@ impl Transition {
             // would count the motion twice).
             self.goal_velocity.copy_from(&self.feed_forward);
         }
+        let (s, _, _) = quintic(self.gain_progress());
         let s1 = 1.0 - s;
         for (dst, (a, b)) in self
             .stiffness
@@ -448,6 +480,82 @@ mod tests {
 
     fn diag(v: &[f64]) -> DMatrix<f64> {
         DMatrix::from_diagonal(&DVector::from_column_slice(v))
+    }
+
+    /// A stiffness change sent while the goal moves leaves the goal's
+    /// motion exactly as it was; the gains reach their target on their own
+    /// clock, and a later goal leaves the gain transition on its way.
+    #[test]
+    fn goal_and_gains_move_on_clocks_of_their_own() {
+        let k = diag(&[500.0, 500.0]);
+        let d = diag(&[40.0, 40.0]);
+        let goal = Target {
+            goal: Some(&[0.2, 0.0]),
+            ..Target::default()
+        };
+        let mut plain = Transition::new(GoalKind::Vector, &[0.0, 1.0], &k, &d).unwrap();
+        let mut t = plain.clone();
+        plain.start(goal, 1.0);
+        t.start(goal, 1.0);
+        let dt = 1e-3;
+        for _ in 0..500 {
+            plain.advance(dt);
+            t.advance(dt);
+        }
+        let stiff = diag(&[800.0, 800.0]);
+        t.start(
+            Target {
+                stiffness: Some(&stiff),
+                ..Target::default()
+            },
+            0.2,
+        );
+        assert_eq!(t.stiffness(), &k, "no jump of K at the start");
+        for step in 0..500 {
+            plain.advance(dt);
+            t.advance(dt);
+            assert_eq!(t.goal(), plain.goal(), "goal unchanged at step {step}");
+            assert_eq!(t.goal_velocity(), plain.goal_velocity());
+            if step == 99 {
+                let mid = t.stiffness()[(0, 0)];
+                assert!((mid - 650.0).abs() < 1e-9, "K half way at σ = ½: {mid}");
+                assert!(t.is_moving());
+            }
+        }
+        assert_eq!(t.goal(), &[0.2, 0.0]);
+        assert_eq!(t.stiffness(), &stiff);
+        assert_eq!(t.damping(), &d);
+        assert!(!t.is_moving());
+        // A new goal during a gain transition: the gains go on to their target.
+        let soft = diag(&[300.0, 300.0]);
+        t.start(
+            Target {
+                stiffness: Some(&soft),
+                ..Target::default()
+            },
+            1.0,
+        );
+        for _ in 0..250 {
+            t.advance(dt);
+        }
+        let k_quarter = t.stiffness()[(0, 0)];
+        t.start(
+            Target {
+                goal: Some(&[0.0, 0.0]),
+                ..Target::default()
+            },
+            0.1,
+        );
+        assert_eq!(
+            t.stiffness()[(0, 0)],
+            k_quarter,
+            "the gains go on from where they are"
+        );
+        for _ in 0..750 {
+            t.advance(dt);
+        }
+        assert_eq!(t.stiffness(), &soft);
+        assert_eq!(t.goal(), &[0.0, 0.0]);
     }
 
     #[test]
