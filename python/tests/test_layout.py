@@ -43,7 +43,7 @@ def test_constants(rust: dict[str, Any]) -> None:
         "setpoint_fields_known", "gain_stiffness_full", "gain_damping_full", "gain_layout_known",
     ]:
         assert flags[key] == getattr(msgs, key.upper()), key
-    assert len(flags) == 11, "a flag is not compared"
+    assert len(flags) == 13, "a flag is not compared"
     setpoint = rust["setpoint"]
     assert set(setpoint) == {
         "max_setpoint_clients", "max_pending_setpoints", "max_gain_entries", "max_transition_s",
@@ -102,7 +102,9 @@ def test_validation_mirrors_the_rust_checks() -> None:
     s.validate(2)
     with pytest.raises(msgs.MsgError):
         s.validate(3)
-    s.flags = 2
+    s.flags = msgs.STATE_FLAG_DRIVER_POLLS_COMMANDS
+    s.validate(2)
+    s.flags = 4
     with pytest.raises(msgs.MsgError):
         s.validate(2)
     with pytest.raises(msgs.MsgError):
