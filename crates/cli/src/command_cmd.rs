@@ -7,7 +7,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use hcc_client::Client;
-use hcc_msgs::{CommandMode, Telemetry, TelemetryCounters};
+use hcc_msgs::{Telemetry, TelemetryCounters};
+use hcc_record::mcap_log::mode_name;
 
 /// Where the controller is.
 #[derive(clap::Args, Debug, Clone)]
@@ -204,16 +205,6 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "compute_ns": t.timings.compute_ns,
         "wakeup_latency_ns": t.timings.wakeup_latency_ns,
     })
-}
-
-fn mode_name(code: u32) -> &'static str {
-    match CommandMode::from_code(code) {
-        Ok(CommandMode::Normal) => "normal",
-        Ok(CommandMode::SafeHold) => "safe_hold",
-        Ok(CommandMode::Singular) => "singular",
-        Ok(CommandMode::Stop) => "stop",
-        Err(_) => "unknown",
-    }
 }
 
 fn table(t: &Telemetry, names: &[String]) -> String {
