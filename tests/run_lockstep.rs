@@ -131,14 +131,11 @@ fn a_rejected_scheduled_setpoint_fails_the_run() {
     let dir = TempDir::new("run_lockstep_rejected");
     let namespace = unique_namespace("run_lockstep_rejected");
     let prefix = unique_file_prefix();
-    let original = repo_root().join("config/panda-waypoints.toml");
-    let urdf = repo_root().join("config/robots/panda/panda.urdf");
-    let text = std::fs::read_to_string(&original).unwrap().replace(
-        "urdf = \"robots/panda/panda.urdf\"",
-        &format!("urdf = {:?}", urdf.display().to_string()),
-    ) + "\n[[setpoint]]\nt = 0.2\nlevel = 1\nstiffness = [5000.0, 5000.0, 5000.0, 20.0, 20.0, 20.0]\n";
-    let config = dir.path().join("rejected.toml");
-    std::fs::write(&config, text).unwrap();
+    let config = scenario_copy(
+        "panda-waypoints.toml",
+        dir.path(),
+        "\n[[setpoint]]\nt = 0.2\nlevel = 1\nstiffness = [5000.0, 5000.0, 5000.0, 20.0, 20.0, 20.0]\n",
+    );
     let run = run_with_timeout(
         Command::new(bin("hcc"))
             .current_dir(repo_root())
