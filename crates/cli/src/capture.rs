@@ -1,11 +1,22 @@
 //! Capturing a namespace's streams into an MCAP recording, as a pure
 //! subscriber: the receiver thread copies every joint state, torque command,
 //! telemetry sample and setpoint out of the iceoryx2 queues (the largest
-//! queues the services allow, drained every 100 µs, so that publishers —
-//! which never block — lose nothing to the recorder), and the
-//! [`StreamRecorder`] writes them into the file as they arrive, counting
-//! sequence gaps and drops per stream with [`SequenceChecker`]s. Used by
-//! `hcc record` and `hcc run` alike.
+//! queues the services allow, [`MAX_SUBSCRIBER_BUFFER`] samples, i.e. 128 ms
+//! at 1 kHz, drained every 100 µs, so that publishers — which never block —
+//! lose nothing to the recorder), and the [`StreamRecorder`] writes them into
+//! the file as they arrive, counting sequence gaps and drops per stream with
+//! [`SequenceChecker`]s. Used by `hcc record` and `hcc run` alike.
+//!
+//! The receiver thread asks for a low SCHED_FIFO priority
+//! ([`RECEIVER_PRIORITY`], below the daemons' loops, which it never
+//! preempts) when the process may have it: at normal priority a machine
+//! loaded by other work (compilers, here) kept it from draining for more
+//! than the queues' 128 ms now and then, and samples were lost. Between the
+//! receiver and the writer at most [`BACKLOG`] samples wait (about two
+//! seconds of the three 1 kHz streams, at most ≈ 25 MB): a writer that
+//! falls further behind loses samples, which are counted
+//! ([`Receiver::dropped`]) and show as gaps in the file — the recorder's
+//! memory stays bounded whatever the load.
 
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
@@ -16,7 +27,7 @@ use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use iceoryx2::prelude::SignalHandlingMode;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
@@ -30,14 +41,40 @@ pub enum Received {
     Failed(String),
 }
 
+/// SCHED_FIFO priority of the receiver thread when permitted: above every
+/// normal-priority process, below the daemons' loops (80 by default).
+pub const RECEIVER_PRIORITY: i32 = 20;
+
+/// Samples that may wait between the receiver and the writer (about two
+/// seconds of joint states, commands and telemetry at 1 kHz).
+pub const BACKLOG: usize = 6_000;
+
 /// The subscribers, on a thread of their own that does nothing but copy
-/// samples out of the queues into a channel, so that writing the file never
-/// delays the draining (in lockstep the daemons run much faster than real
-/// time).
+/// samples out of the queues into a bounded channel, so that writing the
+/// file never delays the draining (in lockstep the daemons run much faster
+/// than real time).
 pub struct Receiver {
     handle: Option<std::thread::JoinHandle<()>>,
     stop: Arc<AtomicBool>,
     rx: mpsc::Receiver<Received>,
+    dropped: Arc<AtomicU64>,
+    /// Why the receiver thread runs at normal priority, if it does.
+    pub priority_warning: Option<String>,
+}
+
+/// The receiver thread's end of the channel: full means the writer is
+/// [`BACKLOG`] samples behind, and the sample is dropped and counted.
+struct Sink {
+    tx: mpsc::SyncSender<Received>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl Sink {
+    fn send(&self, m: Received) {
+        if let Err(mpsc::TrySendError::Full(_)) = self.tx.try_send(m) {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
 }
 
 struct Subscribers {
@@ -49,7 +86,7 @@ struct Subscribers {
 
 impl Subscribers {
     /// Reads every queued sample into `tx`; returns how many.
-    fn drain_into(&self, tx: &mpsc::Sender<Received>) -> Result<usize, String> {
+    fn drain_into(&self, tx: &Sink) -> Result<usize, String> {
         let mut k = 0;
         // Setpoints and states first: a command or telemetry always follows them.
         while let Some(s) = self
@@ -57,7 +94,7 @@ impl Subscribers {
             .receive()
             .map_err(|e| format!("receive setpoint: {e:?}"))?
         {
-            let _ = tx.send(Received::Setpoint(Box::new(*s)));
+            tx.send(Received::Setpoint(Box::new(*s)));
             k += 1;
         }
         while let Some(s) = self
@@ -65,7 +102,7 @@ impl Subscribers {
             .receive()
             .map_err(|e| format!("receive joint_state: {e:?}"))?
         {
-            let _ = tx.send(Received::State(Box::new(*s)));
+            tx.send(Received::State(Box::new(*s)));
             k += 1;
         }
         while let Some(c) = self
@@ -73,7 +110,7 @@ impl Subscribers {
             .receive()
             .map_err(|e| format!("receive torque_command: {e:?}"))?
         {
-            let _ = tx.send(Received::Command(Box::new(*c)));
+            tx.send(Received::Command(Box::new(*c)));
             k += 1;
         }
         while let Some(t) = self
@@ -81,7 +118,7 @@ impl Subscribers {
             .receive()
             .map_err(|e| format!("receive telemetry: {e:?}"))?
         {
-            let _ = tx.send(Received::Telemetry(Box::new(*t)));
+            tx.send(Received::Telemetry(Box::new(*t)));
             k += 1;
         }
         Ok(k)
@@ -89,21 +126,37 @@ impl Subscribers {
 }
 
 impl Receiver {
-    /// Subscribes (on the new thread, node `node_name`) and returns once the
-    /// subscribers exist.
+    /// Subscribes (on the new thread, node `node_name`, at SCHED_FIFO
+    /// `priority` when given and permitted) and returns once the subscribers
+    /// exist.
     pub fn start(
         node_name: &str,
         file_prefix: Option<String>,
         names: ServiceNames,
+        priority: Option<i32>,
     ) -> anyhow::Result<Receiver> {
-        let (tx, rx) = mpsc::channel();
-        let (ready_tx, ready_rx) = mpsc::sync_channel::<Result<(), String>>(1);
+        let (tx, rx) = mpsc::sync_channel(BACKLOG);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let tx = Sink {
+            tx,
+            dropped: dropped.clone(),
+        };
+        type Ready = Result<Option<String>, String>;
+        let (ready_tx, ready_rx) = mpsc::sync_channel::<Ready>(1);
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = stop.clone();
         let node_name = node_name.to_string();
         let handle = std::thread::Builder::new()
             .name("hcc-receiver".into())
             .spawn(move || {
+                let warning = priority.and_then(|p| {
+                    hcc_rt::set_fifo(p).err().map(|e| {
+                        format!(
+                            "the recorder's receiver runs at normal priority (SCHED_FIFO {p}: {e}); \
+                             under load it may lose samples (counted as gaps)"
+                        )
+                    })
+                });
                 let setup = || -> anyhow::Result<_> {
                     let node = ipc::create_node(
                         &node_name,
@@ -121,7 +174,7 @@ impl Receiver {
                 };
                 let (node, services, subs) = match setup() {
                     Ok(x) => {
-                        let _ = ready_tx.send(Ok(()));
+                        let _ = ready_tx.send(Ok(warning));
                         x
                     }
                     Err(e) => {
@@ -138,7 +191,8 @@ impl Receiver {
                         Ok(0) => std::thread::sleep(Duration::from_micros(100)),
                         Ok(_) => {}
                         Err(e) => {
-                            let _ = tx.send(Received::Failed(e));
+                            // Blocking: the failure must reach the writer.
+                            let _ = tx.tx.send(Received::Failed(e));
                             break;
                         }
                     }
@@ -149,10 +203,12 @@ impl Receiver {
             })
             .context("cannot start the receiver thread")?;
         match ready_rx.recv() {
-            Ok(Ok(())) => Ok(Receiver {
+            Ok(Ok(priority_warning)) => Ok(Receiver {
                 handle: Some(handle),
                 stop,
                 rx,
+                dropped,
+                priority_warning,
             }),
             Ok(Err(e)) => {
                 let _ = handle.join();
@@ -160,6 +216,11 @@ impl Receiver {
             }
             Err(_) => bail!("the receiver thread ended during start-up"),
         }
+    }
+
+    /// Samples dropped because the writer was [`BACKLOG`] samples behind.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
     }
 
     /// Hands the samples received so far to `f` (waiting up to `wait` for
@@ -440,5 +501,27 @@ mod tests {
         assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
         // 2000-02-29T12:34:56.789Z
         assert_eq!(rfc3339(951_827_696_789_000_000), "2000-02-29T12:34:56.789Z");
+    }
+
+    /// The version a recording names is the one the workspace builds against
+    /// (Cargo.lock) and the Python package pins.
+    #[test]
+    fn the_recorded_iceoryx2_version_follows_the_pins() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let lock = std::fs::read_to_string(root.join("Cargo.lock")).unwrap();
+        let locked: Vec<&str> = lock
+            .split("[[package]]")
+            .filter(|p| p.contains("\nname = \"iceoryx2\"\n"))
+            .filter_map(|p| p.lines().find_map(|l| l.strip_prefix("version = ")))
+            .map(|v| v.trim_matches('"'))
+            .collect();
+        assert_eq!(locked, [ICEORYX2_VERSION], "Cargo.lock's iceoryx2");
+        let python = std::fs::read_to_string(root.join("python/requirements.txt")).unwrap();
+        assert!(
+            python
+                .lines()
+                .any(|l| l.trim() == format!("iceoryx2=={ICEORYX2_VERSION}")),
+            "python/requirements.txt pins another iceoryx2"
+        );
     }
 }

@@ -45,6 +45,12 @@ pub struct RecordArgs {
     /// Give up when no telemetry arrives within this many seconds of the start.
     #[arg(long, default_value_t = 30.0)]
     pub wait: f64,
+    /// SCHED_FIFO priority of the thread that drains the queues (0: normal
+    /// scheduling). Below the daemons' loops; without it a loaded machine
+    /// can keep the recorder from draining for longer than the queues hold
+    /// (128 ms) and samples are lost (counted as gaps).
+    #[arg(long, default_value_t = capture::RECEIVER_PRIORITY, value_parser = clap::value_parser!(i32).range(0..=99))]
+    pub receiver_priority: i32,
     /// No progress lines on stderr.
     #[arg(long)]
     pub quiet: bool,
@@ -99,7 +105,11 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         machine: capture::machine_metadata(),
     };
     let node = format!("hcc-record-{}", std::process::id());
-    let receiver = Receiver::start(&node, file_prefix, names)?;
+    let priority = (args.receiver_priority > 0).then_some(args.receiver_priority);
+    let receiver = Receiver::start(&node, file_prefix, names, priority)?;
+    if let Some(w) = &receiver.priority_warning {
+        eprintln!("hcc record: warning: {w}");
+    }
     let mut recorder = StreamRecorder::create(&out, &info, clock)?;
     install_signal_handlers()?;
     if !args.quiet {
@@ -150,9 +160,17 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
             _ => {}
         }
     };
+    let dropped = receiver.dropped();
     receiver.finish(|m| recorder.record(&m))?;
     let mut end_meta = BTreeMap::new();
     end_meta.insert("end".into(), end.clone());
+    end_meta.insert("dropped_writer_behind".into(), dropped.to_string());
+    if dropped > 0 {
+        eprintln!(
+            "hcc record: warning: the file writer fell {} samples behind; {dropped} samples dropped (counted as gaps)",
+            capture::BACKLOG
+        );
+    }
     let stats = recorder.finish(end_meta)?;
     println!(
         "recorded {:.1} s into {} ({}): {}",

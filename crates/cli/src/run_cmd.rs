@@ -546,8 +546,19 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let launch = Launch::new(&args, &scenario)?;
     let recording = launch.out.join(RECORDING_FILE);
 
-    // Subscribe before the children start, so that no sample is missed.
-    let receiver = Receiver::start("hcc-run", launch.file_prefix.clone(), launch.names.clone())?;
+    // Subscribe before the children start, so that no sample is missed; a
+    // real-time run drains at a low real-time priority (the daemons' warning
+    // already says when SCHED_FIFO is not permitted).
+    let priority = (launch.mode == "realtime" && !args.no_rt).then_some(capture::RECEIVER_PRIORITY);
+    let receiver = Receiver::start(
+        "hcc-run",
+        launch.file_prefix.clone(),
+        launch.names.clone(),
+        priority,
+    )?;
+    if let Some(w) = &receiver.priority_warning {
+        tracing::debug!("{w}");
+    }
     let clock = hcc_record::mcap_log::clock_pair();
     let mut recorder = StreamRecorder::create(
         &recording,
@@ -585,11 +596,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     // Stop what still runs, collecting the samples published meanwhile.
     let end = children.stop(end);
     let schedule = scheduler.map(Scheduler::finish);
+    let dropped = receiver.dropped();
     receiver.finish(|m| {
         live.see(&m);
         recorder.record(&m)
     })?;
     let mut end_meta = BTreeMap::new();
+    end_meta.insert("dropped_writer_behind".into(), dropped.to_string());
     end_meta.insert(
         "end".into(),
         match &end {

@@ -54,6 +54,8 @@ use iceoryx2::port::listener::{Listener, ListenerCreateError};
 use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
+/// `update_connections` of iceoryx2's ports (see `hcc_rt::ConnectionUpkeep`).
+pub use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::{EventCreateError, EventOpenError, EventOpenOrCreateError};
 use iceoryx2::service::builder::publish_subscribe::{
@@ -505,6 +507,13 @@ impl DriverPorts {
             commands: services.torque_command_subscriber(LATEST_BUFFER)?,
             command_ready: services.command_ready_listener()?,
         })
+    }
+
+    /// The ports whose connections to new or departed peers a driver's loop
+    /// updates while it waits (`hcc_rt::ConnectionUpkeep`): the publisher,
+    /// the notifier and the subscriber (a listener has no connections).
+    pub fn connections(&self) -> [&dyn UpdateConnections; 3] {
+        [&self.states, &self.state_ready, &self.commands]
     }
 }
 

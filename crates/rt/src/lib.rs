@@ -15,6 +15,9 @@
 //!   [`stop_requested`]).
 //! * [`WaitStrategy`]: how a loop waits (`event` or `hybrid`), one type for the
 //!   scenario TOML (serde) and the command lines (clap).
+//! * [`upkeep`]: iceoryx2 connections to peers that appeared or left, made
+//!   while a loop waits instead of inside its next send
+//!   ([`ConnectionUpkeep`]).
 //! * [`init_logging`]: `tracing` to stderr, filtered by `RUST_LOG`, for the
 //!   non-real-time threads.
 //!
@@ -30,15 +33,20 @@ pub mod args;
 pub mod sleep;
 pub mod stop;
 pub mod thread;
+pub mod upkeep;
 mod wait;
 
 pub use args::{IpcArgs, parse_args, run_main};
-pub use sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns, wait_for_event_until};
+pub use sleep::{
+    HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_hybrid_with, sleep_until_ns,
+    wait_for_event_until,
+};
 pub use stop::{install_stop_handler, stop_requested};
 pub use thread::{
     RtReport, RtSettings, available_cores, cleanup_stale_resources, fifo_permitted,
     prepare_rt_thread, set_fifo,
 };
+pub use upkeep::{ConnectionUpkeep, UpkeepCounts};
 pub use wait::WaitStrategy;
 
 /// Logging of a process: `tracing` events to stderr, one line each, as

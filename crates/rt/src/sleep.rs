@@ -49,11 +49,21 @@ pub const HYBRID_LEAD_NS: u64 = 150_000;
 /// deadline. Returns at once when the deadline has passed or a stop was
 /// requested. The spin makes only vDSO clock reads.
 pub fn sleep_until_hybrid_ns(deadline_ns: u64, lead_ns: u64) {
+    sleep_until_hybrid_with(deadline_ns, lead_ns, || {});
+}
+
+/// [`sleep_until_hybrid_ns`] that calls `idle` before it sleeps and on every
+/// pass of its spin: the place for work that must not fall on the path
+/// after the deadline (e.g. [`crate::ConnectionUpkeep::run`]). `idle` must be
+/// short and allocation-free when it has nothing to do.
+pub fn sleep_until_hybrid_with(deadline_ns: u64, lead_ns: u64, mut idle: impl FnMut()) {
     let wake = deadline_ns.saturating_sub(lead_ns);
+    idle();
     if monotonic_now_ns() < wake {
         sleep_until_ns(wake);
     }
     while monotonic_now_ns() < deadline_ns && !stop_requested() {
+        idle();
         std::hint::spin_loop();
     }
 }

@@ -1,6 +1,6 @@
 //! How a real-time loop waits for its next deadline or event.
 
-use crate::sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns};
+use crate::sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_with, sleep_until_ns};
 
 /// How a loop waits: the `wait_strategy` of the scenario TOML
 /// (`[controller_daemon]`, lowercase) and the `--wait` option of the daemons.
@@ -9,7 +9,7 @@ use crate::sleep::{HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_ns};
 ///   and block on the IPC event; no CPU used while waiting, but the wake-up is
 ///   as late as the kernel makes it (tens of µs).
 /// * `hybrid`: sleep until [`HYBRID_LEAD_NS`] before the deadline, then spin
-///   on the clock to it ([`sleep_until_hybrid_ns`]); loops that wait for an
+///   on the clock to it ([`crate::sleep_until_hybrid_ns`]); loops that wait for an
 ///   answer poll for it a while before they block. Precise to a few µs at the
 ///   cost of a busy core for part of the period.
 ///
@@ -45,12 +45,21 @@ impl WaitStrategy {
     }
 
     /// Waits for the `CLOCK_MONOTONIC` time `deadline_ns` this way
-    /// ([`sleep_until_ns`] or [`sleep_until_hybrid_ns`] with
+    /// ([`sleep_until_ns`] or [`crate::sleep_until_hybrid_ns`] with
     /// [`HYBRID_LEAD_NS`]). Allocation-free.
     pub fn sleep_until(self, deadline_ns: u64) {
+        self.sleep_until_with(deadline_ns, || {});
+    }
+
+    /// [`WaitStrategy::sleep_until`] that calls `idle` before sleeping and,
+    /// for `hybrid`, on every pass of the spin ([`sleep_until_hybrid_with`]).
+    pub fn sleep_until_with(self, deadline_ns: u64, mut idle: impl FnMut()) {
         match self {
-            WaitStrategy::Event => sleep_until_ns(deadline_ns),
-            WaitStrategy::Hybrid => sleep_until_hybrid_ns(deadline_ns, HYBRID_LEAD_NS),
+            WaitStrategy::Event => {
+                idle();
+                sleep_until_ns(deadline_ns)
+            }
+            WaitStrategy::Hybrid => sleep_until_hybrid_with(deadline_ns, HYBRID_LEAD_NS, idle),
         }
     }
 }

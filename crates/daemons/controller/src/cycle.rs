@@ -24,7 +24,7 @@ use hcc_config::WaitStrategy;
 use hcc_control::Controller;
 use hcc_msgs::ipc::{
     self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, SETPOINT_BUFFER,
-    Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher,
+    Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher, UpdateConnections,
 };
 use hcc_msgs::{
     CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryCounters, TelemetryTimings,
@@ -75,6 +75,19 @@ impl Ports {
             states,
             state_ready,
         })
+    }
+
+    /// The ports whose connections to new or departed peers the loop updates
+    /// while it waits ([`rt::ConnectionUpkeep`]): the publishers, the
+    /// notifier and the subscribers (a listener has no connections).
+    pub fn connections(&self) -> [&dyn UpdateConnections; 5] {
+        [
+            &self.commands,
+            &self.telemetry,
+            &self.command_ready,
+            &self.states,
+            &self.setpoints,
+        ]
     }
 }
 
@@ -203,6 +216,8 @@ pub struct Cycle {
     /// `command_ready` notifications skipped for polling drivers.
     notifications_skipped: u64,
     timings: CycleTimings,
+    /// Connections to peers that appeared or left, made while waiting.
+    upkeep: rt::ConnectionUpkeep,
     status: Arc<Status>,
 }
 
@@ -221,6 +236,7 @@ impl Cycle {
             pending_send_failures: 0,
             notifications_skipped: 0,
             timings: CycleTimings::default(),
+            upkeep: rt::ConnectionUpkeep::new(),
             status: Arc::new(Status::default()),
         })
     }
@@ -249,6 +265,21 @@ impl Cycle {
     /// (`STATE_FLAG_DRIVER_POLLS_COMMANDS`).
     pub fn notifications_skipped(&self) -> u64 {
         self.notifications_skipped
+    }
+
+    /// What the connection upkeep did so far (off the torque path).
+    pub fn upkeep(&self) -> rt::UpkeepCounts {
+        self.upkeep.counts()
+    }
+
+    /// Connects the ports to peers that appeared or left since the last
+    /// check (a recorder, a monitor, a client, a restarted driver), so that
+    /// the next command's send does not. Called by every step of the wait;
+    /// one atomic load per port when nothing changed.
+    pub fn upkeep_connections(&mut self, ports: &Ports) {
+        if self.upkeep.run(&ports.connections()) {
+            self.status.publish_upkeep(&self.upkeep.counts());
+        }
     }
 
     /// The control law.
@@ -307,8 +338,10 @@ impl Cycle {
         ipc::wait_for_event_until(&ports.state_ready, deadline)
     }
 
-    /// One step of the wait strategy; whether a notification is pending.
-    fn wait_step(&self, ports: &Ports, now: u64) -> bool {
+    /// One step of the wait strategy (after the connection upkeep); whether
+    /// a notification is pending.
+    fn wait_step(&mut self, ports: &Ports, now: u64) -> bool {
+        self.upkeep_connections(ports);
         match self.settings.wait {
             WaitStrategy::Event => self.event_wait(ports, now),
             WaitStrategy::Hybrid => {

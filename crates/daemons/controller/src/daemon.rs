@@ -232,7 +232,8 @@ pub fn run(args: Args) -> Result<()> {
 
 /// The real-time loop: [`Cycle::run_once`] until a stop is requested, inside
 /// an [`hcc_rtalloc::RtSection`]; after [`WARM_UP_CYCLES`] answers, the
-/// allocator's count becomes the `baseline` of the logging thread.
+/// allocator's count of the torque path becomes the `baseline` of the
+/// logging thread.
 fn control_loop(cycle: &mut Cycle, ports: &Ports, baseline: &AtomicU64) {
     let _rt = hcc_rtalloc::RtSection::enter();
     let mut answered = 0u64;
@@ -242,7 +243,10 @@ fn control_loop(cycle: &mut Cycle, ports: &Ports, baseline: &AtomicU64) {
             Outcome::Answered(_) => {
                 answered += 1;
                 if answered == WARM_UP_CYCLES {
-                    baseline.store(hcc_rtalloc::stats().rt_system_allocs, Ordering::Relaxed);
+                    baseline.store(
+                        torque_path_allocs(cycle.status().as_ref()),
+                        Ordering::Relaxed,
+                    );
                 }
             }
             Outcome::Duplicate | Outcome::Stale => {}
@@ -275,8 +279,17 @@ fn log_start(setup: &Setup, report: &RtReport) {
     );
 }
 
-/// The shutdown summary: every counter, the worst compute time and the
-/// real-time thread's system allocations after warm-up.
+/// System allocations of the real-time thread so far, less those of the
+/// connection upkeep (made while waiting, not on the torque path).
+fn torque_path_allocs(status: &Status) -> u64 {
+    hcc_rtalloc::stats()
+        .rt_system_allocs
+        .saturating_sub(status.upkeep_system_allocs.load(Ordering::Relaxed))
+}
+
+/// The shutdown summary: every counter, the worst compute time, the
+/// real-time thread's system allocations on the torque path after warm-up
+/// and the connection upkeep.
 fn log_stop(status: &Status, baseline: u64) {
     let c = status.loop_counters();
     let counters: Vec<String> = c
@@ -289,14 +302,17 @@ fn log_stop(status: &Status, baseline: u64) {
     let allocs = if baseline == u64::MAX {
         "n/a (no warm-up)".to_string()
     } else {
-        s.rt_system_allocs.saturating_sub(baseline).to_string()
+        torque_path_allocs(status)
+            .saturating_sub(baseline)
+            .to_string()
     };
     info!(
-        "stopped after {} cycles: {}; max compute {:.1} µs; rt system allocations after warm-up {allocs}, pool high-water {}",
+        "stopped after {} cycles: {}; max compute {:.1} µs; rt system allocations on the torque path after warm-up {allocs}, pool high-water {}; {}",
         c.telemetry.cycles,
         counters.join(", "),
         status.max_compute_ns.load(Ordering::Relaxed) as f64 / 1e3,
         s.pool_high_water,
+        upkeep_line(status),
     );
 }
 
@@ -327,9 +343,28 @@ fn write_stats(
         "notifications_skipped".into(),
         cycle.notifications_skipped(),
     );
+    let upkeep = cycle.upkeep();
+    for (name, value) in [
+        ("connection_updates", upkeep.updates),
+        ("connection_update_system_allocs", upkeep.system_allocs),
+        ("connection_update_failures", upkeep.failures),
+        ("connection_update_max_ns", upkeep.max_ns),
+    ] {
+        stats.counters.insert(name.into(), value);
+    }
     stats
         .write_json(path)
         .context("--stats: writing the timing report")
+}
+
+/// The connection upkeep in words.
+fn upkeep_line(status: &Status) -> String {
+    format!(
+        "peer connections made or dropped while waiting: {} (system allocations {}, longest {:.1} µs)",
+        status.upkeep_updates.load(Ordering::Relaxed),
+        status.upkeep_system_allocs.load(Ordering::Relaxed),
+        status.upkeep_max_ns.load(Ordering::Relaxed) as f64 / 1e3,
+    )
 }
 
 /// What the logging thread has reported so far.
@@ -338,6 +373,7 @@ struct Reported {
     peer_lost: bool,
     counters: LoopCounters,
     rt_allocs: u64,
+    upkeep_updates: u64,
 }
 
 /// The logging thread: every 100 ms, report what changed.
@@ -347,12 +383,14 @@ fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
         peer_lost: false,
         counters: status.loop_counters(),
         rt_allocs: 0,
+        upkeep_updates: 0,
     };
     while !done.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
         reported.peer(status);
         reported.counters(status.loop_counters());
-        reported.rt_allocations(baseline.load(Ordering::Relaxed));
+        reported.rt_allocations(status, baseline.load(Ordering::Relaxed));
+        reported.upkeep(status);
     }
 }
 
@@ -392,17 +430,27 @@ impl Reported {
         self.counters = now;
     }
 
-    /// System allocations of the real-time thread after warm-up (`baseline`).
-    fn rt_allocations(&mut self, baseline: u64) {
+    /// System allocations of the real-time thread on the torque path after
+    /// warm-up (`baseline`).
+    fn rt_allocations(&mut self, status: &Status, baseline: u64) {
         if baseline == u64::MAX {
             return;
         }
-        let allocs = hcc_rtalloc::stats()
-            .rt_system_allocs
-            .saturating_sub(baseline);
+        let allocs = torque_path_allocs(status).saturating_sub(baseline);
         if allocs != self.rt_allocs {
-            warn!("{allocs} system allocations on the real-time thread after warm-up");
+            warn!(
+                "{allocs} system allocations on the real-time thread's torque path after warm-up"
+            );
             self.rt_allocs = allocs;
+        }
+    }
+
+    /// A peer connected or left (made while waiting, off the torque path).
+    fn upkeep(&mut self, status: &Status) {
+        let updates = status.upkeep_updates.load(Ordering::Relaxed);
+        if updates != self.upkeep_updates {
+            info!("{}", upkeep_line(status));
+            self.upkeep_updates = updates;
         }
     }
 }

@@ -101,6 +101,12 @@ pub struct Status {
     pub connected: AtomicBool,
     /// Worst compute time so far, ns.
     pub max_compute_ns: AtomicU64,
+    /// Connection upkeep while waiting ([`hcc_rt::UpkeepCounts`]): updates
+    /// that changed something, their system allocations on the real-time
+    /// thread, their longest duration (ns).
+    pub upkeep_updates: AtomicU64,
+    pub upkeep_system_allocs: AtomicU64,
+    pub upkeep_max_ns: AtomicU64,
 }
 
 impl Status {
@@ -109,6 +115,14 @@ impl Status {
         for (a, v) in self.counters.iter().zip(counters.values()) {
             a.store(v, Ordering::Relaxed);
         }
+    }
+
+    /// Stores the connection upkeep's counts (allocation-free, lock-free).
+    pub fn publish_upkeep(&self, c: &hcc_rt::UpkeepCounts) {
+        self.upkeep_updates.store(c.updates, Ordering::Relaxed);
+        self.upkeep_system_allocs
+            .store(c.system_allocs, Ordering::Relaxed);
+        self.upkeep_max_ns.store(c.max_ns, Ordering::Relaxed);
     }
 
     /// Every counter as last published.

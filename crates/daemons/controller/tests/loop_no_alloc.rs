@@ -25,6 +25,10 @@ static ALLOCATOR: RtAllocator = RtAllocator::new();
 const WARM_UP: u64 = 3_000;
 const CYCLES: u64 = 10_000;
 
+/// The allocator's counters are process-wide: the loops through iceoryx2 run
+/// one at a time.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn scenario() -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
@@ -38,6 +42,7 @@ struct Occupancy {
 
 #[test]
 fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     assert!(hcc_rtalloc::pool_active());
     let prefix = format!("hcctc{}_", std::process::id());
     {
@@ -307,4 +312,144 @@ fn the_decision_step_allocates_nothing() {
     assert_eq!(during.pool_allocs, 0, "{during:?}");
     assert_eq!(during.system_allocs, 0, "{during:?}");
     assert_eq!(during.fallbacks, 0, "{during:?}");
+}
+
+/// The driver side of the in-test loop: publishes state `k`, runs one cycle
+/// and takes its command; whether the answer came.
+struct TestDriver {
+    state_pub: ipc::StatePublisher,
+    state_ready: ipc::EventNotifier,
+    command_sub: ipc::CommandSubscriber,
+    command_ready: ipc::EventListener,
+    q: Vec<f64>,
+}
+
+impl TestDriver {
+    fn round_trip(&self, cycle: &mut Cycle, ports: &Ports, k: u64) -> bool {
+        let n = self.q.len();
+        let q: Vec<f64> = self
+            .q
+            .iter()
+            .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
+            .collect();
+        let zero = [0.0; MAX_JOINTS];
+        let mut s = JointState::zeroed();
+        s.header.seq = k;
+        s.header.stamp_ns = hcc_msgs::monotonic_now_ns();
+        let mut ok = s.set_joints(&q, &zero[..n], &zero[..n]).is_ok();
+        ok &= self.state_pub.send_copy(s).is_ok();
+        ok &= self.state_ready.notify().is_ok();
+        ok &= cycle.run_once(ports) == Outcome::Answered(CommandMode::Normal);
+        let _ = self.command_ready.try_wait(|_| {});
+        ok & matches!(self.command_sub.receive(), Ok(Some(c)) if c.state_seq == k)
+    }
+}
+
+/// A recorder (or monitor, or client) that subscribes while the loop runs:
+/// left to iceoryx2, the next command's send connects it — allocations on the
+/// real-time thread between a state and its answer. The loop's connection
+/// upkeep, which runs while the loop waits, connects it instead (and
+/// disconnects it when it leaves): the cycles after it allocate nothing from
+/// the system, and the recorder receives every command.
+#[test]
+fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    assert!(hcc_rtalloc::pool_active());
+    let prefix = format!("hcctu{}_", std::process::id());
+    {
+        let scenario = scenario();
+        let names = ServiceNames::for_namespace(Namespace::unique("ctl_upkeep").unwrap());
+        let node =
+            ipc::create_node("upkeep-test", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
+        let services = Services::open(&node, &names).unwrap();
+        let ports = Ports::open(&services).unwrap();
+        let driver = TestDriver {
+            state_pub: services.joint_state_publisher().unwrap(),
+            state_ready: services.state_ready_notifier().unwrap(),
+            command_sub: services.torque_command_subscriber(2).unwrap(),
+            command_ready: services.command_ready_listener().unwrap(),
+            q: scenario.q0.iter().copied().collect(),
+        };
+        let controller =
+            Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+        let mut settings = CycleSettings::from_scenario(&scenario);
+        settings.wait = WaitStrategy::Event;
+        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let rt = RtSection::enter();
+        let mut failures = 0u64;
+        let mut k = 0u64;
+        let mut cycles = |cycle: &mut Cycle, count: u64| {
+            let before = thread_stats();
+            for _ in 0..count {
+                failures += u64::from(!driver.round_trip(cycle, &ports, k));
+                k += 1;
+            }
+            thread_stats().since(before)
+        };
+        cycles(&mut cycle, 500);
+
+        // Without upkeep (the state is already there: no wait), the send of
+        // the next command makes the new connections.
+        let recorder = services
+            .torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)
+            .unwrap();
+        let during = cycles(&mut cycle, 1);
+        println!("the cycle whose send connected a recorder: {during:?}");
+        assert!(
+            during.system_allocs > 0,
+            "connecting inside the send allocates from the system: {during:?}"
+        );
+        assert!(matches!(recorder.receive(), Ok(Some(_))));
+        drop(recorder);
+        cycles(&mut cycle, 10);
+
+        // With the upkeep of a wait between the attach and the next state.
+        let updates_before = cycle.upkeep().updates;
+        let recorder = services
+            .torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)
+            .unwrap();
+        let monitor = services
+            .telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)
+            .unwrap();
+        let upkeep_stats = thread_stats();
+        cycle.upkeep_connections(&ports);
+        let upkeep_stats = thread_stats().since(upkeep_stats);
+        let u = cycle.upkeep();
+        println!("upkeep: {u:?}, allocator {upkeep_stats:?}");
+        assert_eq!(u.updates, updates_before + 1, "{u:?}");
+        assert!(u.allocs > 0 && u.failures == 0, "{u:?}");
+        // (Fewer cycles than the recorder's queue holds: it reads them after.)
+        let during = cycles(&mut cycle, 100);
+        println!("100 cycles after the upkeep connected a recorder: {during:?}");
+        assert_eq!(during.system_allocs, 0, "{during:?}");
+        assert_eq!(during.fallbacks, 0, "{during:?}");
+        let mut received = 0;
+        while let Ok(Some(_)) = recorder.receive() {
+            received += 1;
+        }
+        let mut telemetry = 0;
+        while let Ok(Some(_)) = monitor.receive() {
+            telemetry += 1;
+        }
+        assert_eq!((received, telemetry), (100, 100));
+
+        // Leaving: the cycles stay clean.
+        drop(recorder);
+        drop(monitor);
+        cycle.upkeep_connections(&ports);
+        let during = cycles(&mut cycle, 200);
+        println!(
+            "after the recorder left: upkeep {:?}, cycles {during:?}",
+            cycle.upkeep()
+        );
+        assert_eq!(during.system_allocs, 0, "{during:?}");
+        assert_eq!(during.system_frees, 0, "{during:?}");
+        drop(rt);
+        assert_eq!(failures, 0, "cycles that did not round-trip");
+    }
+    let files = ipc::leftover_files(&prefix).unwrap();
+    for f in files.iter().filter(|f| f.global_mgmt) {
+        std::fs::remove_file(&f.path).unwrap();
+    }
+    assert!(files.iter().all(|f| f.global_mgmt), "{files:?}");
 }

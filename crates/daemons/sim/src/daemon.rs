@@ -168,6 +168,9 @@ pub struct SimLoop<'a> {
     answered: bool,
     counts: PeriodCounts,
     overruns: u64,
+    /// Connections to peers that appeared or left, made while waiting for
+    /// the tick (not by the next state's send).
+    upkeep: hcc_rt::ConnectionUpkeep,
 }
 
 impl<'a> SimLoop<'a> {
@@ -193,6 +196,7 @@ impl<'a> SimLoop<'a> {
             answered: false,
             counts: PeriodCounts::default(),
             overruns: 0,
+            upkeep: hcc_rt::ConnectionUpkeep::new(),
         }
     }
 
@@ -348,7 +352,10 @@ impl<'a> SimLoop<'a> {
         let mut next = monotonic_now_ns() + period_ns;
         loop {
             self.wait_for_answer((self.published_ns + window_ns).min(next));
-            self.wait.sleep_until(next);
+            let (ports, upkeep) = (self.ports, &mut self.upkeep);
+            self.wait.sleep_until_with(next, || {
+                upkeep.run(&ports.connections());
+            });
             let now = monotonic_now_ns();
             self.lateness.record(now.saturating_sub(next));
             if rt::stop_requested() {
@@ -586,6 +593,14 @@ impl SimLoop<'_> {
             c.fallback_cycles,
             c.rejected_commands,
             self.overruns
+        );
+        let u = self.upkeep.counts();
+        tracing::info!(
+            "hcc-sim: peer connections made or dropped while waiting for the tick: {} (allocations {}, longest {:.1} µs, failures {})",
+            u.updates,
+            u.allocs,
+            u.max_ns as f64 / 1e3,
+            u.failures
         );
         if mode == SimMode::Realtime {
             tracing::info!(

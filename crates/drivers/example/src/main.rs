@@ -303,13 +303,16 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     );
 
     // Allocator counters after a warm-up (first loans, lazily built state).
-    let mut warm: Option<hcc_rtalloc::Stats> = None;
+    let mut warm: Option<(hcc_rtalloc::Stats, u64)> = None;
+    // Peers that appear or leave (a recorder, a monitor) are connected before
+    // the sleep, not by the next state's send.
+    let mut upkeep = hcc_rt::ConnectionUpkeep::new();
     let rt = hcc_rtalloc::RtSection::enter();
     let mut period_start = hcc_msgs::monotonic_now_ns();
     let reason = loop {
         d.counts.periods += 1;
         if d.counts.periods == WARM_UP_PERIODS {
-            warm = Some(hcc_rtalloc::stats());
+            warm = Some((hcc_rtalloc::stats(), upkeep.counts().system_allocs));
         }
         let latest = d.publish()?;
         match d.logic.status() {
@@ -330,6 +333,7 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
             d.counts.overruns += 1;
             period_start = now; // resynchronise instead of bursting
         } else {
+            upkeep.run(&d.ports.connections());
             hcc_rt::sleep_until_ns(period_start);
         }
     };
@@ -337,8 +341,10 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     if let Some(e) = d.fault {
         tracing::error!("hcc-driver-example: {e}; stopped");
     }
-    let alloc = warm.map_or("-".to_string(), |w| {
-        (hcc_rtalloc::stats().rt_system_allocs - w.rt_system_allocs).to_string()
+    // System allocations of the loop after warm-up, less the upkeep's.
+    let alloc = warm.map_or("-".to_string(), |(w, upkeep_before)| {
+        let upkeep_allocs = upkeep.counts().system_allocs - upkeep_before;
+        (hcc_rtalloc::stats().rt_system_allocs - w.rt_system_allocs - upkeep_allocs).to_string()
     });
     print_summary(&d, reason, &alloc);
     Ok(reason)
