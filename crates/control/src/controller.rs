@@ -2,8 +2,8 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemm_tn_sym,
-    gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
+    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -370,7 +370,8 @@ pub struct Controller {
     /// Jᵀ of the levels above the lowest (n × K).
     jtop_t: DMatrix<f64>,
     /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
-    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and Ẇ.
+    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and the columns of Ẇ the middle
+    /// levels read (K × max k_i, k_i = Σ_{j<i} m_j: Ġ and Ḣ of eq. 8 lie in them).
     yt: DMatrix<f64>,
     yt_dot: DMatrix<f64>,
     y: DMatrix<f64>,
@@ -434,6 +435,7 @@ impl Controller {
         };
         let middle = r > 2;
         let kd = if middle { ktop } else { 0 };
+        let kmid = levels.iter().map(|l| l.proj.k).max().unwrap_or(0);
         let v_dims: Vec<usize> = levels.iter().map(|l| l.d).collect();
         let out = Output::new(n, &dims, &v_dims);
         // Safety layer (crate::safety): limits from the model, workspace.
@@ -453,7 +455,7 @@ impl Controller {
             y: DMatrix::zeros(ktop, n),
             y_dot: DMatrix::zeros(kd, n),
             w: DMatrix::zeros(ktop, ktop),
-            w_dot: DMatrix::zeros(kd, kd),
+            w_dot: DMatrix::zeros(kd, kmid),
             middle,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
@@ -861,8 +863,8 @@ impl Controller {
             )
             .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
             transpose_into(&mut self.y_dot, &self.yt_dot);
-            gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
-            gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
+            gemm_leading(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
+            gemm_leading(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
         }
         Ok(())
     }

@@ -143,9 +143,23 @@ fn rows<const W: usize>(
 
 /// `c = alpha * a * b + beta * c`.
 pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, k, n) = (a.nrows(), a.ncols(), b.ncols());
+    assert_eq!(b.ncols(), c.ncols());
+    gemm_leading(c, alpha, a, b, beta);
+}
+
+/// `c = alpha * a * b[.., ..p] + beta * c` with p = the columns of `c`: [`gemm`] with
+/// the leading columns of `b` (a product of which only the first columns are needed).
+pub fn gemm_leading(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+) {
+    let (m, k, n) = (a.nrows(), a.ncols(), c.ncols());
     assert_eq!(b.nrows(), k);
-    assert_eq!(c.shape(), (m, n));
+    assert!(n <= b.ncols());
+    assert_eq!(c.nrows(), m);
     let b = Strided {
         data: b.as_slice(),
         ls: 1,
