@@ -2,8 +2,8 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_nt, gemm_tn, gemm_tn_sym,
-    gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
+    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -328,6 +328,27 @@ impl NullSpace {
     }
 }
 
+/// The per-level columns of the τ_μ chains (eq. 22), n × r each: u_i = q̇ − (J̄⁻¹)_i v_i,
+/// M⁻¹ C u_i, M u_i and Ṁ u_i.
+#[derive(Clone, Debug)]
+struct MuWork {
+    u: DMatrix<f64>,
+    minv_cu: DMatrix<f64>,
+    mu: DMatrix<f64>,
+    mdot_u: DMatrix<f64>,
+}
+
+impl MuWork {
+    fn new(n: usize, r: usize) -> MuWork {
+        MuWork {
+            u: DMatrix::zeros(n, r),
+            minv_cu: DMatrix::zeros(n, r),
+            mu: DMatrix::zeros(n, r),
+            mdot_u: DMatrix::zeros(n, r),
+        }
+    }
+}
+
 /// The hierarchical compliance controller of Dietrich, Ott & Albu-Schäffer (IROS 2013).
 ///
 /// Built once by [`Controller::new`] (which allocates everything), then driven by
@@ -349,7 +370,8 @@ pub struct Controller {
     /// Jᵀ of the levels above the lowest (n × K).
     jtop_t: DMatrix<f64>,
     /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
-    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and Ẇ.
+    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and the columns of Ẇ the middle
+    /// levels read (K × max k_i, k_i = Σ_{j<i} m_j: Ġ and Ḣ of eq. 8 lie in them).
     yt: DMatrix<f64>,
     yt_dot: DMatrix<f64>,
     y: DMatrix<f64>,
@@ -370,6 +392,8 @@ pub struct Controller {
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
     tmp_n3: DVector<f64>,
+    /// Columns per level of the τ_μ chains (eq. 22).
+    mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
     safety: crate::safety::Safety,
     out: Output,
@@ -411,6 +435,7 @@ impl Controller {
         };
         let middle = r > 2;
         let kd = if middle { ktop } else { 0 };
+        let kmid = levels.iter().map(|l| l.proj.k).max().unwrap_or(0);
         let v_dims: Vec<usize> = levels.iter().map(|l| l.d).collect();
         let out = Output::new(n, &dims, &v_dims);
         // Safety layer (crate::safety): limits from the model, workspace.
@@ -430,7 +455,7 @@ impl Controller {
             y: DMatrix::zeros(ktop, n),
             y_dot: DMatrix::zeros(kd, n),
             w: DMatrix::zeros(ktop, ktop),
-            w_dot: DMatrix::zeros(kd, kd),
+            w_dot: DMatrix::zeros(kd, kmid),
             middle,
             q: DVector::zeros(n),
             qd: DVector::zeros(n),
@@ -441,6 +466,7 @@ impl Controller {
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
+            mu: MuWork::new(n, r),
             safety,
             out,
         };
@@ -709,7 +735,8 @@ impl Controller {
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
         // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
         self.chol.copy_from(&self.data.m);
-        hcc_model::linalg::cholesky_in_place(&mut self.chol)
+        let n = self.n;
+        hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         transpose_into(&mut self.mdot, &self.data.c);
         self.mdot += &self.data.c;
@@ -822,18 +849,22 @@ impl Controller {
         }
         transpose_into(&mut self.jtop_t, &self.jtop);
         self.yt.copy_from(&self.jtop_t);
-        hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt)
+        hcc_model::linalg::cholesky_solve_slice(self.chol.as_slice(), n, self.yt.as_mut_slice())
             .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
         transpose_into(&mut self.y, &self.yt);
         gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
         if self.middle {
             transpose_into(&mut self.yt_dot, &self.jtop_dot);
             gemm(&mut self.yt_dot, -1.0, &self.mdot, &self.yt, 1.0);
-            hcc_model::linalg::cholesky_solve_matrix_in_place(&self.chol, &mut self.yt_dot)
-                .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
+            hcc_model::linalg::cholesky_solve_slice(
+                self.chol.as_slice(),
+                n,
+                self.yt_dot.as_mut_slice(),
+            )
+            .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
             transpose_into(&mut self.y_dot, &self.yt_dot);
-            gemm(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
-            gemm(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
+            gemm_leading(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
+            gemm_leading(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
         }
         Ok(())
     }
@@ -987,20 +1018,36 @@ impl Controller {
         let r = self.levels.len();
         self.out.tau_mu.fill(0.0);
         if self.spec.coriolis_cancellation && self.spec.form != Form::KinematicProjector {
-            for i in 0..r {
-                let l = &mut self.levels[i];
+            // The levels' u as the columns of U, then C U, M⁻¹ C U (one solve for all
+            // levels, whose substitutions overlap), M U and Ṁ U.
+            let mu = &mut self.mu;
+            for (i, l) in self.levels.iter().enumerate() {
                 self.tmp_n.copy_from(qd);
                 gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
-                gemv(&mut self.tmp_n3, 1.0, &self.data.c, &self.tmp_n, 0.0);
-                hcc_model::linalg::cholesky_solve_in_place(&self.chol, &mut self.tmp_n3)
-                    .map_err(|_| ControlError::Numerical("M⁻¹ C"))?;
+                mu.u.set_column(i, &self.tmp_n);
+            }
+            gemm(&mut mu.minv_cu, 1.0, &self.data.c, &mu.u, 0.0);
+            hcc_model::linalg::cholesky_solve_slice(
+                self.chol.as_slice(),
+                self.n,
+                mu.minv_cu.as_mut_slice(),
+            )
+            .map_err(|_| ControlError::Numerical("M⁻¹ C"))?;
+            if r > 1 {
+                gemm(&mut mu.mu, 1.0, &self.data.m, &mu.u, 0.0);
+                gemm(&mut mu.mdot_u, 1.0, &self.mdot, &mu.u, 0.0);
+            }
+            for i in 0..r {
+                let l = &mut self.levels[i];
+                self.tmp_n.copy_from(&mu.u.column(i));
+                self.tmp_n3.copy_from(&mu.minv_cu.column(i));
                 gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
                 if i == 0 {
                     gemv(&mut l.y_d, -1.0, &l.jdot, &self.tmp_n, 1.0);
                 } else {
-                    gemv(&mut self.tmp_n2, 1.0, &self.data.m, &self.tmp_n, 0.0);
+                    self.tmp_n2.copy_from(&mu.mu.column(i));
                     gemv(&mut l.y_d3, 1.0, &l.zdot, &self.tmp_n2, 0.0);
-                    gemv(&mut self.tmp_n3, 1.0, &self.mdot, &self.tmp_n, 0.0);
+                    self.tmp_n3.copy_from(&mu.mdot_u.column(i));
                     gemv(&mut l.y_d3, 1.0, &l.z, &self.tmp_n3, 1.0);
                     gemv(&mut l.y_d2, 1.0, &l.jbar, &self.tmp_n, 0.0);
                     gemv(&mut l.y_d3, -1.0, &l.lambda_dot, &l.y_d2, 1.0);

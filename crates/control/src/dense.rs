@@ -19,38 +19,90 @@ fn scale(alpha: f64, s: f64, beta: f64, c: f64) -> f64 {
     alpha * s + if beta == 0.0 { 0.0 } else { beta * c }
 }
 
-/// `c = alpha * a * op(b) + beta * c`, `bcol(j)` iterating over column j of op(b).
-/// Column-major: rows in blocks of at most [`MR`] accumulators (a kernel per block
-/// width, so small matrices run fully unrolled), two output columns at a time, so the
-/// inner loop runs down contiguous columns of `a` and vectorises. Every element is
-/// still summed over l in increasing order, so the result is bitwise that of the plain
-/// dot-product loop.
+/// The right operand of [`gemm_cols`]: element (l, j) of op(b) is
+/// `data[l * ls + j * js]` (b itself: ls = 1, js = k; bᵀ: ls = n, js = 1; a vector:
+/// ls = 1, js = 0).
+#[derive(Clone, Copy)]
+struct Strided<'b> {
+    data: &'b [f64],
+    ls: usize,
+    js: usize,
+}
+
+/// `c = alpha * a * op(b) + beta * c` for `a` m × k (column-major slice), op(b) k × n
+/// and `c` m × n. Column-major: rows in blocks of at most [`MR`] accumulators (a
+/// kernel per block width, so small matrices run fully unrolled), one output column at
+/// a time, so the inner loop runs down contiguous columns of `a` and vectorises. Every
+/// element is still summed over l in increasing order, so the result is bitwise that
+/// of the plain dot-product loop.
 #[inline(always)]
-fn gemm_cols<'b, I: Iterator<Item = &'b f64>>(
+fn gemm_cols(
     c: &mut [f64],
     alpha: f64,
-    a: &DMatrix<f64>,
-    n: usize,
-    bcol: impl Fn(usize) -> I,
+    a: &[f64],
+    (m, k, n): (usize, usize, usize),
+    b: Strided,
     beta: f64,
 ) {
-    let m = a.nrows();
-    if m == 0 {
+    // The bounds the unchecked loads and stores of `rows` rely on.
+    assert!(a.len() >= m * k && c.len() >= m * n);
+    assert!(k == 0 || n == 0 || (k - 1) * b.ls + (n - 1) * b.js < b.data.len());
+    #[cfg(target_arch = "x86_64")]
+    if m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
+        unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
         return;
     }
-    let a = a.as_slice();
+    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// Products of at least this many multiply-adds run in the AVX2 build of
+/// [`gemm_blocks`] where the CPU has it (four lanes instead of two; below this the
+/// products are too short to gain from the wider registers).
+#[cfg(target_arch = "x86_64")]
+const AVX2_MIN_WORK: usize = 512;
+
+/// [`gemm_blocks`] compiled for AVX2. Only wider registers, no fused multiply-add: every
+/// product and sum is rounded as in the portable build, so the results are bitwise the
+/// same on every CPU.
+///
+/// # Safety
+/// The CPU must support AVX2, and the sizes must satisfy the checks of [`gemm_cols`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn gemm_cols_avx2(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    (m, k, n): (usize, usize, usize),
+    b: Strided,
+    beta: f64,
+) {
+    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// The row blocks of [`gemm_cols`] (sizes checked there).
+#[inline(always)]
+fn gemm_blocks(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    (m, k, n): (usize, usize, usize),
+    b: Strided,
+    beta: f64,
+) {
     let mut i = 0;
     while i < m {
         let w = MR.min(m - i);
         match w {
-            8 => rows::<8, I>(c, alpha, a, m, i, n, &bcol, beta),
-            7 => rows::<7, I>(c, alpha, a, m, i, n, &bcol, beta),
-            6 => rows::<6, I>(c, alpha, a, m, i, n, &bcol, beta),
-            5 => rows::<5, I>(c, alpha, a, m, i, n, &bcol, beta),
-            4 => rows::<4, I>(c, alpha, a, m, i, n, &bcol, beta),
-            3 => rows::<3, I>(c, alpha, a, m, i, n, &bcol, beta),
-            2 => rows::<2, I>(c, alpha, a, m, i, n, &bcol, beta),
-            _ => rows::<1, I>(c, alpha, a, m, i, n, &bcol, beta),
+            8 => rows::<8>(c, alpha, a, (m, k, n), i, b, beta),
+            7 => rows::<7>(c, alpha, a, (m, k, n), i, b, beta),
+            6 => rows::<6>(c, alpha, a, (m, k, n), i, b, beta),
+            5 => rows::<5>(c, alpha, a, (m, k, n), i, b, beta),
+            4 => rows::<4>(c, alpha, a, (m, k, n), i, b, beta),
+            3 => rows::<3>(c, alpha, a, (m, k, n), i, b, beta),
+            2 => rows::<2>(c, alpha, a, (m, k, n), i, b, beta),
+            _ => rows::<1>(c, alpha, a, (m, k, n), i, b, beta),
         }
         i += w;
     }
@@ -58,48 +110,62 @@ fn gemm_cols<'b, I: Iterator<Item = &'b f64>>(
 
 /// Rows i..i+W of [`gemm_cols`], one output column at a time (W accumulators, which
 /// the compiler keeps in vector registers across the rows).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn rows<'b, const W: usize, I: Iterator<Item = &'b f64>>(
+fn rows<const W: usize>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
-    m: usize,
+    (m, k, n): (usize, usize, usize),
     i: usize,
-    n: usize,
-    bcol: &impl Fn(usize) -> I,
+    b: Strided,
     beta: f64,
 ) {
-    assert!(i + W <= m);
+    debug_assert!(i + W <= m);
+    let (ap, bp, cp) = (a.as_ptr(), b.data.as_ptr(), c.as_mut_ptr());
     for j in 0..n {
         let mut s = [0.0; W];
-        for (al, &bl) in a.chunks_exact(m).zip(bcol(j)) {
-            let al: &[f64; W] = al[i..i + W].try_into().unwrap();
-            for t in 0..W {
-                s[t] += al[t] * bl;
+        for l in 0..k {
+            // SAFETY: l < k and j < n, so l ls + j js ≤ (k − 1) ls + (n − 1) js, which
+            // `gemm_cols` checked to be inside b; l m + i + t < (k − 1) m + m = k m ≤
+            // a.len() since i + t < i + W ≤ m.
+            let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
+            for (t, st) in s.iter_mut().enumerate() {
+                *st += unsafe { *ap.add(l * m + i + t) } * bl;
             }
         }
-        let cj = &mut c[j * m + i..j * m + i + W];
-        for t in 0..W {
-            cj[t] = scale(alpha, s[t], beta, cj[t]);
+        for (t, &st) in s.iter().enumerate() {
+            // SAFETY: j m + i + t < (n − 1) m + m = m n ≤ c.len() (checked in `gemm_cols`).
+            let x = unsafe { &mut *cp.add(j * m + i + t) };
+            *x = scale(alpha, st, beta, *x);
         }
     }
 }
 
 /// `c = alpha * a * b + beta * c`.
 pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, k, n) = (a.nrows(), a.ncols(), b.ncols());
+    assert_eq!(b.ncols(), c.ncols());
+    gemm_leading(c, alpha, a, b, beta);
+}
+
+/// `c = alpha * a * b[.., ..p] + beta * c` with p = the columns of `c`: [`gemm`] with
+/// the leading columns of `b` (a product of which only the first columns are needed).
+pub fn gemm_leading(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+) {
+    let (m, k, n) = (a.nrows(), a.ncols(), c.ncols());
     assert_eq!(b.nrows(), k);
-    assert_eq!(c.shape(), (m, n));
-    let bs = b.as_slice();
-    gemm_cols(
-        c.as_mut_slice(),
-        alpha,
-        a,
-        n,
-        |j| bs[j * k..(j + 1) * k].iter(),
-        beta,
-    );
+    assert!(n <= b.ncols());
+    assert_eq!(c.nrows(), m);
+    let b = Strided {
+        data: b.as_slice(),
+        ls: 1,
+        js: k,
+    };
+    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
 }
 
 /// `c = alpha * a * bᵀ + beta * c`.
@@ -107,15 +173,12 @@ pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f
     let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
     assert_eq!(b.ncols(), k);
     assert_eq!(c.shape(), (m, n));
-    let bs = b.as_slice();
-    gemm_cols(
-        c.as_mut_slice(),
-        alpha,
-        a,
-        n,
-        |j| bs[j..].iter().step_by(n),
-        beta,
-    );
+    let b = Strided {
+        data: b.as_slice(),
+        ls: n,
+        js: 1,
+    };
+    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
 }
 
 /// `c = alpha * aᵀ * b + beta * c`: dot products of contiguous columns, a 4 × 2 block of
@@ -210,10 +273,15 @@ fn gemm_tn_block(
 
 /// `y = alpha * a * x + beta * y` (the kernel of [`gemm`] with one column).
 pub fn gemv(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
-    assert_eq!(a.ncols(), x.len());
-    assert_eq!(a.nrows(), y.len());
-    let xs = x.as_slice();
-    gemm_cols(y.as_mut_slice(), alpha, a, 1, |_| xs.iter(), beta);
+    let (m, k) = a.shape();
+    assert_eq!(k, x.len());
+    assert_eq!(m, y.len());
+    let x = Strided {
+        data: x.as_slice(),
+        ls: 1,
+        js: 0,
+    };
+    gemm_cols(y.as_mut_slice(), alpha, a.as_slice(), (m, k, 1), x, beta);
 }
 
 /// `y = alpha * aᵀ * x + beta * y` (dot products of columns, four at a time).

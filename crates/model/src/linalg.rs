@@ -195,6 +195,75 @@ pub fn spd_inverse<
     Ok(())
 }
 
+/// [`cholesky_in_place`] for a contiguous column-major `n × n` slice `a` (a
+/// `DMatrix`'s storage), in the left-looking column form: column j is updated by the
+/// columns k < j as whole contiguous runs (`a[j.., j] −= a[j.., k] a[j, k]`), which
+/// vectorises. Every element still receives its products in increasing k and is
+/// divided by the pivot last, so the factor is bitwise that of [`cholesky_in_place`].
+/// The strict upper triangle is set to 0.
+pub fn cholesky_in_place_slice(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
+    check("cholesky_in_place_slice (n × n)", n * n, a.len())?;
+    for j in 0..n {
+        let (done, rest) = a.split_at_mut(j * n);
+        let col = &mut rest[..n];
+        for k in 0..j {
+            let ck = &done[k * n..(k + 1) * n];
+            let ljk = ck[j];
+            for (x, &l) in col[j..].iter_mut().zip(&ck[j..]) {
+                *x -= l * ljk;
+            }
+        }
+        let d = col[j];
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(LinalgError::NotPositiveDefinite { index: j, pivot: d });
+        }
+        let ljj = d.sqrt();
+        col[j] = ljj;
+        for x in &mut col[j + 1..] {
+            *x /= ljj;
+        }
+        col[..j].fill(0.0);
+    }
+    Ok(())
+}
+
+/// [`cholesky_solve_in_place`] for contiguous column-major storage: `l` the `n × n`
+/// factor, `b` the right-hand sides, `b.len() / n` columns of `n`. All columns advance
+/// together, one row of the substitutions at a time, so their divisions (whose latency
+/// dominates small solves) overlap instead of forming one chain per column. The forward
+/// substitution runs column-oriented (`b[i] −= l[i, k] b[k]` for i > k, contiguous in
+/// i), the backward one by dot products down the contiguous columns of `l`; every
+/// element is formed by the same operations in the same order as in
+/// [`cholesky_solve_in_place`], so the solution is bitwise the same.
+pub fn cholesky_solve_slice(l: &[f64], n: usize, b: &mut [f64]) -> Result<(), LinalgError> {
+    check("cholesky_solve_slice (n × n factor)", n * n, l.len())?;
+    if n == 0 {
+        return Ok(());
+    }
+    check("cholesky_solve_slice (rhs rows)", 0, b.len() % n)?;
+    // L y = b
+    for (k, lk) in l.chunks_exact(n).enumerate() {
+        for x in b.chunks_exact_mut(n) {
+            let yk = x[k] / lk[k];
+            x[k] = yk;
+            for (xi, &lik) in x[k + 1..].iter_mut().zip(&lk[k + 1..]) {
+                *xi -= lik * yk;
+            }
+        }
+    }
+    // Lᵀ x = y
+    for (i, li) in l.chunks_exact(n).enumerate().rev() {
+        for x in b.chunks_exact_mut(n) {
+            let mut s = x[i];
+            for (&lki, &xk) in li[i + 1..].iter().zip(&x[i + 1..]) {
+                s -= lki * xk;
+            }
+            x[i] = s / li[i];
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -221,11 +290,18 @@ mod tests {
             let mut bm = DMatrix::from_fn(n, 3, |i, j| (i + j) as f64);
             let rhs = bm.clone();
             cholesky_solve_matrix_in_place(&l, &mut bm).unwrap();
-            assert!((&a * &bm - rhs).norm() < 1e-10);
+            assert!((&a * &bm - &rhs).norm() < 1e-10);
             let mut f = DMatrix::zeros(n, n);
             let mut inv = DMatrix::zeros(n, n);
             spd_inverse(&a, &mut f, &mut inv).unwrap();
             assert!((&a * &inv - DMatrix::identity(n, n)).norm() < 1e-10);
+            // The contiguous forms give the same bits.
+            let mut ls = a.clone();
+            cholesky_in_place_slice(ls.as_mut_slice(), n).unwrap();
+            assert_eq!(ls, l);
+            let mut bs = rhs.clone();
+            cholesky_solve_slice(ls.as_slice(), n, bs.as_mut_slice()).unwrap();
+            assert_eq!(bs, bm);
         }
     }
 
