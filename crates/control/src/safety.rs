@@ -26,7 +26,11 @@
 //!
 //! β_i(q) ← min(β_i(q), β_c(r_i)),  β_c(r) = smoothstep(log_100(r / ε_c)) (0 at ε_c, 1 from 100 ε_c),
 //!
-//! before the passive fade below: the same storage function, so the same argument
+//! before the passive fade below. r_i is the smaller eigenvalue ratio of Λ_i and of
+//! G = J_aug M⁻¹ J_augᵀ of the levels above (the ratio the null-space damping uses),
+//! so near a singularity of the levels above the level fades from 100 ε_c on as
+//! well, earlier than the plain fade (100 `singular_ratio`). The same storage
+//! function, so the same argument
 //! holds — a fade-out removes −β̇_i V_i ≥ 0 from E, a fade-in (once r_i ≥ 100 ε_c
 //! again) is paid from the tank, and the null-space damping (c_i from β_i) takes the
 //! faded level's place. β_c is C¹ in log r_i (no torque jump); 1 wherever
