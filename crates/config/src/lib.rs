@@ -1104,6 +1104,7 @@ fn safety_spec(
         velocity_governor: s.velocity_governor.unwrap_or(d.velocity_governor),
         velocity_damping: s.velocity_damping.unwrap_or(d.velocity_damping),
         null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
+        conflict_fade_ratio: s.conflict_fade_ratio.unwrap_or(d.conflict_fade_ratio),
         fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),
         control_period_s: 1.0 / control_rate_hz,
     };

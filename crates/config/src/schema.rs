@@ -398,6 +398,9 @@ pub struct SafetySection {
     pub velocity_damping: Option<f64>,
     /// Null-space damping rate of faded levels, 1/s.
     pub null_space_damping: Option<f64>,
+    /// Conditioning of a level's own Λ_i at which the conflict fade has faded it out
+    /// (default 1e-5; 0: off).
+    pub conflict_fade_ratio: Option<f64>,
     /// Capacity of the energy tank that pays fade-ins, J.
     pub fade_tank_max: Option<f64>,
 }

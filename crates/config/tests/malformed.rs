@@ -783,6 +783,13 @@ fn safety_section() {
     let bad = format!("{BASE}\n[safety]\njoint_limit_margin = -1.0\n");
     let e = load(&bad).unwrap_err().to_string();
     assert!(e.contains("safety.joint_limit_margin"), "{e}");
+    let off = format!("{BASE}\n[safety]\nconflict_fade_ratio = 0.0\n");
+    assert_eq!(load(&off).unwrap().spec.safety.conflict_fade_ratio, 0.0);
+    for v in ["-1e-5", "0.5"] {
+        let bad = format!("{BASE}\n[safety]\nconflict_fade_ratio = {v}\n");
+        let e = load(&bad).unwrap_err().to_string();
+        assert!(e.contains("safety.conflict_fade_ratio"), "{e}");
+    }
     let unknown = format!("{BASE}\n[safety]\nmargin = 1.0\n");
     assert!(load(&unknown).is_err());
 }

@@ -813,8 +813,9 @@ impl Controller {
             self.out.potential[i] = l.potential;
         }
         let (fade, pot) = (&mut self.out.fade, &self.out.potential);
+        let cond = &self.out.conditioning;
         self.safety
-            .passive_fade(fade, pot, p1, &mut self.out.safety);
+            .passive_fade(fade, pot, p1, cond, &mut self.out.safety);
     }
 
     /// The torque of the safety layer (crate::safety) into `out.safety`.

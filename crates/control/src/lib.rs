@@ -61,7 +61,8 @@
 //! then held by level 1, τ_1 = −J_1ᵀ F_1, which involves no inversion and is passive
 //! (with gravity compensation the energy ½ q̇ᵀ M q̇ + V_1 cannot grow), and the lower
 //! tasks resume as it is left. Away from singularities every β_j is exactly 1 and the
-//! law is the paper's.
+//! law is the paper's. The safety layer ([`safety`]) makes the fade passive and also
+//! fades a level whose own Λ_i (eq. 18) turns singular (the conflict fade).
 //!
 //! **Allocation.** [`Controller::new`] allocates every buffer (an own
 //! `hcc_model::Data` included); [`Controller::step`] allocates nothing. M⁻¹ is never

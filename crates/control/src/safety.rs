@@ -16,6 +16,26 @@
 //! falling β(q) at once (the protection of the singular region is kept), and rises
 //! only once β(q) = 1 again (hysteresis), at most at [`FADE_IN_RATE`].
 //!
+//! **Conflict fade.** A level i ≥ 2 whose goal is unreachable given the levels
+//! above it (an algorithmic conflict: Λ_i = Z_i M Z_iᵀ of eq. 18 becomes singular,
+//! its conditioning r_i = `Output::conditioning` falls, while the levels above stay
+//! regular) keeps pulling in the direction it lost through the damped inverse: the
+//! arm creeps along the self-motion that makes the conflict worse (e.g. a wrist
+//! centre pulled beyond reach by the orientation level stretches the elbow). With
+//! `conflict_fade_ratio` = ε_c > 0 its fade is lowered to
+//!
+//! β_i(q) ← min(β_i(q), β_c(r_i)),  β_c(r) = smoothstep(log_100(r / ε_c)) (0 at ε_c, 1 from 100 ε_c),
+//!
+//! before the passive fade below. r_i is the smaller eigenvalue ratio of Λ_i and of
+//! G = J_aug M⁻¹ J_augᵀ of the levels above (the ratio the null-space damping uses),
+//! so near a singularity of the levels above the level fades from 100 ε_c on as
+//! well, earlier than the plain fade (100 `singular_ratio`). The same storage
+//! function, so the same argument
+//! holds — a fade-out removes −β̇_i V_i ≥ 0 from E, a fade-in (once r_i ≥ 100 ε_c
+//! again) is paid from the tank, and the null-space damping (c_i from β_i) takes the
+//! faded level's place. β_c is C¹ in log r_i (no torque jump); 1 wherever
+//! r_i ≥ 100 ε_c, so a regular hierarchy is untouched bit for bit.
+//!
 //! **Null-space damping of faded levels.** A faded level no longer damps the motion it
 //! controlled (the self-motion the levels above it leave free). In its place, level i
 //! adds the joint damping c_i M q̇ projected into the null space of the levels above
@@ -122,6 +142,11 @@ pub struct SafetySpec {
     pub velocity_damping: f64,
     /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
     pub null_space_damping: f64,
+    /// The conflict fade: a level i ≥ 2 whose own Λ_i is near-singular (an
+    /// algorithmic conflict with the levels above) fades by its own conditioning r_i,
+    /// fully off at r_i ≤ this ratio ε_c and untouched from 100 ε_c up, with the
+    /// null-space damping in its place (module docs); in [0, 0.01), 0 switches it off.
+    pub conflict_fade_ratio: f64,
     /// Capacity of the energy tank that pays fade-ins (J), ≥ 0.
     pub fade_tank_max: f64,
     /// Control period (s), for the energy the tank collects per cycle, > 0.
@@ -141,6 +166,7 @@ impl Default for SafetySpec {
             velocity_governor: true,
             velocity_damping: 50.0,
             null_space_damping: 20.0,
+            conflict_fade_ratio: 1e-5,
             fade_tank_max: 5.0,
             control_period_s: 1e-3,
         }
@@ -181,6 +207,9 @@ impl SafetySpec {
         if !nonneg(self.null_space_damping) {
             return bad("null_space_damping", "must be non-negative");
         }
+        if !(nonneg(self.conflict_fade_ratio) && self.conflict_fade_ratio < 0.01) {
+            return bad("conflict_fade_ratio", "must be in [0, 0.01)");
+        }
         if !nonneg(self.fade_tank_max) {
             return bad("fade_tank_max", "must be non-negative");
         }
@@ -213,6 +242,11 @@ pub struct SafetyOutput {
     pub spring_scale: Vec<f64>,
     /// A faded level's null-space damping acted.
     pub null_space_damping_active: bool,
+    /// The conflict fade lowered a level's β_i(q) in this cycle (its own Λ_i
+    /// near-singular).
+    pub conflict_fade_active: bool,
+    /// Cycles in which the conflict fade acted, since construction.
+    pub conflict_fade_cycles: u64,
     /// Cycles in which the guard acted, since construction.
     pub joint_limit_cycles: u64,
     /// Cycles in which the governor or the velocity damping acted, since construction.
@@ -241,6 +275,8 @@ impl SafetyOutput {
             velocity_governor: 0.0,
             spring_scale: vec![1.0; levels],
             null_space_damping_active: false,
+            conflict_fade_active: false,
+            conflict_fade_cycles: 0,
             joint_limit_cycles: 0,
             velocity_limit_cycles: 0,
             fade_in_limited_cycles: 0,
@@ -480,17 +516,34 @@ impl Safety {
     }
 
     /// The passive fade (module docs): `fade` holds β_i(q) on entry and the effective
-    /// β_i on return; `potential` V_i; `damper_dissipation` Σ β_i ẋ_iᵀ D_i ẋ_i (W).
+    /// β_i on return; `potential` V_i; `damper_dissipation` Σ β_i ẋ_iᵀ D_i ẋ_i (W);
+    /// `conditioning` r_i of each level's own inversions, for the conflict fade
+    /// β_i(q) ← min(β_i(q), β_c(r_i)).
     pub(crate) fn passive_fade(
         &mut self,
         fade: &mut [f64],
         potential: &[f64],
         damper_dissipation: f64,
+        conditioning: &[f64],
         out: &mut SafetyOutput,
     ) {
         if !self.spec.enabled {
             return;
         }
+        let eps_c = self.spec.conflict_fade_ratio;
+        out.conflict_fade_active = false;
+        if eps_c > 0.0 {
+            // The conflict fade: a level whose own Λ_i (eq. 18) is near-singular has
+            // lost a direction to the levels above; its spring fades with r_i.
+            for i in 1..fade.len() {
+                let own = crate::controller::fade_factor(conditioning[i], eps_c);
+                if own < fade[i] {
+                    fade[i] = own;
+                    out.conflict_fade_active = true;
+                }
+            }
+        }
+        out.conflict_fade_cycles += u64::from(out.conflict_fade_active);
         if !self.has_prev {
             self.beta_prev.copy_from_slice(fade);
             self.has_prev = true;
@@ -739,5 +792,13 @@ mod tests {
             ..Default::default()
         };
         assert!(s.validate().is_err());
+        for bad in [-1e-6, 0.01, f64::NAN] {
+            let s = SafetySpec {
+                conflict_fade_ratio: bad,
+                ..Default::default()
+            };
+            let e = s.validate().unwrap_err().to_string();
+            assert!(e.contains("conflict_fade_ratio"), "{e}");
+        }
     }
 }

@@ -357,6 +357,7 @@ pub fn simulate_law_observed(
         ("joint_limit_guard_cycles", safety.joint_limit_cycles),
         ("velocity_limit_cycles", safety.velocity_limit_cycles),
         ("spring_saturation_cycles", safety.spring_saturated_cycles),
+        ("conflict_fade_cycles", safety.conflict_fade_cycles),
     ] {
         if value > 0 {
             run.description.settings.insert(key.into(), value.into());

@@ -36,11 +36,14 @@ struct Sample {
     governor: f64,
     /// The spring saturation capped a level's spring.
     saturated: bool,
-    /// |τ − τ_twin| (largest joint): the torque the velocity governor changed, against
-    /// a twin controller without it stepped on the same states (0 without a twin).
-    governor_tau: f64,
+    /// The conflict fade acted.
+    conflict: bool,
+    /// |τ − τ_twin| (largest joint): the torque a part of the safety layer changed,
+    /// against a twin controller without it stepped on the same states (0 without a
+    /// twin).
+    twin_tau: f64,
     /// Largest |d(τ − τ_twin)/dt| over the joints (N·m/s).
-    governor_rate: f64,
+    twin_rate: f64,
     /// Per level: its conditioning (`Output::conditioning`).
     conditioning: Vec<f64>,
 }
@@ -53,7 +56,7 @@ struct Logged {
     prev_safety: DVector<f64>,
     /// The same controller without the velocity governor, stepped on the same states.
     twin: Option<hcc_control::Controller>,
-    prev_governor: DVector<f64>,
+    prev_twin: DVector<f64>,
     log: Vec<Sample>,
 }
 
@@ -65,13 +68,13 @@ impl ControlLaw for Logged {
         let out = self.law.controller().output();
         let rate = (&out.safety.tau - &self.prev_safety).amax() / self.period_s;
         self.prev_safety.copy_from(&out.safety.tau);
-        let (mut governor_tau, mut governor_rate) = (0.0, 0.0);
+        let (mut twin_tau, mut twin_rate) = (0.0, 0.0);
         if let Some(twin) = &mut self.twin {
             let t = twin.step(q.as_slice(), qd.as_slice()).unwrap();
             let d = &out.tau - &t.tau;
-            governor_tau = d.amax();
-            governor_rate = (&d - &self.prev_governor).amax() / self.period_s;
-            self.prev_governor.copy_from(&d);
+            twin_tau = d.amax();
+            twin_rate = (&d - &self.prev_twin).amax() / self.period_s;
+            self.prev_twin.copy_from(&d);
         }
         self.log.push(Sample {
             t,
@@ -86,8 +89,9 @@ impl ControlLaw for Logged {
             faded: out.safety.null_space_damping_active || out.fade.iter().any(|&b| b < 1.0),
             governor: out.safety.velocity_governor,
             saturated: out.safety.spring_saturated,
-            governor_tau,
-            governor_rate,
+            conflict: out.safety.conflict_fade_active,
+            twin_tau,
+            twin_rate,
             conditioning: out.conditioning.clone(),
         });
         Ok(())
@@ -122,18 +126,32 @@ impl ControlLaw for Logged {
 }
 
 fn run(scenario: Scenario, duration_s: f64) -> Vec<Sample> {
-    run_logged(scenario, duration_s, false)
+    run_logged(scenario, duration_s, None)
 }
 
-/// [`run`]; `twin`: also step a controller without the velocity governor on the
-/// same states (for the governor's torque and its rate).
-fn run_logged(mut scenario: Scenario, duration_s: f64, twin: bool) -> Vec<Sample> {
+/// The twin of the velocity limits: without the governor and the velocity damping.
+fn without_velocity_limits(s: &mut hcc_control::SafetySpec) {
+    s.velocity_governor = false;
+    s.velocity_damping = 0.0;
+}
+
+/// The twin of the conflict fade: without it.
+fn without_conflict_fade(s: &mut hcc_control::SafetySpec) {
+    s.conflict_fade_ratio = 0.0;
+}
+
+/// [`run`]; `twin`: also step a controller whose safety layer `twin` changed on
+/// the same states (for the torque of what it removed and its rate).
+fn run_logged(
+    mut scenario: Scenario,
+    duration_s: f64,
+    twin: Option<fn(&mut hcc_control::SafetySpec)>,
+) -> Vec<Sample> {
     scenario.set_duration(duration_s).unwrap();
     let n = scenario.model.nq();
-    let twin = twin.then(|| {
+    let twin = twin.map(|change| {
         let mut spec = scenario.spec.clone();
-        spec.safety.velocity_governor = false;
-        spec.safety.velocity_damping = 0.0;
+        change(&mut spec.safety);
         hcc_control::Controller::new(&scenario.model, spec, &scenario.q0).unwrap()
     });
     let mut law = Logged {
@@ -142,7 +160,7 @@ fn run_logged(mut scenario: Scenario, duration_s: f64, twin: bool) -> Vec<Sample
         k: 0,
         prev_safety: DVector::zeros(n),
         twin,
-        prev_governor: DVector::zeros(n),
+        prev_twin: DVector::zeros(n),
         log: Vec::new(),
     };
     simulate_with(&scenario, &mut law).unwrap_or_else(|e| panic!("closed loop: {e}"));
@@ -293,15 +311,16 @@ fn panda(tcp: [f64; 3], posture: &[f64]) -> Scenario {
     s
 }
 
-/// The velocity governor's onset: |dτ/dt| of the torque it changed in its first
-/// five cycles, the largest |dτ/dt| and the largest torque change of the run.
-fn governor_figures(log: &[Sample]) -> (Vec<f64>, f64, f64) {
-    let first = log.iter().position(|s| s.governor > 0.0);
+/// The onset of what the twin lacks (the first cycle in which `acts`): |dτ/dt| of
+/// the torque it changed in its first five cycles, the largest |dτ/dt| and the
+/// largest torque change of the run.
+fn twin_figures(log: &[Sample], acts: fn(&Sample) -> bool) -> (Vec<f64>, f64, f64) {
+    let first = log.iter().position(acts);
     let onset = first
-        .map(|k| log[k..].iter().take(5).map(|s| s.governor_rate).collect())
+        .map(|k| log[k..].iter().take(5).map(|s| s.twin_rate).collect())
         .unwrap_or_default();
-    let rate = log.iter().map(|s| s.governor_rate).fold(0.0, f64::max);
-    let tau = log.iter().map(|s| s.governor_tau).fold(0.0, f64::max);
+    let rate = log.iter().map(|s| s.twin_rate).fold(0.0, f64::max);
+    let tau = log.iter().map(|s| s.twin_tau).fold(0.0, f64::max);
     (onset, rate, tau)
 }
 
@@ -326,13 +345,13 @@ fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits(
     let tcp = [1.2, 0.3, 0.4];
     let posture = [0.0, -0.3, 0.0, 0.3, 0.0, 4.0, 0.8];
     let scenario = panda(tcp, &posture);
-    let log = run_logged(scenario.clone(), 6.0, true);
+    let log = run_logged(scenario.clone(), 6.0, Some(without_velocity_limits));
     let (beyond, speed) = limit_figures(&scenario, &log);
     let guard = log.iter().filter(|s| s.guard).count();
     let vel = log.iter().filter(|s| s.velocity).count();
     let sat = log.iter().filter(|s| s.saturated).count();
     let rate = log.iter().map(|s| s.max_tau_rate).fold(0.0, f64::max);
-    let (onset, gov_rate, gov_tau) = governor_figures(&log);
+    let (onset, gov_rate, gov_tau) = twin_figures(&log, |s| s.governor > 0.0);
     let last = log.last().unwrap();
     println!(
         "panda 1.3 m: max |q̇| from 4 s {:.2e} rad/s; deepest beyond a limit {beyond:.2e} rad; largest |q̇|/limit {speed:.3}; guard cycles {guard}, spring-saturation cycles {sat}, velocity-limit cycles {vel}; largest |dτ_safety/dt| {rate:.0} N·m/s; governor: |dτ/dt| in its first 5 cycles {onset:.3?} N·m/s, largest {gov_rate:.0} N·m/s, largest torque change {gov_tau:.2} N·m; final q {:.3?}; final TCP error {:.3} m",
@@ -350,6 +369,48 @@ fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits(
     assert!(gov_rate < 1000.0, "velocity limits: {gov_rate} N·m/s");
 }
 
+/// A TCP goal the Panda reaches only with its elbow stretched, and the hand asked to
+/// point down: the orientation level loses a direction to the TCP level (its own Λ_2
+/// near-singular, an algorithmic conflict). The conflict fade takes its spring out
+/// (the null-space damping in its place): the arm comes to rest, without a torque
+/// jump (against a twin controller without the conflict fade on the same states).
+#[test]
+fn a_level_in_conflict_fades_out_and_the_arm_comes_to_rest() {
+    let tcp = [-0.15, 0.68, 0.78];
+    let posture = [1.01, 0.98, -2.99, -1.89, -2.49, 0.78, -3.09];
+    let scenario = panda(tcp, &posture);
+    let log = run_logged(scenario.clone(), 4.0, Some(without_conflict_fade));
+    let (beyond, speed) = limit_figures(&scenario, &log);
+    let conflict = log.iter().filter(|s| s.conflict).count();
+    let first = log.iter().find(|s| s.conflict).map_or(f64::NAN, |s| s.t);
+    let (onset, rate, tau) = twin_figures(&log, |s| s.conflict);
+    let last = log.last().unwrap();
+    let mut without = scenario.clone();
+    without_conflict_fade(&mut without.spec.safety);
+    let without = run(without, 4.0);
+    println!(
+        "conflict: without the conflict fade max |q̇| over the last 0.1 s {:.2e} rad/s, orientation error {:.4} rad",
+        max_speed(&without, 3.9),
+        without.last().unwrap().errors[1]
+    );
+    println!(
+        "conflict: the conflict fade from t = {first:.3} s, in {conflict} cycles; |dτ/dt| in its first 5 cycles {onset:.3?} N·m/s, largest {rate:.0} N·m/s, largest torque change {tau:.2} N·m; max |q̇| over the last 0.1 s {:.2e} rad/s (from 3 s {:.2e}); largest rise of E after 2 s {:.2e} J; errors at the end {:.4?}; conditioning {:?}; largest |q̇|/limit {speed:.2}",
+        max_speed(&log, 3.9),
+        max_speed(&log, 3.0),
+        energy_rise(&log, 2.0),
+        last.errors,
+        last.conditioning
+            .iter()
+            .map(|c| format!("{c:.2e}"))
+            .collect::<Vec<_>>(),
+    );
+    assert!(log.iter().all(|s| s.finite));
+    assert!(conflict > 0, "the conflict fade never acted");
+    assert!(beyond <= 0.0);
+    assert!(max_speed(&log, 3.9) < 0.01, "not at rest");
+    assert!(onset[0] < 0.1 * rate, "a torque jump at the onset");
+}
+
 /// A small deterministic generator (xorshift64*), uniform in [0, 1).
 struct Rng(u64);
 
@@ -365,13 +426,73 @@ impl Rng {
     }
 }
 
+/// Why a sweep goal is not settled (at rest or converged) at the end of its run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Unsettled {
+    /// Still moving (≥ 0.1 rad/s over the last 0.1 s), levels 1 and 2 not yet at
+    /// their goals (or their closest points): the move itself is not over.
+    Travelling,
+    /// Moving, levels 1 and 2 converged (TCP within 5 mm, orientation within
+    /// 50 mrad): the posture level still swings in their null space.
+    PostureSwinging,
+    /// A joint within the guard's margin of a limit (the guard acting at the end).
+    AtJointLimit,
+    /// Slower than 0.1 rad/s with level 1 singular (TCP goal at or beyond the reach
+    /// boundary).
+    CreepReachBoundary,
+    /// Slower than 0.1 rad/s with level 2 in an algorithmic conflict (its own Λ_2
+    /// singular, level 1 regular).
+    CreepConflict,
+    /// Slower than 0.1 rad/s, no singularity, no limit.
+    CreepOther,
+}
+
+/// The class of an unsettled run (see [`Unsettled`]); `eps` the singular ratio ε
+/// (the fade region is ε … 100 ε).
+fn classify(log: &[Sample], seconds: f64, eps: f64) -> Unsettled {
+    let last = log.last().unwrap();
+    let speed = max_speed(log, seconds - 0.1);
+    let singular = |i: usize| last.conditioning[i] < 100.0 * eps;
+    if last.guard {
+        Unsettled::AtJointLimit
+    } else if speed >= 0.1 {
+        if last.errors[0] < 5e-3 && last.errors[1] < 5e-2 {
+            Unsettled::PostureSwinging
+        } else {
+            Unsettled::Travelling
+        }
+    } else if singular(0) {
+        Unsettled::CreepReachBoundary
+    } else if singular(1) {
+        Unsettled::CreepConflict
+    } else {
+        Unsettled::CreepOther
+    }
+}
+
+/// The shortest time in which the joints can cover the distance from `q0` to `q`
+/// with every joint at `fraction` of its URDF velocity limit (max_k |Δq_k| / (f v_k)).
+fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f64) -> f64 {
+    joints
+        .iter()
+        .enumerate()
+        .map(|(k, j)| (q[k] - q0[k]).abs() / (fraction * j.velocity_limit))
+        .fold(0.0, f64::max)
+}
+
 /// Seeded random Panda goals, 3 s each from the scenario's start: TCP goals from
 /// 0.3 m to 1.4 m from the shoulder (within and beyond reach), posture goals up
 /// to 0.5 rad beyond the limits of every joint. `SWEEP_GOALS` goals (default 100
 /// here; `SWEEP_GOALS=500 cargo test --release -p hcc-plant --test
 /// limits_and_singularities sweep -- --nocapture` runs the full sweep;
 /// `SWEEP_SECONDS` sets the time per goal, `SWEEP_DETAIL` prints every goal not
-/// settled and every one over a velocity limit).
+/// settled and every one over a velocity limit, `SWEEP_SAFETY` changes `[safety]`
+/// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`).
+/// Every goal not settled is classified ([`Unsettled`]). With the defaults (3 s,
+/// at least 100 goals, no `SWEEP_SAFETY`) at least 35 % must settle: 41 % of the
+/// first 100 goals and 39.6 % of 500 do with the conflict fade (31 % and 31.6 %
+/// without it), so the floor catches a loss of the conflict fade, with 6 goals in
+/// 100 of margin for numerical differences of a chaotic sweep.
 #[test]
 fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
     let goals: usize = std::env::var("SWEEP_GOALS")
@@ -388,6 +509,10 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
     let (mut settled, mut worst_beyond, mut worst_speed) = (0, f64::NEG_INFINITY, 0.0f64);
     let mut unsettled = Vec::new();
+    let eps = base.spec.singular_ratio;
+    let mut classes = std::collections::BTreeMap::new();
+    let mut travel_min = Vec::new();
+    let mut overridden = false;
     for g in 0..goals {
         let radius = rng.range(0.3, 1.4);
         let (az, el) = (rng.range(-3.1, 3.1), rng.range(-0.8, 1.2));
@@ -400,7 +525,8 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             .iter()
             .map(|j| rng.range(j.lower - 0.5, j.upper + 0.5))
             .collect();
-        let scenario = panda(tcp, &posture);
+        let mut scenario = panda(tcp, &posture);
+        overridden = sweep_safety_overrides(&mut scenario);
         let log = run(scenario.clone(), seconds);
         assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
         let (beyond, speed) = limit_figures(&scenario, &log);
@@ -439,8 +565,16 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         if rest || converged {
             settled += 1;
         } else {
+            let class = classify(&log, seconds, eps);
+            let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+            let t_min = shortest_move(&joints, &q0, &last.q, 0.9);
+            *classes.entry(class).or_insert(0usize) += 1;
+            if class == Unsettled::Travelling {
+                travel_min.push(t_min);
+            }
             unsettled.push((
                 g,
+                class,
                 max_speed(&log, seconds - 0.1),
                 last.errors[0],
                 last.errors[1],
@@ -468,9 +602,48 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         }
     }
     println!(
-        "sweep: {goals} goals, {settled} at rest or converged by {seconds} s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, max |q̇| over the last 0.1 s, TCP and orientation errors, TCP goal radius): {unsettled:.3?}",
+        "sweep: {goals} goals, {settled} at rest or converged by {seconds} s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, class, max |q̇| over the last 0.1 s, TCP and orientation errors, TCP goal radius): {unsettled:.3?}",
         100.0 * settled as f64 / goals as f64
     );
+    travel_min.sort_by(f64::total_cmp);
+    println!(
+        "sweep: not settled by class {classes:?}; travelling: shortest time from the start to where they are at 0.9 of the velocity limits {travel_min:.2?} s"
+    );
+    if seconds == 3.0 && goals >= 100 && !overridden {
+        assert!(
+            settled as f64 >= 0.35 * goals as f64,
+            "only {settled} of {goals} goals settled by 3 s"
+        );
+    }
+}
+
+/// `SWEEP_SAFETY=field=value,…`: the `[safety]` fields of a comparison run (numeric
+/// fields only). Returns whether anything was changed.
+fn sweep_safety_overrides(s: &mut Scenario) -> bool {
+    let Ok(v) = std::env::var("SWEEP_SAFETY") else {
+        return false;
+    };
+    for kv in v.split(',').filter(|kv| !kv.is_empty()) {
+        let (k, x) = kv
+            .split_once('=')
+            .unwrap_or_else(|| panic!("SWEEP_SAFETY: {kv:?} is not field=value"));
+        let x: f64 = x
+            .parse()
+            .unwrap_or_else(|e| panic!("SWEEP_SAFETY: {kv:?}: {e}"));
+        let sp = &mut s.spec.safety;
+        match k {
+            "null_space_damping" => sp.null_space_damping = x,
+            "conflict_fade_ratio" => sp.conflict_fade_ratio = x,
+            "velocity_damping" => sp.velocity_damping = x,
+            "fade_tank_max" => sp.fade_tank_max = x,
+            _ => panic!("SWEEP_SAFETY: unknown field {k:?}"),
+        }
+    }
+    s.spec
+        .safety
+        .validate()
+        .unwrap_or_else(|e| panic!("SWEEP_SAFETY: {e}"));
+    true
 }
 
 /// The paper's scenarios never reach a limit or a singularity: the safety layer never
@@ -490,13 +663,14 @@ fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
         let scenario = load(name);
         let panda = name.starts_with("panda");
         let duration = scenario.simulation.duration_s;
-        let log = run_logged(scenario.clone(), duration, panda);
+        let twin = panda.then_some(without_velocity_limits as fn(&mut _));
+        let log = run_logged(scenario.clone(), duration, twin);
         let faded = log.iter().filter(|s| s.faded).count();
         let guard = log.iter().filter(|s| s.guard).count();
         let vel = log.iter().filter(|s| s.velocity).count();
         let sat = log.iter().filter(|s| s.saturated).count();
         let (beyond, speed) = limit_figures(&scenario, &log);
-        let (onset, gov_rate, gov_tau) = governor_figures(&log);
+        let (onset, gov_rate, gov_tau) = twin_figures(&log, |s| s.governor > 0.0);
         println!(
             "{name}: fade / null-space damping in {faded} cycles, guard in {guard}, spring saturation in {sat}, velocity governor or damping in {vel}; largest |q̇|/limit {speed:.3}; governor: |dτ/dt| in its first 5 cycles {onset:.3?} N·m/s, largest {gov_rate:.0} N·m/s, largest torque change {gov_tau:.2} N·m; errors at the end {:.3?}",
             log.last().unwrap().errors
