@@ -2,8 +2,10 @@
 //! subscriber: the receiver thread copies every joint state, torque command,
 //! telemetry sample and setpoint out of the iceoryx2 queues (the largest
 //! queues the services allow, [`MAX_SUBSCRIBER_BUFFER`] samples, i.e. 128 ms
-//! at 1 kHz, drained every 100 µs, so that publishers — which never block —
-//! lose nothing to the recorder), and the [`StreamRecorder`] writes them into
+//! at 1 kHz, drained every [`POLL`] — at once again when a drain found half a
+//! queue, as in lockstep runs faster than real time — so that publishers,
+//! which never block, lose nothing to the recorder), and the
+//! [`StreamRecorder`] writes them into
 //! the file as they arrive, counting sequence gaps and drops per stream with
 //! [`SequenceChecker`]s. Used by `hcc record` and `hcc run` alike.
 //!
@@ -48,6 +50,14 @@ pub const RECEIVER_PRIORITY: i32 = 20;
 /// Samples that may wait between the receiver and the writer (about two
 /// seconds of joint states, commands and telemetry at 1 kHz).
 pub const BACKLOG: usize = 6_000;
+
+/// The receiver's sleep between drains: 1/128 of what a queue holds at
+/// 1 kHz. (A 100 µs poll, as before, woke the thread 10 000 times a second
+/// on the daemons' cores for nothing.)
+pub const POLL: Duration = Duration::from_millis(1);
+
+/// A drain that found this many samples is followed by another at once.
+const BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
 
 /// The subscribers, on a thread of their own that does nothing but copy
 /// samples out of the queues into a bounded channel, so that writing the
@@ -188,8 +198,8 @@ impl Receiver {
                     let last = stop_flag.load(Ordering::SeqCst);
                     match subs.drain_into(&tx) {
                         Ok(0) if last => break,
-                        Ok(0) => std::thread::sleep(Duration::from_micros(100)),
-                        Ok(_) => {}
+                        Ok(k) if k >= BURST => {}
+                        Ok(_) => std::thread::sleep(POLL),
                         Err(e) => {
                             // Blocking: the failure must reach the writer.
                             let _ = tx.tx.send(Received::Failed(e));

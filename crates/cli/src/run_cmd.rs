@@ -18,7 +18,7 @@
 //!
 //! Publishers of the contract never block (safe overflow): the recorder's
 //! subscribers have the largest queue the services allow and are drained
-//! every 100 µs by a thread that only copies, and every stream goes through
+//! every millisecond by a thread that only copies, and every stream goes through
 //! a [`hcc_msgs::SequenceChecker`], so lost samples are counted, reported and
 //! stored in the file, never lost silently.
 //!
