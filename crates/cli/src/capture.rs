@@ -194,10 +194,12 @@ impl Receiver {
                 };
                 loop {
                     // Read the flag before draining: after a stop request
-                    // one more complete drain happens.
+                    // one more complete drain (every queue emptied) happens,
+                    // then the thread ends, whether or not the publishers
+                    // are still running.
                     let last = stop_flag.load(Ordering::SeqCst);
                     match subs.drain_into(&tx) {
-                        Ok(0) if last => break,
+                        Ok(_) if last => break,
                         Ok(k) if k >= BURST => {}
                         Ok(_) => std::thread::sleep(POLL),
                         Err(e) => {
