@@ -3,8 +3,11 @@
 //! spirit of Figs. 3–7 of Dietrich, Ott & Albu-Schäffer (IROS 2013).
 //!
 //! The crate knows nothing about how a run was produced (in-process simulation
-//! or the daemons): its inputs are a [`Trajectory`] with the columns described
-//! in [`columns`] and a [`RunDescription`].
+//! or the daemons): its inputs are rows with the columns described in
+//! [`columns`] and a [`RunDescription`]. The rows are taken one at a time
+//! ([`RunWriter`]: the CSV streamed, the metrics accumulated online, the plots
+//! from a bounded decimation), so memory does not grow with the run; an
+//! in-memory [`Trajectory`] goes through the same writer ([`write_run`]).
 //!
 //! ```no_run
 //! # use hcc_report::*;
@@ -15,14 +18,20 @@
 //! ```
 
 pub mod columns;
+pub mod decimate;
 pub mod metrics;
+mod online;
 pub mod percentiles;
 pub mod plots;
+pub mod stream;
 pub mod trajectory;
 
+pub use decimate::{Decimator, PLOT_POINTS};
 pub use metrics::{ErrorUnit, LevelDescription, LevelMetrics, Metrics, RunDescription};
+pub use online::MetricsAccumulator;
 pub use percentiles::{PercentileCurve, plot_percentiles};
 pub use plots::{TimePanel, plot_all, plot_time_series};
+pub use stream::{CsvWriter, RunWriter};
 pub use trajectory::Trajectory;
 
 use std::path::{Path, PathBuf};
@@ -65,24 +74,18 @@ pub struct RunOutputs {
     pub files: Vec<PathBuf>,
 }
 
-/// Writes `trajectory.csv`, `metrics.json` and the plots into `dir` (created if missing).
+/// Writes `trajectory.csv`, `metrics.json` and the plots of an in-memory table
+/// into `dir` (created if missing), through the streaming [`RunWriter`].
 pub fn write_run(
     dir: &Path,
     traj: &Trajectory,
     run: &RunDescription,
 ) -> Result<RunOutputs, ReportError> {
-    std::fs::create_dir_all(dir).map_err(|e| ReportError::Io {
-        path: dir.to_path_buf(),
-        error: e,
-    })?;
-    let csv = dir.join(TRAJECTORY_FILE);
-    traj.write_csv(&csv)?;
-    let metrics = Metrics::compute(traj, run)?;
-    let json = dir.join(METRICS_FILE);
-    metrics.write_json(&json)?;
-    let mut files = vec![csv, json];
-    files.extend(plot_all(dir, traj, &metrics)?);
-    Ok(RunOutputs { metrics, files })
+    let mut w = RunWriter::new(dir, traj.columns().to_vec(), run, true)?;
+    for row in traj.rows() {
+        w.push_row(row)?;
+    }
+    w.finish(run)
 }
 
 /// Regenerates the plots of a run directory from its `trajectory.csv` and `metrics.json`.

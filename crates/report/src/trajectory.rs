@@ -10,6 +10,44 @@ use crate::ReportError;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// Checks column names: at least one, unique, none empty or containing a
+/// comma, quote or newline (they are written unquoted in the CSV header).
+pub(crate) fn validate_columns(columns: &[String]) -> Result<(), ReportError> {
+    if columns.is_empty() {
+        return Err(ReportError::Table(
+            "a trajectory needs at least one column".into(),
+        ));
+    }
+    for (i, c) in columns.iter().enumerate() {
+        if c.is_empty() || c.contains([',', '\n', '\r', '"']) {
+            return Err(ReportError::Table(format!(
+                "column {i} has an invalid name {c:?} (empty or containing a comma, quote or newline)"
+            )));
+        }
+        if columns[..i].contains(c) {
+            return Err(ReportError::Table(format!(
+                "column name {c:?} appears twice"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Appends one CSV line (values separated by commas, then a newline) to `s`:
+/// the one formatting of a row, shared by [`Trajectory::to_csv_string`] and the
+/// streaming [`crate::stream::CsvWriter`] so both write the same bytes.
+pub(crate) fn push_csv_row(s: &mut String, row: &[f64]) {
+    for (j, v) in row.iter().enumerate() {
+        if j > 0 {
+            s.push(',');
+        }
+        // `{:?}` is the shortest representation that round-trips
+        // (and uses an exponent for very small/large magnitudes).
+        let _ = write!(s, "{v:?}");
+    }
+    s.push('\n');
+}
+
 /// Column-named table of f64 values, stored row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
@@ -25,23 +63,7 @@ impl Trajectory {
 
     /// Like [`Trajectory::new`], reserving room for `rows` rows.
     pub fn with_capacity(columns: Vec<String>, rows: usize) -> Result<Trajectory, ReportError> {
-        if columns.is_empty() {
-            return Err(ReportError::Table(
-                "a trajectory needs at least one column".into(),
-            ));
-        }
-        for (i, c) in columns.iter().enumerate() {
-            if c.is_empty() || c.contains([',', '\n', '\r', '"']) {
-                return Err(ReportError::Table(format!(
-                    "column {i} has an invalid name {c:?} (empty or containing a comma, quote or newline)"
-                )));
-            }
-            if columns[..i].contains(c) {
-                return Err(ReportError::Table(format!(
-                    "column name {c:?} appears twice"
-                )));
-            }
-        }
+        validate_columns(&columns)?;
         let n = columns.len();
         Ok(Trajectory {
             columns,
@@ -107,15 +129,7 @@ impl Trajectory {
         s.push_str(&self.columns.join(","));
         s.push('\n');
         for row in self.rows() {
-            for (j, v) in row.iter().enumerate() {
-                if j > 0 {
-                    s.push(',');
-                }
-                // `{:?}` is the shortest representation that round-trips
-                // (and uses an exponent for very small/large magnitudes).
-                let _ = write!(s, "{v:?}");
-            }
-            s.push('\n');
+            push_csv_row(&mut s, row);
         }
         s
     }
