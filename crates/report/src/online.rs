@@ -56,7 +56,11 @@ impl StayBelow {
 /// Whether `cur` is a rise over `prev` for the tolerance `tol`: the step the
 /// backward scan of [`crate::metrics::non_increasing_from`] stops at.
 fn is_rise(prev: f64, cur: f64, tol: f64) -> bool {
-    !(cur <= prev + tol)
+    // `!(cur <= prev + tol)`, spelled out: NaN on either side is a rise.
+    !matches!(
+        cur.partial_cmp(&(prev + tol)),
+        Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+    )
 }
 
 /// The smallest tolerance ≥ 0 (as f64 bits, which order non-negative floats)
