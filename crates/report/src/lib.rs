@@ -88,9 +88,25 @@ pub fn write_run(
     w.finish(run)
 }
 
-/// Regenerates the plots of a run directory from its `trajectory.csv` and `metrics.json`.
+/// Regenerates the plots of a run directory from its `trajectory.csv` and
+/// `metrics.json`; the CSV is read line by line into the plots' bounded
+/// decimation, as the rows of a run are when it is written.
 pub fn replot(dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let traj = Trajectory::read_csv(&dir.join(TRAJECTORY_FILE))?;
+    use std::io::BufRead as _;
+    let path = dir.join(TRAJECTORY_FILE);
+    let io = |error| ReportError::Io {
+        path: path.clone(),
+        error,
+    };
+    let file = std::fs::File::open(&path).map_err(io)?;
+    let lines = std::io::BufReader::new(file).lines().map(|l| l.map_err(io));
+    let origin = path.display().to_string();
+    let mut csv = trajectory::CsvLines::new(lines, &origin);
+    let mut plot = Decimator::for_plots(csv.header()?)?;
+    let mut row = Vec::new();
+    while csv.next_row(&mut row)? {
+        plot.push_row(&row)?;
+    }
     let metrics = Metrics::read_json(&dir.join(METRICS_FILE))?;
-    plot_all(dir, &traj, &metrics)
+    plot_all(dir, &plot.finish()?, &metrics)
 }
