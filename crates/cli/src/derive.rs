@@ -31,8 +31,8 @@ use hcc_config::Scenario;
 use hcc_msgs::{CommandMode, JointState, SeqEvent, SequenceChecker, Telemetry, TorqueCommand};
 use hcc_plant::closed_loop::{self, ControlLaw, HierarchicalLaw, Sampled, describe};
 use hcc_record::mcap_log::{self, Entry, META_RUN, META_SCENARIO, ReadSummary};
-use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder};
-use hcc_report::{RunDescription, Trajectory};
+use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder, RowSink};
+use hcc_report::{RunDescription, RunWriter};
 use nalgebra::DVector;
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -81,7 +81,8 @@ pub struct RowBuilder<'a> {
     dims: Vec<usize>,
     period: f64,
     recorder: Recorder,
-    pub traj: Trajectory,
+    /// Rows built so far.
+    pub rows: usize,
     shadow: HierarchicalLaw,
     pub shadow_failures: u64,
     pub shadow_tau_diff: f64,
@@ -92,18 +93,13 @@ pub struct RowBuilder<'a> {
 impl<'a> RowBuilder<'a> {
     fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
         let n = scenario.model.nq();
-        let s = &scenario.simulation;
-        let cycles = (s.duration_s * s.control_rate_hz).round() as usize;
-        let recorder = closed_loop::recorder(scenario, true)?;
         Ok(RowBuilder {
             scenario,
             n,
             dims: scenario.task_dims(),
-            period: 1.0 / s.control_rate_hz,
-            // Room for the expected rows (at most ten minutes ahead: the
-            // table grows as needed).
-            traj: recorder.trajectory((cycles + 1).min(600_001))?,
-            recorder,
+            period: 1.0 / scenario.simulation.control_rate_hz,
+            rows: 0,
+            recorder: closed_loop::recorder(scenario, true)?,
             shadow: crate::simulate_cmd::scheduled_law(scenario)?,
             shadow_failures: 0,
             shadow_tau_diff: 0.0,
@@ -150,8 +146,13 @@ impl<'a> RowBuilder<'a> {
         true
     }
 
-    /// Appends the row of one controller cycle: `tel` answered `state`.
-    fn push(&mut self, state: &StateRecord, tel: &Telemetry) -> anyhow::Result<()> {
+    /// Pushes the row of one controller cycle into `sink`: `tel` answered `state`.
+    fn push(
+        &mut self,
+        state: &StateRecord,
+        tel: &Telemetry,
+        sink: &mut dyn RowSink,
+    ) -> anyhow::Result<()> {
         self.check_shape(tel)?;
         if state.q.len() != self.n || state.qd.len() != self.n {
             bail!(
@@ -172,7 +173,8 @@ impl<'a> RowBuilder<'a> {
             output: &output,
             law: shadow_ok.then_some(&shadow as &dyn LawTerms),
         };
-        self.recorder.record(&cycle, &mut self.traj)?;
+        self.recorder.record(&cycle, sink)?;
+        self.rows += 1;
         Ok(())
     }
 }
@@ -281,9 +283,14 @@ impl Recording {
         self.pending_telemetry.push_back(t);
     }
 
-    /// Joins pending telemetry with its states and appends the rows. With
-    /// `flush`, telemetry whose state never arrived is given up.
-    fn join(&mut self, rows: &mut RowBuilder, flush: bool) -> anyhow::Result<()> {
+    /// Joins pending telemetry with its states and pushes the rows into
+    /// `sink`. With `flush`, telemetry whose state never arrived is given up.
+    fn join(
+        &mut self,
+        rows: &mut RowBuilder,
+        sink: &mut dyn RowSink,
+        flush: bool,
+    ) -> anyhow::Result<()> {
         while let Some(tel) = self.pending_telemetry.front() {
             let want = tel.state_seq;
             if self.last_joined_seq.is_some_and(|last| want <= last) {
@@ -310,7 +317,7 @@ impl Recording {
             match self.pending_states.front() {
                 Some(s) if s.seq == want => {
                     if let Some(s) = self.pending_states.pop_front() {
-                        rows.push(&s, &tel)?;
+                        rows.push(&s, &tel, sink)?;
                     }
                     self.last_joined_seq = Some(want);
                     self.last_telemetry = Some(tel);
@@ -383,9 +390,30 @@ pub fn scenario_of(path: &Path, config: Option<&Path>) -> anyhow::Result<Scenari
     Ok(scenario)
 }
 
-/// Reads the recording at `path` and derives its rows and figures for
-/// `scenario` (from [`scenario_of`]).
-pub fn derive<'a>(path: &Path, scenario: &'a Scenario) -> anyhow::Result<Derived<'a>> {
+/// The writer of the results of `scenario`'s recordings into `out` (the
+/// columns of [`derive`]'s rows; with the plots unless `no_plots`): give it to
+/// [`derive`], then finish it with the derived description.
+pub fn results_writer(
+    scenario: &Scenario,
+    out: &Path,
+    no_plots: bool,
+) -> anyhow::Result<RunWriter> {
+    Ok(RunWriter::new(
+        out,
+        closed_loop::column_names(scenario, true),
+        &describe(scenario),
+        !no_plots,
+    )?)
+}
+
+/// Reads the recording at `path` and derives its rows for `scenario` (from
+/// [`scenario_of`]), pushing each into `sink` as it is derived (memory does
+/// not grow with the recording), and the run's figures.
+pub fn derive<'a>(
+    path: &Path,
+    scenario: &'a Scenario,
+    sink: &mut dyn RowSink,
+) -> anyhow::Result<Derived<'a>> {
     let mut rows = RowBuilder::new(scenario)?;
     let mut rec = Recording::new();
     let mut metadata = BTreeMap::new();
@@ -401,9 +429,9 @@ pub fn derive<'a>(path: &Path, scenario: &'a Scenario) -> anyhow::Result<Derived
                 metadata.insert(name, map);
             }
         }
-        rec.join(&mut rows, false)
+        rec.join(&mut rows, sink, false)
     })?;
-    rec.join(&mut rows, true)?;
+    rec.join(&mut rows, sink, true)?;
     if let Some(reason) = &read.truncated {
         tracing::warn!(
             "{} is truncated ({reason}): read up to its last complete chunk",
@@ -411,7 +439,7 @@ pub fn derive<'a>(path: &Path, scenario: &'a Scenario) -> anyhow::Result<Derived
         );
     }
     let run_meta = metadata.get(META_RUN).cloned().unwrap_or_default();
-    let mut latencies_ns = rec.latencies_ns.clone();
+    let mut latencies_ns = std::mem::take(&mut rec.latencies_ns);
     latencies_ns.sort_unstable();
     let s = &scenario.simulation;
     let expected_rows = run_meta
@@ -458,7 +486,7 @@ impl Derived<'_> {
             "mode": self.mode,
             "namespace": run_meta.get("namespace"),
             "expected_rows": self.expected_rows,
-            "rows": self.rows.traj.n_rows(),
+            "rows": self.rows.rows,
             "states_received": rec.states.received,
             "commands_received": rec.commands.received,
             "telemetry_received": rec.telemetry.received,
@@ -498,7 +526,7 @@ impl Derived<'_> {
         println!(
             "  ipc ({}): {} rows of {} expected; driver missed commands {}, fallback cycles {}; controller missed states {}",
             self.mode,
-            self.rows.traj.n_rows(),
+            self.rows.rows,
             self.expected_rows
                 .map_or("-".to_string(), |e| e.to_string()),
             last_state.map_or(0, |s| s.missed_commands),

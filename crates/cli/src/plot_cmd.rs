@@ -5,11 +5,11 @@
 //! FILE.csv [--from S] [--to S]` writes the derived table only.
 
 use anyhow::{Context, bail};
-use hcc_report::Trajectory;
+use hcc_record::{RecordError, RowSink};
+use hcc_report::CsvWriter;
 use std::path::{Path, PathBuf};
 
 use crate::derive;
-use crate::simulate_cmd::write_results;
 
 #[derive(clap::Args, Debug)]
 pub struct PlotArgs {
@@ -59,20 +59,22 @@ pub fn run(args: PlotArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let scenario = derive::scenario_of(&args.path, args.config.as_deref())?;
-    let d = derive::derive(&args.path, &scenario)?;
-    if d.rows.traj.n_rows() == 0 {
-        bail!(
-            "{} holds no complete controller cycle (joint state and telemetry)",
-            args.path.display()
-        );
-    }
     let out = args.out.clone().unwrap_or_else(|| {
         args.path
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."))
     });
-    let m = write_results(&out, &d.rows.traj, &d.description, args.no_plots)?;
+    // The results are written as the rows are derived (nothing before the first).
+    let mut writer = derive::results_writer(&scenario, &out, args.no_plots)?;
+    let d = derive::derive(&args.path, &scenario, &mut writer)?;
+    if d.rows.rows == 0 {
+        bail!(
+            "{} holds no complete controller cycle (joint state and telemetry)",
+            args.path.display()
+        );
+    }
+    let m = writer.finish(&d.description)?.metrics;
     print!("{}", m.summary());
     d.print();
     if let Some(reason) = &d.read.truncated {
@@ -89,23 +91,39 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         }
     }
     let scenario = derive::scenario_of(&args.recording, args.config.as_deref())?;
-    let d = derive::derive(&args.recording, &scenario)?;
-    let traj = &d.rows.traj;
-    let from = args.from.unwrap_or(f64::NEG_INFINITY);
-    let to = args.to.unwrap_or(f64::INFINITY);
-    let mut table = Trajectory::new(traj.columns().to_vec())?;
-    for row in traj.rows().filter(|r| r[0] >= from && r[0] <= to) {
-        table.push_row(row)?;
-    }
     if let Some(dir) = args.csv.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    table.write_csv(&args.csv)?;
+    let columns = hcc_plant::closed_loop::column_names(&scenario, true);
+    let mut window = TimeWindow {
+        csv: CsvWriter::create(&args.csv, &columns)?,
+        from: args.from.unwrap_or(f64::NEG_INFINITY),
+        to: args.to.unwrap_or(f64::INFINITY),
+    };
+    derive::derive(&args.recording, &scenario, &mut window)?;
+    let rows = window.csv.rows();
+    window.csv.finish()?;
     println!(
-        "{} rows x {} columns into {}",
-        table.n_rows(),
-        table.columns().len(),
+        "{rows} rows x {} columns into {}",
+        columns.len(),
         args.csv.display()
     );
     Ok(())
+}
+
+/// The rows of `hcc export` whose time `t` (the first column) lies in
+/// [from, to], written to the CSV as they are derived.
+struct TimeWindow {
+    csv: CsvWriter,
+    from: f64,
+    to: f64,
+}
+
+impl RowSink for TimeWindow {
+    fn push_row(&mut self, row: &[f64]) -> Result<(), RecordError> {
+        if row[0] >= self.from && row[0] <= self.to {
+            self.csv.push_row(row)?;
+        }
+        Ok(())
+    }
 }

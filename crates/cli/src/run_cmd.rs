@@ -50,7 +50,6 @@ use crate::daemons::{
     wait_until_controller_listens,
 };
 use crate::run_schedule::Scheduler;
-use crate::simulate_cmd::write_results;
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
 pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
@@ -520,17 +519,18 @@ fn write_derived(
     no_plots: bool,
     schedule: Option<serde_json::Value>,
 ) -> anyhow::Result<bool> {
-    let mut d = crate::derive::derive(recording, scenario)?;
+    let mut writer = crate::derive::results_writer(scenario, out, no_plots)?;
+    let mut d = crate::derive::derive(recording, scenario, &mut writer)?;
     if let Some(report) = schedule
         && let Some(ipc) = d.description.settings.get_mut("ipc")
     {
         ipc["scheduled_setpoints"] = report;
     }
-    if d.rows.traj.n_rows() == 0 {
+    if d.rows.rows == 0 {
         d.print();
         return Ok(false);
     }
-    let m = write_results(out, &d.rows.traj, &d.description, no_plots)?;
+    let m = writer.finish(&d.description)?.metrics;
     print!("{}", m.summary());
     d.print();
     Ok(true)

@@ -21,7 +21,7 @@ use hcc_msgs::{
 use hcc_plant::SimError;
 use hcc_plant::closed_loop::{self, Commands, ControlLaw, HierarchicalLaw};
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
-use hcc_report::{Metrics, RunDescription, Trajectory};
+use hcc_report::{Metrics, RunDescription, RunWriter, Trajectory};
 use nalgebra::DVector;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -83,20 +83,17 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
 
 /// Writes trajectory.csv, metrics.json and (unless `no_plots`) the plots into
 /// `out` (created if missing); the metrics.
-pub fn write_results(
+fn write_results(
     out: &Path,
     traj: &Trajectory,
     description: &RunDescription,
     no_plots: bool,
 ) -> anyhow::Result<Metrics> {
-    if no_plots {
-        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-        traj.write_csv(&out.join(hcc_report::TRAJECTORY_FILE))?;
-        let m = Metrics::compute(traj, description)?;
-        m.write_json(&out.join(hcc_report::METRICS_FILE))?;
-        return Ok(m);
+    let mut w = RunWriter::new(out, traj.columns().to_vec(), description, !no_plots)?;
+    for row in traj.rows() {
+        w.push_row(row)?;
     }
-    Ok(hcc_report::write_run(out, traj, description)?.metrics)
+    Ok(w.finish(description)?.metrics)
 }
 
 /// The scenario's `[[setpoint]]` schedule as [`Commands`] of the in-process law.

@@ -26,7 +26,8 @@
 //!
 //! The recorder is streaming: [`Recorder::record`] takes one cycle and pushes
 //! one row into a [`RowSink`]; the in-memory [`hcc_report::Trajectory`] is one
-//! such sink.
+//! such sink, the streaming [`hcc_report::RunWriter`] (the results of a run
+//! written as its rows come) and [`hcc_report::CsvWriter`] are others.
 //!
 //! ```no_run
 //! # use hcc_record::*;

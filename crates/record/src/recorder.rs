@@ -4,7 +4,7 @@
 use crate::{RecordError, column_names};
 use hcc_config::Scenario;
 use hcc_model::{Data, Model};
-use hcc_report::Trajectory;
+use hcc_report::{CsvWriter, RunWriter, Trajectory};
 use nalgebra::{DMatrix, DVector};
 
 /// What the controller computed in one cycle, as the recorder reads it (from
@@ -61,6 +61,20 @@ pub trait RowSink {
 impl RowSink for Trajectory {
     fn push_row(&mut self, row: &[f64]) -> Result<(), RecordError> {
         Ok(Trajectory::push_row(self, row)?)
+    }
+}
+
+/// The results of a run written as the rows come (CSV, metrics, plots).
+impl RowSink for RunWriter {
+    fn push_row(&mut self, row: &[f64]) -> Result<(), RecordError> {
+        Ok(RunWriter::push_row(self, row)?)
+    }
+}
+
+/// A CSV table written as the rows come.
+impl RowSink for CsvWriter {
+    fn push_row(&mut self, row: &[f64]) -> Result<(), RecordError> {
+        Ok(CsvWriter::push_row(self, row)?)
     }
 }
 

@@ -3,8 +3,11 @@
 //! spirit of Figs. 3–7 of Dietrich, Ott & Albu-Schäffer (IROS 2013).
 //!
 //! The crate knows nothing about how a run was produced (in-process simulation
-//! or the daemons): its inputs are a [`Trajectory`] with the columns described
-//! in [`columns`] and a [`RunDescription`].
+//! or the daemons): its inputs are rows with the columns described in
+//! [`columns`] and a [`RunDescription`]. The rows are taken one at a time
+//! ([`RunWriter`]: the CSV streamed, the metrics accumulated online, the plots
+//! from a bounded decimation), so memory does not grow with the run; an
+//! in-memory [`Trajectory`] goes through the same writer ([`write_run`]).
 //!
 //! ```no_run
 //! # use hcc_report::*;
@@ -15,14 +18,20 @@
 //! ```
 
 pub mod columns;
+pub mod decimate;
 pub mod metrics;
+mod online;
 pub mod percentiles;
 pub mod plots;
+pub mod stream;
 pub mod trajectory;
 
+pub use decimate::{Decimator, PLOT_POINTS};
 pub use metrics::{ErrorUnit, LevelDescription, LevelMetrics, Metrics, RunDescription};
+pub use online::MetricsAccumulator;
 pub use percentiles::{PercentileCurve, plot_percentiles};
 pub use plots::{TimePanel, plot_all, plot_time_series};
+pub use stream::{CsvWriter, RunWriter};
 pub use trajectory::Trajectory;
 
 use std::path::{Path, PathBuf};
@@ -65,29 +74,39 @@ pub struct RunOutputs {
     pub files: Vec<PathBuf>,
 }
 
-/// Writes `trajectory.csv`, `metrics.json` and the plots into `dir` (created if missing).
+/// Writes `trajectory.csv`, `metrics.json` and the plots of an in-memory table
+/// into `dir` (created if missing), through the streaming [`RunWriter`].
 pub fn write_run(
     dir: &Path,
     traj: &Trajectory,
     run: &RunDescription,
 ) -> Result<RunOutputs, ReportError> {
-    std::fs::create_dir_all(dir).map_err(|e| ReportError::Io {
-        path: dir.to_path_buf(),
-        error: e,
-    })?;
-    let csv = dir.join(TRAJECTORY_FILE);
-    traj.write_csv(&csv)?;
-    let metrics = Metrics::compute(traj, run)?;
-    let json = dir.join(METRICS_FILE);
-    metrics.write_json(&json)?;
-    let mut files = vec![csv, json];
-    files.extend(plot_all(dir, traj, &metrics)?);
-    Ok(RunOutputs { metrics, files })
+    let mut w = RunWriter::new(dir, traj.columns().to_vec(), run, true)?;
+    for row in traj.rows() {
+        w.push_row(row)?;
+    }
+    w.finish(run)
 }
 
-/// Regenerates the plots of a run directory from its `trajectory.csv` and `metrics.json`.
+/// Regenerates the plots of a run directory from its `trajectory.csv` and
+/// `metrics.json`; the CSV is read line by line into the plots' bounded
+/// decimation, as the rows of a run are when it is written.
 pub fn replot(dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let traj = Trajectory::read_csv(&dir.join(TRAJECTORY_FILE))?;
+    use std::io::BufRead as _;
+    let path = dir.join(TRAJECTORY_FILE);
+    let io = |error| ReportError::Io {
+        path: path.clone(),
+        error,
+    };
+    let file = std::fs::File::open(&path).map_err(io)?;
+    let lines = std::io::BufReader::new(file).lines().map(|l| l.map_err(io));
+    let origin = path.display().to_string();
+    let mut csv = trajectory::CsvLines::new(lines, &origin);
+    let mut plot = Decimator::for_plots(csv.header()?)?;
+    let mut row = Vec::new();
+    while csv.next_row(&mut row)? {
+        plot.push_row(&row)?;
+    }
     let metrics = Metrics::read_json(&dir.join(METRICS_FILE))?;
-    plot_all(dir, &traj, &metrics)
+    plot_all(dir, &plot.finish()?, &metrics)
 }

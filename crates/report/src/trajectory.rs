@@ -10,6 +10,130 @@ use crate::ReportError;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// Checks column names: at least one, unique, none empty or containing a
+/// comma, quote or newline (they are written unquoted in the CSV header).
+pub(crate) fn validate_columns(columns: &[String]) -> Result<(), ReportError> {
+    if columns.is_empty() {
+        return Err(ReportError::Table(
+            "a trajectory needs at least one column".into(),
+        ));
+    }
+    for (i, c) in columns.iter().enumerate() {
+        if c.is_empty() || c.contains([',', '\n', '\r', '"']) {
+            return Err(ReportError::Table(format!(
+                "column {i} has an invalid name {c:?} (empty or containing a comma, quote or newline)"
+            )));
+        }
+        if columns[..i].contains(c) {
+            return Err(ReportError::Table(format!(
+                "column name {c:?} appears twice"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Appends one CSV line (values separated by commas, then a newline) to `s`:
+/// the one formatting of a row, shared by [`Trajectory::to_csv_string`] and the
+/// streaming [`crate::stream::CsvWriter`] so both write the same bytes.
+pub(crate) fn push_csv_row(s: &mut String, row: &[f64]) {
+    for (j, v) in row.iter().enumerate() {
+        if j > 0 {
+            s.push(',');
+        }
+        // `{:?}` is the shortest representation that round-trips
+        // (and uses an exponent for very small/large magnitudes).
+        let _ = write!(s, "{v:?}");
+    }
+    s.push('\n');
+}
+
+/// A CSV table as written by [`Trajectory::to_csv_string`], parsed one line at
+/// a time (so a long `trajectory.csv` can be read without holding it whole).
+pub struct CsvLines<'a, S, I> {
+    lines: std::iter::Enumerate<I>,
+    origin: &'a str,
+    columns: Vec<String>,
+    _line: std::marker::PhantomData<S>,
+}
+
+impl<'a, S: AsRef<str>, I: Iterator<Item = Result<S, ReportError>>> CsvLines<'a, S, I> {
+    /// A parser of `lines`; `origin` names the source in error messages.
+    pub fn new(lines: I, origin: &'a str) -> Self {
+        CsvLines {
+            lines: lines.enumerate(),
+            origin,
+            columns: Vec::new(),
+            _line: std::marker::PhantomData,
+        }
+    }
+
+    fn error(&self, line: usize, message: String) -> ReportError {
+        ReportError::Parse {
+            origin: self.origin.to_string(),
+            line,
+            message,
+        }
+    }
+
+    /// The column names of the header (the first non-blank line), validated.
+    pub fn header(&mut self) -> Result<Vec<String>, ReportError> {
+        let header = loop {
+            match self.lines.next() {
+                Some((_, l)) => {
+                    let l = l?;
+                    if !l.as_ref().trim().is_empty() {
+                        break l;
+                    }
+                }
+                None => return Err(self.error(1, "empty file, expected a header line".into())),
+            }
+        };
+        let columns: Vec<String> = header
+            .as_ref()
+            .split(',')
+            .map(|c| c.trim().to_string())
+            .collect();
+        validate_columns(&columns).map_err(|e| self.error(1, e.to_string()))?;
+        self.columns = columns.clone();
+        Ok(columns)
+    }
+
+    /// Parses the next row into `row`; `false` at the end of the table.
+    pub fn next_row(&mut self, row: &mut Vec<f64>) -> Result<bool, ReportError> {
+        let (i, line) = loop {
+            match self.lines.next() {
+                Some((i, l)) => {
+                    let l = l?;
+                    if !l.as_ref().trim().is_empty() {
+                        break (i, l);
+                    }
+                }
+                None => return Ok(false),
+            }
+        };
+        row.clear();
+        for (j, field) in line.as_ref().split(',').enumerate() {
+            let v: f64 = field.trim().parse().map_err(|_| {
+                let column = self.columns.get(j).map(String::as_str).unwrap_or("<extra>");
+                self.error(
+                    i + 1,
+                    format!("column {column:?}: {field:?} is not a number"),
+                )
+            })?;
+            row.push(v);
+        }
+        let n = self.columns.len();
+        if row.len() != n {
+            return Err(self.error(
+                i + 1,
+                format!("{} values, the header has {n} columns", row.len()),
+            ));
+        }
+        Ok(true)
+    }
+}
+
 /// Column-named table of f64 values, stored row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
@@ -25,23 +149,7 @@ impl Trajectory {
 
     /// Like [`Trajectory::new`], reserving room for `rows` rows.
     pub fn with_capacity(columns: Vec<String>, rows: usize) -> Result<Trajectory, ReportError> {
-        if columns.is_empty() {
-            return Err(ReportError::Table(
-                "a trajectory needs at least one column".into(),
-            ));
-        }
-        for (i, c) in columns.iter().enumerate() {
-            if c.is_empty() || c.contains([',', '\n', '\r', '"']) {
-                return Err(ReportError::Table(format!(
-                    "column {i} has an invalid name {c:?} (empty or containing a comma, quote or newline)"
-                )));
-            }
-            if columns[..i].contains(c) {
-                return Err(ReportError::Table(format!(
-                    "column name {c:?} appears twice"
-                )));
-            }
-        }
+        validate_columns(&columns)?;
         let n = columns.len();
         Ok(Trajectory {
             columns,
@@ -107,15 +215,7 @@ impl Trajectory {
         s.push_str(&self.columns.join(","));
         s.push('\n');
         for row in self.rows() {
-            for (j, v) in row.iter().enumerate() {
-                if j > 0 {
-                    s.push(',');
-                }
-                // `{:?}` is the shortest representation that round-trips
-                // (and uses an exponent for very small/large magnitudes).
-                let _ = write!(s, "{v:?}");
-            }
-            s.push('\n');
+            push_csv_row(&mut s, row);
         }
         s
     }
@@ -131,52 +231,10 @@ impl Trajectory {
     /// Parses CSV text as written by [`Trajectory::to_csv_string`]. `origin` names the
     /// source in error messages.
     pub fn from_csv_str(text: &str, origin: &str) -> Result<Trajectory, ReportError> {
-        let mut lines = text.lines().enumerate();
-        let header = loop {
-            match lines.next() {
-                Some((_, l)) if l.trim().is_empty() => continue,
-                Some((_, l)) => break l,
-                None => {
-                    return Err(ReportError::Parse {
-                        origin: origin.to_string(),
-                        line: 1,
-                        message: "empty file, expected a header line".into(),
-                    });
-                }
-            }
-        };
-        let columns: Vec<String> = header.split(',').map(|c| c.trim().to_string()).collect();
-        let mut t = Trajectory::new(columns).map_err(|e| ReportError::Parse {
-            origin: origin.to_string(),
-            line: 1,
-            message: e.to_string(),
-        })?;
-        let n = t.columns.len();
-        let mut row = Vec::with_capacity(n);
-        for (i, line) in lines {
-            if line.trim().is_empty() {
-                continue;
-            }
-            row.clear();
-            for (j, field) in line.split(',').enumerate() {
-                let v: f64 = field.trim().parse().map_err(|_| ReportError::Parse {
-                    origin: origin.to_string(),
-                    line: i + 1,
-                    message: format!(
-                        "column {:?}: {:?} is not a number",
-                        t.columns.get(j).map(String::as_str).unwrap_or("<extra>"),
-                        field
-                    ),
-                })?;
-                row.push(v);
-            }
-            if row.len() != n {
-                return Err(ReportError::Parse {
-                    origin: origin.to_string(),
-                    line: i + 1,
-                    message: format!("{} values, the header has {n} columns", row.len()),
-                });
-            }
+        let mut csv = CsvLines::new(text.lines().map(Ok), origin);
+        let mut t = Trajectory::new(csv.header()?)?;
+        let mut row = Vec::with_capacity(t.columns.len());
+        while csv.next_row(&mut row)? {
             t.data.extend_from_slice(&row);
         }
         Ok(t)
