@@ -221,10 +221,20 @@ pub fn run(args: Args) -> Result<()> {
     control_loop(&mut cycle, &ipc.ports, &baseline);
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
-    log_stop(&status, baseline.load(Ordering::Relaxed));
+    let baseline = baseline.load(Ordering::Relaxed);
+    log_stop(&status, baseline);
     if let Some(path) = &args.stats {
         let rt = report.obtained(&rt_settings);
-        write_stats(path, &cycle, setup.settings.wait, rt, started.elapsed())?;
+        let allocs =
+            (baseline != u64::MAX).then(|| torque_path_allocs(&status).saturating_sub(baseline));
+        write_stats(
+            path,
+            &cycle,
+            setup.settings.wait,
+            rt,
+            started.elapsed(),
+            allocs,
+        )?;
     }
     drop(ipc);
     Ok(())
@@ -324,6 +334,7 @@ fn write_stats(
     wait: WaitStrategy,
     rt: hcc_timing::RtObtained,
     run: Duration,
+    torque_path_allocs: Option<u64>,
 ) -> Result<()> {
     let t = cycle.timings();
     let mut stats = hcc_timing::DaemonTimings {
@@ -343,6 +354,11 @@ fn write_stats(
         "notifications_skipped".into(),
         cycle.notifications_skipped(),
     );
+    if let Some(allocs) = torque_path_allocs {
+        stats
+            .counters
+            .insert("torque_path_system_allocs_after_warm_up".into(), allocs);
+    }
     let upkeep = cycle.upkeep();
     for (name, value) in [
         ("connection_updates", upkeep.updates),
