@@ -63,6 +63,23 @@ fn positive(what: &str, v: f64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs_f64(v))
 }
 
+/// The recording's metadata: the recorder, the namespace, the start time,
+/// the scenario when known (`--config`) and the machine.
+fn run_info(namespace: &str, scenario: Option<&Scenario>, clock: (u64, u64)) -> RunInfo {
+    let mut run = capture::run_metadata("hcc record", namespace, clock);
+    if let Some(s) = scenario {
+        run.insert(
+            "control_rate_hz".into(),
+            s.simulation.control_rate_hz.to_string(),
+        );
+    }
+    RunInfo {
+        run,
+        scenario: scenario.map(RunInfo::describe_scenario).unwrap_or_default(),
+        machine: capture::machine_metadata(),
+    }
+}
+
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let names = ServiceNames::new(&args.namespace).context("--namespace")?;
     let duration = args
@@ -88,22 +105,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
             .collect();
         PathBuf::from(format!("hcc-{}-{stamp}.mcap", args.namespace))
     });
-
-    let mut run = capture::run_metadata("hcc record", &args.namespace, clock);
-    if let Some(s) = &scenario {
-        run.insert(
-            "control_rate_hz".into(),
-            s.simulation.control_rate_hz.to_string(),
-        );
-    }
-    let info = RunInfo {
-        run,
-        scenario: scenario
-            .as_ref()
-            .map(RunInfo::describe_scenario)
-            .unwrap_or_default(),
-        machine: capture::machine_metadata(),
-    };
+    let info = run_info(&args.namespace, scenario.as_ref(), clock);
     let node = format!("hcc-record-{}", std::process::id());
     let priority = (args.receiver_priority > 0).then_some(args.receiver_priority);
     let receiver = Receiver::start(&node, file_prefix, names, priority)?;
