@@ -825,6 +825,8 @@ impl Measured<'_> {
                 "poll_commands": args.poll_commands,
                 "telemetry_every": args.telemetry_every,
                 "notifications_skipped": pair.controller.counter("notifications_skipped"),
+                "controller_torque_path_system_allocs": pair.controller.counter("torque_path_system_allocs_after_warm_up"),
+                "controller_connection_updates": pair.controller.counter("connection_updates"),
                 "cores": {"sim": args.sim_core, "controller": args.controller_core},
                 "sched_fifo_requested": plan.fifo,
                 "memory_locked_launcher": self.env.memory_locked,
@@ -996,6 +998,14 @@ impl Measured<'_> {
             "  steal time: floor {}, pair {}",
             steal_text(&self.floor_steal),
             steal_text(&self.pair_steal)
+        );
+        let ctl = &self.pair.controller;
+        println!(
+            "  controller: system allocations on the torque path after warm-up {}; peer connections made while waiting {} ({} system allocations, longest {:.1} µs)",
+            ctl.counter("torque_path_system_allocs_after_warm_up"),
+            ctl.counter("connection_updates"),
+            ctl.counter("connection_update_system_allocs"),
+            ctl.counter("connection_update_max_ns") as f64 / 1e3,
         );
         for (what, value, limit) in &self.targets {
             println!(
