@@ -2,8 +2,9 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
-    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_leading_cols,
+    gemm_nt, gemm_tn, gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar,
+    procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -369,13 +370,12 @@ pub struct Controller {
     jtop_dot: DMatrix<f64>,
     /// Jᵀ of the levels above the lowest (n × K).
     jtop_t: DMatrix<f64>,
-    /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K), Y = J M⁻¹ and
-    /// Ẏ (K × n), the Gram matrix W = J M⁻¹ Jᵀ (K × K) and the columns of Ẇ the middle
-    /// levels read (K × max k_i, k_i = Σ_{j<i} m_j: Ġ and Ḣ of eq. 8 lie in them).
+    /// (J M⁻¹)ᵀ = M⁻¹ Jᵀ and its derivative M⁻¹ (J̇ᵀ − Ṁ M⁻¹ Jᵀ) (n × K; the rows of
+    /// Y = J M⁻¹ and Ẏ a level needs are transposed straight out of their columns), the
+    /// Gram matrix W = J M⁻¹ Jᵀ (K × K) and the columns of Ẇ the middle levels read
+    /// (K × max k_i, k_i = Σ_{j<i} m_j: Ġ and Ḣ of eq. 8 lie in them).
     yt: DMatrix<f64>,
     yt_dot: DMatrix<f64>,
-    y: DMatrix<f64>,
-    y_dot: DMatrix<f64>,
     w: DMatrix<f64>,
     w_dot: DMatrix<f64>,
     q: DVector<f64>,
@@ -385,8 +385,6 @@ pub struct Controller {
     mdot: DMatrix<f64>,
     /// Frame Jacobians of the current cycle (shared by the tasks on one frame).
     frames: FrameWork,
-    /// M⁻¹ J_1ᵀ (n × m_1).
-    minv_j1t: DMatrix<f64>,
     /// Ẏ and Ẇ are needed (a level between the first and the lowest exists).
     middle: bool,
     tmp_n: DVector<f64>,
@@ -452,8 +450,6 @@ impl Controller {
             jtop_t: DMatrix::zeros(n, ktop),
             yt: DMatrix::zeros(n, ktop),
             yt_dot: DMatrix::zeros(n, kd),
-            y: DMatrix::zeros(ktop, n),
-            y_dot: DMatrix::zeros(kd, n),
             w: DMatrix::zeros(ktop, ktop),
             w_dot: DMatrix::zeros(kd, kmid),
             middle,
@@ -462,7 +458,6 @@ impl Controller {
             chol: DMatrix::zeros(n, n),
             mdot: DMatrix::zeros(n, n),
             frames: FrameWork::new(n),
-            minv_j1t: DMatrix::zeros(n, dims[0]),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
             tmp_n3: DVector::zeros(n),
@@ -852,7 +847,6 @@ impl Controller {
         self.yt.copy_from(&self.jtop_t);
         hcc_model::linalg::cholesky_solve_slice(self.chol.as_slice(), n, self.yt.as_mut_slice())
             .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
-        transpose_into(&mut self.y, &self.yt);
         gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
         if self.middle {
             transpose_into(&mut self.yt_dot, &self.jtop_dot);
@@ -863,7 +857,6 @@ impl Controller {
                 self.yt_dot.as_mut_slice(),
             )
             .map_err(|_| ControlError::Numerical("d/dt M⁻¹ Jᵀ"))?;
-            transpose_into(&mut self.y_dot, &self.yt_dot);
             gemm_leading(&mut self.w_dot, 1.0, &self.jtop_dot, &self.yt, 0.0);
             gemm_leading(&mut self.w_dot, 1.0, &self.jtop, &self.yt_dot, 1.0);
         }
@@ -872,21 +865,21 @@ impl Controller {
 
     /// Level 1: Λ_1 = (J_1 M⁻¹ J_1ᵀ)⁻¹ (eq. 18), J̄_1 = J_1.
     fn first_level(&mut self) {
-        let (n, eps) = (self.n, self.spec.singular_ratio);
+        let eps = self.spec.singular_ratio;
         let l = &mut self.levels[0];
         copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
-        copy_block(&mut self.minv_j1t, 0, 0, &self.yt, 0, 0, n, l.m);
         let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
         self.out.conditioning[0] = c.ratio;
         self.out.singular[0] = c.damping > 0.0;
         l.jbar.copy_from(&l.j);
-        // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13).
-        gemm(&mut l.jbar_inv, 1.0, &self.minv_j1t, &l.lambda, 0.0);
+        // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13); M⁻¹ J_1ᵀ is the first m_1
+        // columns of M⁻¹ Jᵀ.
+        gemm_leading_cols(&mut l.jbar_inv, 1.0, &self.yt, &l.lambda, 0.0);
     }
 
     /// Null-space level i ≥ 2 (eqs. 5–13, 16–18).
     fn null_space_level(&mut self, i: usize) -> Result<(), ControlError> {
-        let (n, r, eps) = (self.n, self.levels.len(), self.spec.singular_ratio);
+        let (r, eps) = (self.levels.len(), self.spec.singular_ratio);
         let lowest = i == r - 1;
         if lowest {
             self.null_space()?;
@@ -914,10 +907,11 @@ impl Controller {
             copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
             copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
             copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
-            copy_block(&mut p.y_aug, 0, 0, &self.y, 0, 0, k, n);
-            copy_block(&mut p.y_aug_dot, 0, 0, &self.y_dot, 0, 0, k, n);
-            copy_block(&mut l.z, 0, 0, &self.y, k, 0, m, n);
-            copy_block(&mut l.zdot, 0, 0, &self.y_dot, k, 0, m, n);
+            // Y_aug, Ẏ_aug, Y_i and Ẏ_i: rows 0..k and k..k + m of Y and Ẏ.
+            transpose_cols_into(&mut p.y_aug, &self.yt, 0);
+            transpose_cols_into(&mut p.y_aug_dot, &self.yt_dot, 0);
+            transpose_cols_into(&mut l.z, &self.yt, k);
+            transpose_cols_into(&mut l.zdot, &self.yt_dot, k);
             p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
             gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
             gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
@@ -1252,15 +1246,26 @@ pub struct Diagnostics {
 
 /// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
 fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
-    let (r, c) = a.shape();
-    assert_eq!(out.shape(), (c, r));
-    if r == 0 || c == 0 {
+    assert_eq!(out.nrows(), a.ncols());
+    transpose_cols_into(out, a, 0);
+}
+
+/// `out = a[.., c0..c0 + p]ᵀ` with p = the rows of `out`: the transpose of a block of
+/// columns (row i of `a` from column c0 on becomes column i of `out`).
+fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
+    let (r, p) = (a.nrows(), out.nrows());
+    assert_eq!(out.ncols(), r);
+    assert!(c0 + p <= a.ncols());
+    if r == 0 || p == 0 {
         return;
     }
-    let a = a.as_slice();
-    for (i, col) in out.as_mut_slice().chunks_exact_mut(c).enumerate() {
-        for (o, x) in col.iter_mut().zip(a[i..].iter().step_by(r)) {
-            *o = *x;
+    // Column c0 + t of `a` (contiguous) becomes row t of `out` (one element per
+    // column of `out`).
+    let a = &a.as_slice()[c0 * r..(c0 + p) * r];
+    let out = out.as_mut_slice();
+    for (t, src) in a.chunks_exact(r).enumerate() {
+        for (col, &x) in out.chunks_exact_mut(p).zip(src) {
+            col[t] = x;
         }
     }
 }

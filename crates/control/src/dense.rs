@@ -168,6 +168,34 @@ pub fn gemm_leading(
     gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
 }
 
+/// `c = alpha * a[.., ..k] * b + beta * c` with k = the rows of `b`: [`gemm`] with the
+/// leading columns of `a` (a prefix of its column-major storage, so nothing is copied).
+pub fn gemm_leading_cols(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+) {
+    let (m, k, n) = (c.nrows(), b.nrows(), c.ncols());
+    assert_eq!(a.nrows(), m);
+    assert!(k <= a.ncols());
+    assert_eq!(b.ncols(), n);
+    let b = Strided {
+        data: b.as_slice(),
+        ls: 1,
+        js: k,
+    };
+    gemm_cols(
+        c.as_mut_slice(),
+        alpha,
+        &a.as_slice()[..m * k],
+        (m, k, n),
+        b,
+        beta,
+    );
+}
+
 /// `c = alpha * a * bᵀ + beta * c`.
 pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
