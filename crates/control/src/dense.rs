@@ -496,12 +496,30 @@ impl SpdWork {
 /// through its Cholesky factor `L` (left in `factor`): `A⁻¹ = L⁻ᵀ L⁻¹`, with `L⁻¹`
 /// formed in `out` and overwritten by the product column by column, exactly
 /// symmetric. False (with `out` undefined) when a pivot is not positive and finite.
+/// The sizes of task spaces (up to six) run in a build for their size, fully unrolled.
 pub fn spd_inverse(a: &DMatrix<f64>, factor: &mut DMatrix<f64>, out: &mut DMatrix<f64>) -> bool {
     let n = a.nrows();
     assert_eq!(a.shape(), (n, n));
     assert_eq!(factor.shape(), (n, n));
     assert_eq!(out.shape(), (n, n));
     let (a, l, x) = (a.as_slice(), factor.as_mut_slice(), out.as_mut_slice());
+    match n {
+        1 => spd_inverse_n(a, l, x, 1),
+        2 => spd_inverse_n(a, l, x, 2),
+        3 => spd_inverse_n(a, l, x, 3),
+        4 => spd_inverse_n(a, l, x, 4),
+        5 => spd_inverse_n(a, l, x, 5),
+        6 => spd_inverse_n(a, l, x, 6),
+        _ => spd_inverse_n(a, l, x, n),
+    }
+}
+
+/// The body of [`spd_inverse`] on n × n column-major slices (a constant n where it is
+/// inlined with one, so the loops unroll and the index checks fold away; the same
+/// operations in the same order either way).
+#[inline(always)]
+fn spd_inverse_n(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool {
+    let (a, l, x) = (&a[..n * n], &mut l[..n * n], &mut x[..n * n]);
     // A = L Lᵀ (column j from the columns before it).
     for j in 0..n {
         let mut d = a[j * n + j];

@@ -241,6 +241,25 @@ pub fn cholesky_solve_slice(l: &[f64], n: usize, b: &mut [f64]) -> Result<(), Li
         return Ok(());
     }
     check("cholesky_solve_slice (rhs rows)", 0, b.len() % n)?;
+    // Robot sizes run in a build for their size (loops unrolled, index checks folded).
+    match n {
+        1 => solve_n(l, b, 1),
+        2 => solve_n(l, b, 2),
+        3 => solve_n(l, b, 3),
+        4 => solve_n(l, b, 4),
+        5 => solve_n(l, b, 5),
+        6 => solve_n(l, b, 6),
+        7 => solve_n(l, b, 7),
+        _ => solve_n(l, b, n),
+    }
+    Ok(())
+}
+
+/// The substitutions of [`cholesky_solve_slice`] (sizes checked there; a constant n
+/// where it is inlined with one, the same operations in the same order either way).
+#[inline(always)]
+fn solve_n(l: &[f64], b: &mut [f64], n: usize) {
+    let l = &l[..n * n];
     // L y = b
     for (k, lk) in l.chunks_exact(n).enumerate() {
         for x in b.chunks_exact_mut(n) {
@@ -261,7 +280,6 @@ pub fn cholesky_solve_slice(l: &[f64], n: usize, b: &mut [f64]) -> Result<(), Li
             x[i] = s / li[i];
         }
     }
-    Ok(())
 }
 
 #[cfg(test)]
