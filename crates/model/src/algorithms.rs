@@ -482,12 +482,22 @@ fn coriolis_pass(model: &Model, data: &mut Data) {
         sc.bcts[i] = join(Vector3::zeros(), f_c.cross(&sl) + mul3tv(&br_c, &sa));
         sc.w[i] = sc.ic[i].mul(&sc.sdot[i]) + join(-f_c.cross(&sa), mul3v(&br_c, &sa));
     }
-    for j in 0..n {
-        for k in 0..n {
-            data.c[(k, j)] = if k >= j {
-                dot6(&sc.ics[k], &sc.sdot[j]) + dot6(&sc.bcts[k], &sc.s[j])
+    // Column j of C (contiguous) from the per-joint vectors, sliced to n once.
+    assert_eq!(data.c.shape(), (n, n));
+    let (s, sdot, ics, bcts, w) = (
+        &sc.s[..n],
+        &sc.sdot[..n],
+        &sc.ics[..n],
+        &sc.bcts[..n],
+        &sc.w[..n],
+    );
+    for (j, col) in data.c.as_mut_slice().chunks_exact_mut(n).enumerate() {
+        let (col, sj, sdj, wj) = (&mut col[..n], &s[j], &sdot[j], &w[j]);
+        for (k, ck) in col.iter_mut().enumerate() {
+            *ck = if k >= j {
+                dot6(&ics[k], sdj) + dot6(&bcts[k], sj)
             } else {
-                dot6(&sc.s[k], &sc.w[j])
+                dot6(&s[k], wj)
             };
         }
     }
