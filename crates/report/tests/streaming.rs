@@ -7,16 +7,10 @@ use hcc_report::{
     Trajectory, columns,
 };
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
-fn out_dir(name: &str) -> PathBuf {
-    let base = option_env!("CARGO_TARGET_TMPDIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(std::env::temp_dir);
-    let d = base.join(format!("hcc-report-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
+mod common;
+
+use common::out_dir;
 
 /// Two joints; a 3-D level of mixed units, a 1-D joint level; energies that
 /// rise at a few times (a push, a setpoint change) and a NaN in the second.

@@ -4,16 +4,10 @@ use hcc_report::{
     ErrorUnit, LevelDescription, Metrics, RunDescription, Trajectory, columns, replot, write_run,
 };
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
-fn out_dir(name: &str) -> PathBuf {
-    let base = option_env!("CARGO_TARGET_TMPDIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(std::env::temp_dir);
-    let d = base.join(format!("hcc-report-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
+mod common;
+
+use common::out_dir;
 
 fn synthetic() -> (Trajectory, RunDescription) {
     let n = 2;
