@@ -2,9 +2,8 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_leading_cols,
-    gemm_nt, gemm_tn, gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar,
-    procrustes_align,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
+    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -874,7 +873,7 @@ impl Controller {
         l.jbar.copy_from(&l.j);
         // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13); M⁻¹ J_1ᵀ is the first m_1
         // columns of M⁻¹ Jᵀ.
-        gemm_leading_cols(&mut l.jbar_inv, 1.0, &self.yt, &l.lambda, 0.0);
+        gemm_leading(&mut l.jbar_inv, 1.0, &self.yt, &l.lambda, 0.0);
     }
 
     /// Null-space level i ≥ 2 (eqs. 5–13, 16–18).

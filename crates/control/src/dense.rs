@@ -144,33 +144,15 @@ fn rows<const W: usize>(
 /// `c = alpha * a * b + beta * c`.
 pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     assert_eq!(b.ncols(), c.ncols());
+    assert_eq!(a.ncols(), b.nrows());
     gemm_leading(c, alpha, a, b, beta);
 }
 
-/// `c = alpha * a * b[.., ..p] + beta * c` with p = the columns of `c`: [`gemm`] with
-/// the leading columns of `b` (a product of which only the first columns are needed).
+/// `c = alpha * a[.., ..k] * b[.., ..p] + beta * c` with k = the rows of `b` and p =
+/// the columns of `c`: [`gemm`] on the leading columns of `a` and of `b` (prefixes of
+/// their column-major storage, so nothing is copied) — a product of which only the
+/// first columns are needed, or with the first block of a stacked matrix.
 pub fn gemm_leading(
-    c: &mut DMatrix<f64>,
-    alpha: f64,
-    a: &DMatrix<f64>,
-    b: &DMatrix<f64>,
-    beta: f64,
-) {
-    let (m, k, n) = (a.nrows(), a.ncols(), c.ncols());
-    assert_eq!(b.nrows(), k);
-    assert!(n <= b.ncols());
-    assert_eq!(c.nrows(), m);
-    let b = Strided {
-        data: b.as_slice(),
-        ls: 1,
-        js: k,
-    };
-    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
-}
-
-/// `c = alpha * a[.., ..k] * b + beta * c` with k = the rows of `b`: [`gemm`] with the
-/// leading columns of `a` (a prefix of its column-major storage, so nothing is copied).
-pub fn gemm_leading_cols(
     c: &mut DMatrix<f64>,
     alpha: f64,
     a: &DMatrix<f64>,
@@ -179,8 +161,7 @@ pub fn gemm_leading_cols(
 ) {
     let (m, k, n) = (c.nrows(), b.nrows(), c.ncols());
     assert_eq!(a.nrows(), m);
-    assert!(k <= a.ncols());
-    assert_eq!(b.ncols(), n);
+    assert!(k <= a.ncols() && n <= b.ncols());
     let b = Strided {
         data: b.as_slice(),
         ls: 1,
