@@ -197,13 +197,7 @@ impl Decimator {
     /// Takes the next row (time order).
     pub fn push_row(&mut self, row: &[f64]) -> Result<(), ReportError> {
         if let Some(b) = &mut self.buckets {
-            if row.len() != self.columns.len() {
-                return Err(ReportError::Table(format!(
-                    "a row of {} values, the table has {} columns",
-                    row.len(),
-                    self.columns.len()
-                )));
-            }
+            ReportError::check_row("in the decimation", row, self.columns.len())?;
             b.push(row[self.t_col], row);
             return Ok(());
         }

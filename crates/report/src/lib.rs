@@ -66,6 +66,24 @@ pub enum ReportError {
     Plot { path: PathBuf, message: String },
 }
 
+impl ReportError {
+    /// Checks that row number `index` has `columns` values (every table and
+    /// writer of this crate takes rows of a fixed width).
+    pub(crate) fn check_row(
+        index: impl std::fmt::Display,
+        row: &[f64],
+        columns: usize,
+    ) -> Result<(), ReportError> {
+        if row.len() == columns {
+            return Ok(());
+        }
+        Err(ReportError::Table(format!(
+            "row {index} has {} values, the table has {columns} columns",
+            row.len()
+        )))
+    }
+}
+
 /// What [`write_run`] produced.
 #[derive(Clone, Debug)]
 pub struct RunOutputs {

@@ -327,14 +327,7 @@ impl MetricsAccumulator {
 
     /// Takes the next row.
     pub fn push_row(&mut self, row: &[f64]) -> Result<(), ReportError> {
-        if row.len() != self.n_columns {
-            return Err(ReportError::Table(format!(
-                "row {} has {} values, the table has {} columns",
-                self.samples,
-                row.len(),
-                self.n_columns
-            )));
-        }
+        ReportError::check_row(self.samples, row, self.n_columns)?;
         let first = self.samples == 0;
         let t = row[self.t_col];
         if first {

@@ -50,14 +50,7 @@ impl CsvWriter {
 
     /// Appends one row (as many values as columns).
     pub fn push_row(&mut self, row: &[f64]) -> Result<(), ReportError> {
-        if row.len() != self.n_columns {
-            return Err(ReportError::Table(format!(
-                "row {} has {} values, the table has {} columns",
-                self.rows,
-                row.len(),
-                self.n_columns
-            )));
-        }
+        ReportError::check_row(self.rows, row, self.n_columns)?;
         self.line.clear();
         push_csv_row(&mut self.line, row);
         self.out

@@ -169,14 +169,7 @@ impl Trajectory {
 
     /// Appends one row; its length must equal the number of columns.
     pub fn push_row(&mut self, row: &[f64]) -> Result<(), ReportError> {
-        if row.len() != self.columns.len() {
-            return Err(ReportError::Table(format!(
-                "row {} has {} values, the table has {} columns",
-                self.n_rows(),
-                row.len(),
-                self.columns.len()
-            )));
-        }
+        ReportError::check_row(self.n_rows(), row, self.columns.len())?;
         self.data.extend_from_slice(row);
         Ok(())
     }
