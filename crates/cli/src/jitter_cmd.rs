@@ -109,6 +109,11 @@ pub struct JitterArgs {
     /// The controller publishes telemetry for every N-th answered state.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub telemetry_every: u32,
+    /// The controller does not warm its caches with a copy of the law while
+    /// it spins before each state (`hcc-controller --no-warm-up`; the
+    /// scenario's `[controller_daemon] warm_up` otherwise).
+    #[arg(long)]
+    pub no_warm_up: bool,
     /// Skip the PNG plot.
     #[arg(long)]
     pub no_plot: bool,
@@ -285,6 +290,9 @@ fn pair_args(
         "--telemetry-every".into(),
         args.telemetry_every.to_string(),
     ]);
+    if args.no_warm_up {
+        controller_args.push("--no-warm-up".into());
+    }
     let mut sim_args = vec![config];
     sim_args.extend(common);
     sim_args.extend([
@@ -824,6 +832,7 @@ impl Measured<'_> {
                 "load": args.load,
                 "poll_commands": args.poll_commands,
                 "telemetry_every": args.telemetry_every,
+                "controller_warm_up": self.warm_up(),
                 "notifications_skipped": pair.controller.counter("notifications_skipped"),
                 "controller_torque_path_system_allocs": pair.controller.counter("torque_path_system_allocs_after_warm_up"),
                 "controller_connection_updates": pair.controller.counter("connection_updates"),
@@ -903,12 +912,20 @@ impl Measured<'_> {
         Ok(())
     }
 
+    /// Whether the controller warmed its caches before each state (hybrid wait,
+    /// `[controller_daemon] warm_up`, no `--no-warm-up`).
+    fn warm_up(&self) -> bool {
+        matches!(self.args.wait, Wait::Hybrid)
+            && self.scenario.controller_daemon.warm_up
+            && !self.args.no_warm_up
+    }
+
     /// The heading of the table: the run, the machine, the scheduling obtained.
     fn print_heading(&self) {
         let (args, env, pair) = (self.args, self.env, self.pair);
         let machine = &env.machine;
         println!(
-            "hcc jitter: {} — {} wait, pair {} s (floor {} s), simulator core {} / controller core {}, load {}, command_ready {}, telemetry every {} cycle(s)",
+            "hcc jitter: {} — {} wait, pair {} s (floor {} s), simulator core {} / controller core {}, load {}, command_ready {}, telemetry every {} cycle(s), cache warm-up {}",
             self.scenario.name,
             args.wait.name(),
             args.duration,
@@ -922,6 +939,7 @@ impl Measured<'_> {
                 "notified"
             },
             args.telemetry_every,
+            if self.warm_up() { "on" } else { "off" },
         );
         println!(
             "  {} ({} CPUs{}), kernel {}, rt throttling {} of {} µs",

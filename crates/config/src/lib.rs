@@ -92,6 +92,8 @@ pub struct ControllerDaemon {
     /// Per joint, Nm (URDF effort limits unless configured; may be +inf).
     pub torque_limits: DVector<f64>,
     pub stale_timeout_ms: f64,
+    /// Hybrid wait: the cache warm-up before each state (default true).
+    pub warm_up: bool,
 }
 
 /// Resolved `[sim_daemon]`.
@@ -1055,6 +1057,7 @@ fn resolve_controller_daemon(
         wait_strategy: d.wait_strategy,
         torque_limits,
         stale_timeout_ms,
+        warm_up: d.warm_up.unwrap_or(true),
     })
 }
 

@@ -421,6 +421,12 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
             Some(52),
         ),
         (
+            "cache warm-up not a boolean",
+            edit("torque_limits = 100.0", "torque_limits = 100.0\nwarm_up = \"yes\""),
+            "controller_daemon.warm_up",
+            Some(52),
+        ),
+        (
             "sim daemon mode",
             edit("mode = \"lockstep\"", "mode = \"fast\""),
             "sim_daemon.mode",
@@ -595,8 +601,9 @@ fn cpu_cores_are_checked_against_the_available_ones() {
     let e = load(&edit("cpu_core = 1", "cpu_core = 4096")).unwrap_err();
     assert!(e.to_string().contains("controller_daemon.cpu_core"), "{e}");
     assert_eq!(e.line(), Some(49));
-    // The default stale timeout is three control periods.
+    // The default stale timeout is three control periods; the cache warm-up is on.
     assert_eq!(s.controller_daemon.stale_timeout_ms, 3.0);
+    assert!(s.controller_daemon.warm_up);
     let slow = load(&edit("control_rate_hz = 1000.0", "control_rate_hz = 500.0")).unwrap();
     assert_eq!(slow.controller_daemon.stale_timeout_ms, 6.0);
 }

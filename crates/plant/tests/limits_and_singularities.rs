@@ -487,7 +487,8 @@ fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f
 /// limits_and_singularities sweep -- --nocapture` runs the full sweep;
 /// `SWEEP_SECONDS` sets the time per goal, `SWEEP_DETAIL` prints every goal not
 /// settled and every one over a velocity limit, `SWEEP_SAFETY` changes `[safety]`
-/// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`).
+/// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`,
+/// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I).
 /// Every goal not settled is classified ([`Unsettled`]). With the defaults (3 s,
 /// at least 100 goals, no `SWEEP_SAFETY`) at least 35 % must settle: 41 % of the
 /// first 100 goals and 39.6 % of 500 do with the conflict fade (31 % and 31.6 %
@@ -527,6 +528,14 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             .collect();
         let mut scenario = panda(tcp, &posture);
         overridden = sweep_safety_overrides(&mut scenario);
+        if let Ok(v) = std::env::var("SWEEP_DAMPING") {
+            for (l, x) in v.split(',').enumerate() {
+                let x: f64 = x.parse().unwrap();
+                let m = scenario.spec.levels[l].damping.nrows();
+                scenario.spec.levels[l].damping = DMatrix::identity(m, m) * x;
+            }
+            overridden = true;
+        }
         let log = run(scenario.clone(), seconds);
         assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
         let (beyond, speed) = limit_figures(&scenario, &log);

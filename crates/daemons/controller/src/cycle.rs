@@ -115,6 +115,10 @@ pub struct CycleSettings {
     /// Publish telemetry for every this many answered states (1: every
     /// cycle; a peer-lost sample is always published).
     pub telemetry_every: u32,
+    /// Hybrid wait: step a copy of the law on the last state once per cycle
+    /// when the spin before the next state starts (cache warm-up;
+    /// [`Decider::warm_up`]).
+    pub warm_up: bool,
 }
 
 impl CycleSettings {
@@ -132,6 +136,7 @@ impl CycleSettings {
             commanding: scenario.commanding.clone(),
             output: scenario.output.clone(),
             telemetry_every: 1,
+            warm_up: d.warm_up,
         }
     }
 }
@@ -219,6 +224,8 @@ pub struct Cycle {
     /// Connections to peers that appeared or left, made while waiting.
     upkeep: rt::ConnectionUpkeep,
     status: Arc<Status>,
+    /// The cache warm-up ran in this wait.
+    warmed: bool,
 }
 
 impl Cycle {
@@ -238,6 +245,7 @@ impl Cycle {
             timings: CycleTimings::default(),
             upkeep: rt::ConnectionUpkeep::new(),
             status: Arc::new(Status::default()),
+            warmed: false,
         })
     }
 
@@ -363,6 +371,11 @@ impl Cycle {
                     rt::sleep_until_ns(wake_at.min(self.stale_deadline_ns));
                     false
                 } else if now < expected.saturating_add(self.settings.hybrid_spin_ns) {
+                    if !self.warmed {
+                        // Once per wait, at the start of the spin.
+                        self.warmed = true;
+                        self.decider.warm_up();
+                    }
                     std::hint::spin_loop();
                     false
                 } else {
@@ -406,6 +419,7 @@ impl Cycle {
             .is_some()
             .then(|| wake.saturating_sub(self.last_wake_ns));
         self.note_state(wake);
+        self.warmed = false;
         // Setpoints waiting for this state first (they arrived earlier), then
         // every newly queued one (at most the queue's length: bounded work),
         // in arrival order: the order in which a client sent them.

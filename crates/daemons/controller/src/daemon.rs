@@ -83,6 +83,11 @@ pub struct Args {
     /// sample; `hcc run`'s recorder needs every cycle.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub telemetry_every: u32,
+    /// No cache warm-up (overrides [controller_daemon].warm_up): the hybrid
+    /// wait no longer steps a copy of the law on the last state while it
+    /// spins before the next one.
+    #[arg(long)]
+    pub no_warm_up: bool,
 }
 
 /// Parses `args` (program name first), runs the daemon, maps the result to
@@ -150,6 +155,7 @@ fn load(args: &Args) -> Result<Setup> {
         settings.wait = w;
     }
     settings.telemetry_every = args.telemetry_every;
+    settings.warm_up &= !args.no_warm_up;
     Ok(Setup {
         scenario,
         names,

@@ -233,3 +233,50 @@ fn torque_limits_scale_the_law_and_are_counted() {
     settings.torque_limits = vec![-1.0; n];
     assert!(Decider::new(controller(&scenario), &settings).is_err());
 }
+
+/// The cache warm-up steps a copy of the law on the last valid state between
+/// decisions: the commands are bit for bit those of a decider without it (the
+/// copy shares no state with the law that answers), on the Panda with its
+/// safety layer and null-space basis memory, through a NaN state, and before
+/// any valid state (nothing to warm on).
+#[test]
+fn the_cache_warm_up_changes_no_command() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
+    let scenario = Scenario::load(&path).unwrap();
+    let n = scenario.model.nq();
+    let make = |warm_up: bool| {
+        let mut settings = CycleSettings::from_scenario(&scenario);
+        settings.warm_up = warm_up;
+        Decider::new(controller(&scenario), &settings).unwrap()
+    };
+    assert!(
+        CycleSettings::from_scenario(&scenario).warm_up,
+        "on by default"
+    );
+    let (mut warm, mut plain) = (make(true), make(false));
+    warm.warm_up();
+    for k in 1..=300u64 {
+        let t = k as f64 * 1e-3;
+        let q: Vec<f64> = scenario
+            .q0
+            .iter()
+            .enumerate()
+            .map(|(j, q)| q + 0.3 * (t * (1.0 + j as f64)).sin())
+            .collect();
+        let qd: Vec<f64> = (0..n).map(|j| 0.3 * (t * (1.0 + j as f64)).cos()).collect();
+        let mut s = JointState::zeroed();
+        s.set_joints(&q, &qd, &vec![0.0; n]).unwrap();
+        s.header.seq = k;
+        if k == 150 {
+            s.q[2] = f64::NAN;
+        }
+        let (a, b) = (warm.decide(&s, k * PERIOD), plain.decide(&s, k * PERIOD));
+        assert_eq!(a, b, "state {k}");
+        assert_eq!(warm.command().tau(), plain.command().tau(), "state {k}");
+        assert_eq!(warm.telemetry().tau(), plain.telemetry().tau(), "state {k}");
+        // Warm on a state other than the next: the copy's memory diverges.
+        warm.warm_up();
+        warm.warm_up();
+    }
+}

@@ -225,6 +225,8 @@ fn the_decision_step_allocates_nothing() {
     let mut settings = CycleSettings::from_scenario(&scenario);
     settings.output.torque_rate_limit = Some(10.0);
     settings.output.low_pass_hz = Some(100.0);
+    // And the cache warm-up between decisions, as the hybrid wait runs it.
+    settings.warm_up = true;
     let mut decider = Decider::new(controller, &settings).unwrap();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let mut states = Vec::new();
@@ -280,7 +282,9 @@ fn the_decision_step_allocates_nothing() {
         let code = decider
             .receive_setpoint(&setpoints[k as usize], k)
             .unwrap_or(0);
-        (decider.decide(&states[k as usize], k * 1_000_000), code)
+        let answer = decider.decide(&states[k as usize], k * 1_000_000);
+        decider.warm_up();
+        (answer, code)
     };
     let rt = RtSection::enter();
     for k in 0..WARM_UP {
