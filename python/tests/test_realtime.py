@@ -53,6 +53,10 @@ def test_realtime_run_with_a_client(tmp_path: pathlib.Path) -> None:
     )
     assert stats["periods"] == 6000
     assert stats["applied_commands"] > 0
+    # The client attached mid-run: the state publisher's connections were kept
+    # up while the loop waited, once per period, without an error.
+    assert stats["connection_updates"] >= 6000
+    assert stats["connection_update_failures"] == 0
     assert seen["n"] == 4 and seen["levels"] == 3
     seqs = seen["seqs"]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)

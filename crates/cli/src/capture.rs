@@ -56,6 +56,12 @@ pub const BACKLOG: usize = 6_000;
 /// on the daemons' cores for nothing.)
 pub const POLL: Duration = Duration::from_millis(1);
 
+/// The receiver's sleep between drains in a lockstep run, whose daemons turn
+/// as fast as they can (tens of kHz): a queue of [`MAX_SUBSCRIBER_BUFFER`]
+/// samples then lasts a few milliseconds, and there is no real-time loop
+/// whose core the wake-ups would disturb.
+pub const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
+
 /// A drain that found this many samples is followed by another at once.
 const BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
 
@@ -137,13 +143,15 @@ impl Subscribers {
 
 impl Receiver {
     /// Subscribes (on the new thread, node `node_name`, at SCHED_FIFO
-    /// `priority` when given and permitted) and returns once the subscribers
-    /// exist.
+    /// `priority` when given and permitted, draining every `poll`: [`POLL`],
+    /// or [`LOCKSTEP_POLL`] for a lockstep run) and returns once the
+    /// subscribers exist.
     pub fn start(
         node_name: &str,
         file_prefix: Option<String>,
         names: ServiceNames,
         priority: Option<i32>,
+        poll: Duration,
     ) -> anyhow::Result<Receiver> {
         let (tx, rx) = mpsc::sync_channel(BACKLOG);
         let dropped = Arc::new(AtomicU64::new(0));
@@ -201,7 +209,7 @@ impl Receiver {
                     match subs.drain_into(&tx) {
                         Ok(_) if last => break,
                         Ok(k) if k >= BURST => {}
-                        Ok(_) => std::thread::sleep(POLL),
+                        Ok(_) => std::thread::sleep(poll),
                         Err(e) => {
                             // Blocking: the failure must reach the writer.
                             let _ = tx.tx.send(Received::Failed(e));

@@ -61,6 +61,10 @@ pub const RECORDING_FILE: &str = "run.mcap";
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// A running simulator that publishes nothing for this long is considered hung.
 const STALL_TIMEOUT: Duration = Duration::from_secs(10);
+/// `hcc-sim --lockstep-max-speed` of a lockstep run: at most five times
+/// faster than real time (a 3 s scenario in 0.6 s).
+const LOCKSTEP_MAX_SPEED: f64 = 5.0;
+
 /// `hcc-sim --lockstep-timeout-ms` of a lockstep run: a command missing
 /// this long is a miss (the simulator falls back and the run is no longer
 /// deterministic), so it is far above any stall of a loaded machine.
@@ -281,6 +285,12 @@ impl Launch {
             sim_args.extend([
                 "--lockstep-timeout-ms".to_string(),
                 format!("{LOCKSTEP_TIMEOUT_MS:?}"),
+                // The recorder is not in the lockstep: at most this many times
+                // real time, its queues (128 samples) last 25 ms at 1 kHz
+                // instead of the few ms of an unpaced run, which host stalls
+                // of the recorder's CPU exceeded now and then (samples lost).
+                "--lockstep-max-speed".to_string(),
+                format!("{LOCKSTEP_MAX_SPEED:?}"),
             ]);
         } else if !args.no_rt {
             let (sim_rt, controller_rt) = realtime_args(scenario, args.quiet);
@@ -546,15 +556,24 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let launch = Launch::new(&args, &scenario)?;
     let recording = launch.out.join(RECORDING_FILE);
 
-    // Subscribe before the children start, so that no sample is missed; a
-    // real-time run drains at a low real-time priority (the daemons' warning
-    // already says when SCHED_FIFO is not permitted).
-    let priority = (launch.mode == "realtime" && !args.no_rt).then_some(capture::RECEIVER_PRIORITY);
+    // Subscribe before the children start, so that no sample is missed. The
+    // receiver drains at a low real-time priority when permitted (the
+    // daemons' warning already says when SCHED_FIFO is not), also in
+    // lockstep, whose daemons run at normal priority as fast as they can:
+    // there it drains every 100 µs (at 1 ms a loaded machine lost samples of
+    // a lockstep run now and then).
+    let priority = (!args.no_rt).then_some(capture::RECEIVER_PRIORITY);
+    let poll = if launch.mode == "lockstep" {
+        capture::LOCKSTEP_POLL
+    } else {
+        capture::POLL
+    };
     let receiver = Receiver::start(
         "hcc-run",
         launch.file_prefix.clone(),
         launch.names.clone(),
         priority,
+        poll,
     )?;
     if let Some(w) = &receiver.priority_warning {
         tracing::debug!("{w}");

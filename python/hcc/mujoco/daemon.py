@@ -57,6 +57,8 @@ class RunStats:
     stopped_periods: int = 0
     late_commands: int = 0
     overruns: int = 0
+    connection_updates: int = 0
+    connection_update_failures: int = 0
     lateness_ns: list[int] = field(default_factory=list)
     state_to_command_ns: list[int] = field(default_factory=list)
 
@@ -92,6 +94,8 @@ class RunStats:
             "late_commands": self.late_commands,
             "ticks_late": late_ticks,
             "overruns": self.overruns,
+            "connection_updates": self.connection_updates,
+            "connection_update_failures": self.connection_update_failures,
             "tick_lateness": pct(self.lateness_ns),
             "state_to_command": pct(self.state_to_command_ns),
         }
@@ -205,6 +209,17 @@ class Loop:
             self.command_ready.try_wait()
         return got
 
+    def _upkeep(self) -> None:
+        """Connects the state publisher to subscribers that appeared (a recorder,
+        a monitor) while the loop waits, so that the next ``send_copy`` does not
+        (iceoryx2 otherwise connects them inside the send, between a tick and
+        its state)."""
+        try:
+            self.states.update_connections()
+            self.stats.connection_updates += 1
+        except Exception:  # an iceoryx2 error: counted, the send retries it
+            self.stats.connection_update_failures += 1
+
     def _advance(self) -> None:
         applied = self.driver.advance(self.newest)
         self.stats.periods += 1
@@ -229,6 +244,7 @@ class Loop:
                 if time.monotonic_ns() >= deadline:
                     break
                 time.sleep(POLL_S)
+            self._upkeep()
             rest = next_tick - time.monotonic_ns()
             if rest > SPIN_LEAD_S * 1e9:
                 time.sleep((rest - SPIN_LEAD_S * 1e9) * 1e-9)
@@ -275,6 +291,7 @@ class Loop:
                 if deadline is not None:
                     wait_ns = min(wait_ns, deadline - now)
                 wait_ns = max(1_000, min(wait_ns, 20_000_000))
+                self._upkeep()
                 self.command_ready.timed_wait(iox2.Duration.from_nanos(wait_ns))
             if _Stop.requested:
                 break

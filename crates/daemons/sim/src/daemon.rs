@@ -84,6 +84,13 @@ pub struct Args {
     /// Lockstep: a command missing this long (ms) counts as a miss.
     #[arg(long, default_value_t = 100.0)]
     pub lockstep_timeout_ms: f64,
+    /// Lockstep: run at most this many times faster than real time (a state
+    /// at most every control period / this); default: as fast as the
+    /// controller answers. Subscribers that are not in the lockstep (a
+    /// recorder) then have their queues' length in real time divided by it
+    /// to drain them, however the host stalls them.
+    #[arg(long)]
+    pub lockstep_max_speed: Option<f64>,
     /// SCHED_FIFO priority of the simulator thread (1..=99); default: normal scheduling.
     #[arg(long)]
     pub sched_priority: Option<i32>,
@@ -374,11 +381,18 @@ impl<'a> SimLoop<'a> {
         Ok(())
     }
 
-    fn run_lockstep(&mut self, timeout_ns: u64) -> Result<()> {
+    fn run_lockstep(&mut self, timeout_ns: u64, max_speed: Option<f64>) -> Result<()> {
         let period_ns = (self.driver.period_s() * 1e9).round() as u64;
+        // At most `max_speed` × real time: a state at most every `pace_ns`.
+        let pace_ns = max_speed.map_or(0, |x| (period_ns as f64 / x).round() as u64);
+        let mut last_publish = 0u64;
         loop {
             if self.driver.finished() {
                 break;
+            }
+            if pace_ns > 0 {
+                rt::sleep_until_ns(last_publish.saturating_add(pace_ns));
+                last_publish = monotonic_now_ns();
             }
             self.publish();
             let mut published = monotonic_now_ns();
@@ -481,6 +495,11 @@ fn check_args(args: &Args) -> Result<()> {
     {
         anyhow::bail!("--sched-priority {p} must be in 1..=99");
     }
+    if let Some(x) = args.lockstep_max_speed
+        && !(x.is_finite() && x > 0.0)
+    {
+        anyhow::bail!("--lockstep-max-speed {x} must be positive");
+    }
     Ok(())
 }
 
@@ -555,7 +574,7 @@ pub fn run(args: Args) -> Result<()> {
         let timeout_ns = (args.lockstep_timeout_ms * 1e6) as u64;
         match mode {
             SimMode::Realtime => lp.run_realtime(),
-            SimMode::Lockstep => lp.run_lockstep(timeout_ns),
+            SimMode::Lockstep => lp.run_lockstep(timeout_ns, args.lockstep_max_speed),
         }
     };
     // The final state, status Stopped.
