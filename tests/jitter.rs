@@ -107,6 +107,14 @@ fn jitter_with_a_polling_simulator_skips_every_notification() {
 #[test]
 fn jitter_reports_every_figure_and_consistent_counts() {
     let (report, _) = jitter("jitter", &[]);
+    // The hybrid wait warmed the law's caches before states (the scenario's
+    // default), and says so.
+    let settings = &report["settings"];
+    assert_eq!(settings["controller_warm_up"], true, "{settings}");
+    assert!(
+        settings["controller_warm_ups"].as_u64().unwrap() > 0,
+        "{settings}"
+    );
     for name in FIGURES {
         let f = &report["figures"][name];
         for s in STATS {

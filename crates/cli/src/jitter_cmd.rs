@@ -833,6 +833,7 @@ impl Measured<'_> {
                 "poll_commands": args.poll_commands,
                 "telemetry_every": args.telemetry_every,
                 "controller_warm_up": self.warm_up(),
+                "controller_warm_ups": pair.controller.counter("warm_ups"),
                 "notifications_skipped": pair.controller.counter("notifications_skipped"),
                 "controller_torque_path_system_allocs": pair.controller.counter("torque_path_system_allocs_after_warm_up"),
                 "controller_connection_updates": pair.controller.counter("connection_updates"),

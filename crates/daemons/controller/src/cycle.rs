@@ -116,8 +116,8 @@ pub struct CycleSettings {
     /// cycle; a peer-lost sample is always published).
     pub telemetry_every: u32,
     /// Hybrid wait: step a copy of the law on the last state once per cycle
-    /// when the spin before the next state starts (cache warm-up;
-    /// [`Decider::warm_up`]).
+    /// when the spin before the next state starts, if the last step took at
+    /// most a third of `hybrid_lead_ns` (cache warm-up; [`Decider::warm_up`]).
     pub warm_up: bool,
 }
 
@@ -226,6 +226,8 @@ pub struct Cycle {
     status: Arc<Status>,
     /// The cache warm-up ran in this wait.
     warmed: bool,
+    /// Cache warm-ups run since start-up.
+    warm_ups: u64,
 }
 
 impl Cycle {
@@ -246,6 +248,7 @@ impl Cycle {
             upkeep: rt::ConnectionUpkeep::new(),
             status: Arc::new(Status::default()),
             warmed: false,
+            warm_ups: 0,
         })
     }
 
@@ -273,6 +276,11 @@ impl Cycle {
     /// (`STATE_FLAG_DRIVER_POLLS_COMMANDS`).
     pub fn notifications_skipped(&self) -> u64 {
         self.notifications_skipped
+    }
+
+    /// Cache warm-ups run so far ([`CycleSettings::warm_up`]).
+    pub fn warm_ups(&self) -> u64 {
+        self.warm_ups
     }
 
     /// What the connection upkeep did so far (off the torque path).
@@ -372,9 +380,18 @@ impl Cycle {
                     false
                 } else if now < expected.saturating_add(self.settings.hybrid_spin_ns) {
                     if !self.warmed {
-                        // Once per wait, at the start of the spin.
+                        // Once per wait, at the start of the spin, and only
+                        // while the law takes at most a third of the spin's
+                        // lead (a large robot's step would still run when its
+                        // state comes).
                         self.warmed = true;
-                        self.decider.warm_up();
+                        let lead = self.settings.hybrid_lead_ns;
+                        if self.settings.warm_up
+                            && self.decider.step_ns().is_some_and(|s| 3 * s <= lead)
+                        {
+                            self.decider.warm_up();
+                            self.warm_ups += 1;
+                        }
                     }
                     std::hint::spin_loop();
                     false

@@ -360,6 +360,7 @@ fn write_stats(
         "notifications_skipped".into(),
         cycle.notifications_skipped(),
     );
+    stats.counters.insert("warm_ups".into(), cycle.warm_ups());
     if let Some(allocs) = torque_path_allocs {
         stats
             .counters

@@ -220,10 +220,10 @@ impl Decider {
     }
 
     /// Cache warm-up (`CycleSettings::warm_up`): steps a copy of the law on the
-    /// last valid state, so that the law's code (and the model it shares in
-    /// layout) is in the caches and branch predictors when the next state comes.
-    /// Nothing of it reaches a command; allocation-free. Does nothing when off
-    /// or before the first valid state.
+    /// last valid state, so that the law's code is in the caches and its
+    /// branches in the predictors when the next state comes (the copy's data is
+    /// its own). Nothing of it reaches a command; allocation-free. Does nothing
+    /// when off or before the first valid state.
     pub fn warm_up(&mut self) {
         let n = self.n;
         if let Some(twin) = self.warm.as_deref_mut()
