@@ -1258,14 +1258,26 @@ fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
     if r == 0 || p == 0 {
         return;
     }
-    // Column c0 + t of `a` (contiguous) becomes row t of `out` (one element per
-    // column of `out`).
+    // Four columns c0 + t.. of `a` (contiguous) at a time become rows t..t + 4 of
+    // `out`: four streams read down the columns, four adjacent elements written to
+    // every column of `out`.
     let a = &a.as_slice()[c0 * r..(c0 + p) * r];
     let out = out.as_mut_slice();
-    for (t, src) in a.chunks_exact(r).enumerate() {
+    let mut t = 0;
+    while t + 4 <= p {
+        let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
+        let (s2, s3) = (&a[(t + 2) * r..(t + 3) * r], &a[(t + 3) * r..(t + 4) * r]);
+        for (i, col) in out.chunks_exact_mut(p).enumerate() {
+            col[t..t + 4].copy_from_slice(&[s0[i], s1[i], s2[i], s3[i]]);
+        }
+        t += 4;
+    }
+    while t < p {
+        let src = &a[t * r..(t + 1) * r];
         for (col, &x) in out.chunks_exact_mut(p).zip(src) {
             col[t] = x;
         }
+        t += 1;
     }
 }
 
