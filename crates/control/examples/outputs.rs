@@ -6,12 +6,14 @@
 //! `cargo run --release -p hcc-control --example outputs -- write FILE` stores them
 //! (every value as its bits); `-- compare FILE` runs the law again and prints, per
 //! case and quantity, the largest absolute deviation and the largest one relative to
-//! the norm of the vector it belongs to (0 when the bits are the same).
+//! the norm of the vector it belongs to (τ_μ and P_μ, zero in theory: to ‖τ‖ and
+//! ‖τ‖ ‖q̇‖), 0 when the bits are the same. `-- steps CASE
+//! [N]` runs N steps of one case (planar, panda, chain32, …) for an instruction count.
 
-#[path = "../tests/common/mod.rs"]
-mod common;
 #[path = "../benches/support/chain.rs"]
 mod chain;
+#[path = "../tests/common/mod.rs"]
+mod common;
 
 use common::*;
 use hcc_control::{Controller, ControllerSpec, Form};
@@ -58,11 +60,16 @@ fn cases() -> Vec<(String, Model, ControllerSpec, Vec<f64>)> {
     v
 }
 
+/// q̇ of the compared path.
+fn path_velocity(n: usize) -> Vec<f64> {
+    (0..n).map(|i| 0.3 * (i as f64 + 1.0).sin()).collect()
+}
+
 /// `STEPS` steps along q(t) = q0 + t q̇ (1 ms apart) with a fixed q̇.
 fn run(model: &Model, spec: ControllerSpec, q0: &[f64]) -> Run {
     let n = model.nq();
     let mut c = Controller::new(model, spec, &DVector::from_column_slice(q0)).expect("controller");
-    let qd: Vec<f64> = (0..n).map(|i| 0.3 * (i as f64 + 1.0).sin()).collect();
+    let qd = path_velocity(n);
     let mut q = q0.to_vec();
     let mut values: Run = vec![Vec::new(); NAMES.len()];
     for _ in 0..STEPS {
@@ -93,7 +100,11 @@ fn all_runs() -> BTreeMap<String, Run> {
         for form in [Form::Extended, Form::ClassicalProjector] {
             let mut spec = spec.clone();
             spec.form = form;
-            let tag = if form == Form::Extended { "eq21" } else { "proj" };
+            let tag = if form == Form::Extended {
+                "eq21"
+            } else {
+                "proj"
+            };
             runs.insert(format!("{name}/{tag}"), run(&model, spec, &q0));
         }
     }
@@ -126,13 +137,22 @@ fn compare(path: &str) {
     }
     let mut worst_rel: BTreeMap<&str, f64> = BTreeMap::new();
     for (case, run) in all_runs() {
+        let n = run[0][0].len();
+        let speed = path_velocity(n).iter().map(|x| x * x).sum::<f64>().sqrt();
         let mut line = format!("{case:<18}");
         for (q, steps) in NAMES.iter().zip(&run) {
             let (mut abs, mut rel) = (0.0f64, 0.0f64);
             for (k, v) in steps.iter().enumerate() {
                 let w = &old[&(case.clone(), q.to_string(), k)];
                 assert_eq!(v.len(), w.len());
-                let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let norm_of = |w: &[f64]| w.iter().map(|x| x * x).sum::<f64>().sqrt();
+                // τ_μ and P_μ (zero in theory) against ‖τ‖ and ‖τ‖ ‖q̇‖ of the step.
+                let tau = norm_of(&old[&(case.clone(), "tau".to_string(), k)]);
+                let norm = match *q {
+                    "tau_mu" => tau,
+                    "p_mu" => tau * speed,
+                    _ => norm_of(w),
+                };
                 for (a, b) in v.iter().zip(w) {
                     if a.to_bits() != b.to_bits() {
                         let d = (a - b).abs();
@@ -147,9 +167,31 @@ fn compare(path: &str) {
         }
         println!("{line}");
     }
-    println!("largest relative deviation per quantity (|Δ| / ‖vector‖):");
+    println!(
+        "largest relative deviation per quantity (|Δ| / ‖vector‖; τ_μ: / ‖τ‖, P_μ: / ‖τ‖ ‖q̇‖):"
+    );
     for (q, r) in worst_rel {
         println!("  {q:<10} {r:.2e}");
+    }
+}
+
+/// N steps of one case along the benchmarks' path (for an instruction count of
+/// `Controller::step` under callgrind: `--toggle-collect='*Controller::step*'`).
+fn steps(case: &str, count: usize) {
+    let (_, model, spec, q0) = cases()
+        .into_iter()
+        .find(|c| c.0 == case)
+        .expect("no such case");
+    let n = model.nq();
+    let mut c =
+        Controller::new(&model, spec, &DVector::from_column_slice(&q0)).expect("controller");
+    let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
+    let mut q = q0.clone();
+    for _ in 0..count {
+        for (qi, vi) in q.iter_mut().zip(&qd) {
+            *qi += 1e-5 * vi;
+        }
+        std::hint::black_box(c.step(&q, &qd).expect("step").tau[0]);
     }
 }
 
@@ -158,6 +200,9 @@ fn main() {
     match (args.get(1).map(String::as_str), args.get(2)) {
         (Some("write"), Some(p)) => write(p),
         (Some("compare"), Some(p)) => compare(p),
-        _ => eprintln!("usage: outputs write FILE | outputs compare FILE"),
+        (Some("steps"), Some(case)) => {
+            steps(case, args.get(3).map_or(1000, |s| s.parse().unwrap()))
+        }
+        _ => eprintln!("usage: outputs write FILE | outputs compare FILE | outputs steps CASE [N]"),
     }
 }
