@@ -53,7 +53,7 @@ fn gemm_cols(
         unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
         return;
     }
-    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<1>(c, alpha, a, (m, k, n), b, beta);
 }
 
 /// Products of at least this many multiply-adds run in the AVX2 build of
@@ -78,12 +78,13 @@ unsafe fn gemm_cols_avx2(
     b: Strided,
     beta: f64,
 ) {
-    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<4>(c, alpha, a, (m, k, n), b, beta);
 }
 
-/// The row blocks of [`gemm_cols`] (sizes checked there).
+/// The row blocks of [`gemm_cols`] (sizes checked there), `NC` output columns at a
+/// time.
 #[inline(always)]
-fn gemm_blocks(
+fn gemm_blocks<const NC: usize>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -95,23 +96,24 @@ fn gemm_blocks(
     while i < m {
         let w = MR.min(m - i);
         match w {
-            8 => rows::<8>(c, alpha, a, (m, k, n), i, b, beta),
-            7 => rows::<7>(c, alpha, a, (m, k, n), i, b, beta),
-            6 => rows::<6>(c, alpha, a, (m, k, n), i, b, beta),
-            5 => rows::<5>(c, alpha, a, (m, k, n), i, b, beta),
-            4 => rows::<4>(c, alpha, a, (m, k, n), i, b, beta),
-            3 => rows::<3>(c, alpha, a, (m, k, n), i, b, beta),
-            2 => rows::<2>(c, alpha, a, (m, k, n), i, b, beta),
-            _ => rows::<1>(c, alpha, a, (m, k, n), i, b, beta),
+            8 => rows::<8, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            7 => rows::<7, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            6 => rows::<6, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            5 => rows::<5, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            4 => rows::<4, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            3 => rows::<3, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            2 => rows::<2, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            _ => rows::<1, NC>(c, alpha, a, (m, k, n), i, b, beta),
         }
         i += w;
     }
 }
 
-/// Rows i..i+W of [`gemm_cols`], one output column at a time (W accumulators, which
-/// the compiler keeps in vector registers across the rows).
+/// Rows i..i+W of [`gemm_cols`]: `NC` output columns at a time (W × NC accumulators,
+/// which the compiler keeps in vector registers across the rows: NC independent
+/// chains of additions instead of one), the remaining columns one at a time.
 #[inline(always)]
-fn rows<const W: usize>(
+fn rows<const W: usize, const NC: usize>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -122,12 +124,35 @@ fn rows<const W: usize>(
 ) {
     debug_assert!(i + W <= m);
     let (ap, bp, cp) = (a.as_ptr(), b.data.as_ptr(), c.as_mut_ptr());
-    for j in 0..n {
+    let mut j = 0;
+    while j + NC <= n {
+        let mut s = [[0.0; W]; NC];
+        for l in 0..k {
+            // SAFETY: l < k and j + u < n, so l ls + (j + u) js ≤ (k − 1) ls + (n − 1) js,
+            // which `gemm_cols` checked to be inside b; l m + i + t < (k − 1) m + m =
+            // k m ≤ a.len() since i + t < i + W ≤ m.
+            let al: [f64; W] = std::array::from_fn(|t| unsafe { *ap.add(l * m + i + t) });
+            for (u, su) in s.iter_mut().enumerate() {
+                let bl = unsafe { *bp.add(l * b.ls + (j + u) * b.js) };
+                for (st, &at) in su.iter_mut().zip(&al) {
+                    *st += at * bl;
+                }
+            }
+        }
+        for (u, su) in s.iter().enumerate() {
+            for (t, &st) in su.iter().enumerate() {
+                // SAFETY: (j + u) m + i + t < (n − 1) m + m = m n ≤ c.len() (checked in
+                // `gemm_cols`).
+                let x = unsafe { &mut *cp.add((j + u) * m + i + t) };
+                *x = scale(alpha, st, beta, *x);
+            }
+        }
+        j += NC;
+    }
+    for j in j..n {
         let mut s = [0.0; W];
         for l in 0..k {
-            // SAFETY: l < k and j < n, so l ls + j js ≤ (k − 1) ls + (n − 1) js, which
-            // `gemm_cols` checked to be inside b; l m + i + t < (k − 1) m + m = k m ≤
-            // a.len() since i + t < i + W ≤ m.
+            // SAFETY: as above, with one column j < n.
             let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
             for (t, st) in s.iter_mut().enumerate() {
                 *st += unsafe { *ap.add(l * m + i + t) } * bl;
