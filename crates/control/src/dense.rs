@@ -49,22 +49,28 @@ fn gemm_cols(
     assert!(k == 0 || n == 0 || (k - 1) * b.ls + (n - 1) * b.js < b.data.len());
     #[cfg(target_arch = "x86_64")]
     if m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
-        unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
+        if std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
+            // checked above.
+            unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta) };
+        } else {
+            // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
+            unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
+        }
         return;
     }
-    gemm_blocks::<1>(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta);
 }
 
 /// Products of at least this many multiply-adds run in the AVX2 build of
-/// [`gemm_blocks`] where the CPU has it (four lanes instead of two; below this the
-/// products are too short to gain from the wider registers).
+/// [`gemm_blocks`] where the CPU has it (four lanes instead of two, four output columns
+/// at a time, fused multiply-adds where the CPU has them; below this the products are
+/// too short to gain from the wider registers).
 #[cfg(target_arch = "x86_64")]
 const AVX2_MIN_WORK: usize = 512;
 
-/// [`gemm_blocks`] compiled for AVX2. Only wider registers, no fused multiply-add: every
-/// product and sum is rounded as in the portable build, so the results are bitwise the
-/// same on every CPU.
+/// [`gemm_blocks`] compiled for AVX2 without fused multiply-adds: every product and
+/// sum is rounded as in the portable build (the CPUs with AVX2 but no FMA).
 ///
 /// # Safety
 /// The CPU must support AVX2, and the sizes must satisfy the checks of [`gemm_cols`].
@@ -78,13 +84,40 @@ unsafe fn gemm_cols_avx2(
     b: Strided,
     beta: f64,
 ) {
-    gemm_blocks::<4>(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<4, false>(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// [`gemm_blocks`] compiled for AVX2 and FMA: every multiply-add of the sums is one
+/// fused operation (one rounding instead of two: half the arithmetic, and results that
+/// differ from the portable build's at the rounding level, the same on every CPU with
+/// these features).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and the sizes must satisfy the checks of
+/// [`gemm_cols`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gemm_cols_avx2_fma(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    (m, k, n): (usize, usize, usize),
+    b: Strided,
+    beta: f64,
+) {
+    gemm_blocks::<4, true>(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// `s + a b`, fused (one rounding) in the builds for FMA.
+#[inline(always)]
+fn madd<const FMA: bool>(s: f64, a: f64, b: f64) -> f64 {
+    if FMA { a.mul_add(b, s) } else { s + a * b }
 }
 
 /// The row blocks of [`gemm_cols`] (sizes checked there), `NC` output columns at a
 /// time.
 #[inline(always)]
-fn gemm_blocks<const NC: usize>(
+fn gemm_blocks<const NC: usize, const FMA: bool>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -96,14 +129,14 @@ fn gemm_blocks<const NC: usize>(
     while i < m {
         let w = MR.min(m - i);
         match w {
-            8 => rows::<8, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            7 => rows::<7, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            6 => rows::<6, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            5 => rows::<5, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            4 => rows::<4, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            3 => rows::<3, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            2 => rows::<2, NC>(c, alpha, a, (m, k, n), i, b, beta),
-            _ => rows::<1, NC>(c, alpha, a, (m, k, n), i, b, beta),
+            8 => rows::<8, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            7 => rows::<7, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            6 => rows::<6, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            5 => rows::<5, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            4 => rows::<4, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            3 => rows::<3, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            2 => rows::<2, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            _ => rows::<1, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
         }
         i += w;
     }
@@ -113,7 +146,7 @@ fn gemm_blocks<const NC: usize>(
 /// which the compiler keeps in vector registers across the rows: NC independent
 /// chains of additions instead of one), the remaining columns one at a time.
 #[inline(always)]
-fn rows<const W: usize, const NC: usize>(
+fn rows<const W: usize, const NC: usize, const FMA: bool>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -135,7 +168,7 @@ fn rows<const W: usize, const NC: usize>(
             for (u, su) in s.iter_mut().enumerate() {
                 let bl = unsafe { *bp.add(l * b.ls + (j + u) * b.js) };
                 for (st, &at) in su.iter_mut().zip(&al) {
-                    *st += at * bl;
+                    *st = madd::<FMA>(*st, at, bl);
                 }
             }
         }
@@ -155,7 +188,7 @@ fn rows<const W: usize, const NC: usize>(
             // SAFETY: as above, with one column j < n.
             let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
             for (t, st) in s.iter_mut().enumerate() {
-                *st += unsafe { *ap.add(l * m + i + t) } * bl;
+                *st = madd::<FMA>(*st, unsafe { *ap.add(l * m + i + t) }, bl);
             }
         }
         for (t, &st) in s.iter().enumerate() {
