@@ -67,7 +67,7 @@ fn gemm_cols(
 /// at a time, fused multiply-adds where the CPU has them; below this the products are
 /// too short to gain from the wider registers).
 #[cfg(target_arch = "x86_64")]
-const AVX2_MIN_WORK: usize = 512;
+const AVX2_MIN_WORK: usize = 64;
 
 /// [`gemm_blocks`] compiled for AVX2 without fused multiply-adds: every product and
 /// sum is rounded as in the portable build (the CPUs with AVX2 but no FMA).
