@@ -796,6 +796,30 @@ pub fn damped_spd_inverse(
     Conditioning { ratio, damping }
 }
 
+/// The inverse of [`damped_spd_inverse`] alone, for a caller that does not read the
+/// conditioning: the same matrix, but the Cholesky inverse is accepted as soon as a
+/// guaranteed lower bound of the eigenvalue ratio, 1/(‖A⁻¹‖_F ‖A‖_F) (λ_min ≥
+/// 1/‖A⁻¹‖_F, λ_max ≤ ‖A‖_F), shows that no damping is due (at least ε, with
+/// λ_max ≥ tr A / m clear of `floor`) — the ratio itself, which the eigen-decomposition
+/// would have to find below `EXACT_RATIO_FACTOR × ε`, is not needed.
+pub fn damped_spd_inverse_only(
+    a: &DMatrix<f64>,
+    out: &mut DMatrix<f64>,
+    work: &mut SpdWork,
+    eps: f64,
+    floor: f64,
+) {
+    let m = a.nrows();
+    if m > 0 && spd_inverse(a, &mut work.a, out) {
+        let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
+        let bound = 1.0 / (out.norm() * a.norm());
+        if bound.is_finite() && bound >= eps && trace >= m as f64 * floor {
+            return;
+        }
+    }
+    damped_spd_inverse(a, out, work, eps, floor);
+}
+
 /// Workspace of [`procrustes_align`] for bases with `d` columns.
 #[derive(Clone, Debug)]
 pub struct AlignWork {
