@@ -3,7 +3,8 @@
 use crate::ControlError;
 use crate::dense::{
     AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
-    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
+    gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar, procrustes_align,
+    transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -261,11 +262,13 @@ impl Level {
 struct NullSpace {
     qr_work: DMatrix<f64>,
     qr_q: DMatrix<f64>,
-    /// V_{i−1}: orthonormal basis (n × (n − k)).
+    /// V_{i−1}: orthonormal basis (n × (n − k)), and Vᵀ.
     v: DMatrix<f64>,
+    vt: DMatrix<f64>,
     v_prev: DMatrix<f64>,
     has_prev: bool,
     vdot: DMatrix<f64>,
+    vdot_t: DMatrix<f64>,
     gram: DMatrix<f64>,
     gram_inv: DMatrix<f64>,
     t1: DMatrix<f64>,
@@ -301,9 +304,11 @@ impl NullSpace {
             qr_work: DMatrix::zeros(nb, kb),
             qr_q: DMatrix::zeros(nb, nb),
             v: DMatrix::zeros(nb, nd),
+            vt: DMatrix::zeros(nd, nb),
             v_prev: DMatrix::zeros(nb, nd),
             has_prev: false,
             vdot: DMatrix::zeros(nb, nd),
+            vdot_t: DMatrix::zeros(nd, nb),
             gram: DMatrix::zeros(kb, kb),
             gram_inv: DMatrix::zeros(kb, kb),
             t1: DMatrix::zeros(kb, nd),
@@ -888,8 +893,10 @@ impl Controller {
             // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
             // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
             let ns = &mut self.basis;
-            transpose_into(&mut l.z, &ns.v);
-            transpose_into(&mut l.zdot, &ns.vdot);
+            // Vᵀ and V̇ᵀ of this cycle, handed over (the buffers swap; the null space
+            // forms both afresh every cycle).
+            std::mem::swap(&mut l.z, &mut ns.vt);
+            std::mem::swap(&mut l.zdot, &mut ns.vdot_t);
             l.lambda.copy_from(&ns.vtmv);
             l.lambda_inv.copy_from(&ns.s);
             l.lambda_dot.copy_from(&ns.x);
@@ -1097,13 +1104,19 @@ impl Controller {
         gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
         gemm(&mut ns.vdot, -1.0, jaug_t, &ns.t2, 0.0);
-        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
+        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇; the
+        // products with Vᵀ and V̇ᵀ (= Z_r and Ż_r) by the column kernel, the symmetric
+        // ones with the upper triangle mirrored.
+        transpose_into(&mut ns.vt, &ns.v);
+        transpose_into(&mut ns.vdot_t, &ns.vdot);
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
-        gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
+        gemm(&mut ns.vtmv, 1.0, &ns.vt, &ns.mv, 0.0);
+        mirror_upper(&mut ns.vtmv);
         ns.s_cond = damped_spd_inverse(&ns.vtmv, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
-        gemm_tn_sym(&mut ns.x, &ns.v, &ns.mdv);
-        gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
+        gemm(&mut ns.x, 1.0, &ns.vt, &ns.mdv, 0.0);
+        mirror_upper(&mut ns.x);
+        gemm(&mut ns.tmp_dd, 1.0, &ns.vdot_t, &ns.mv, 0.0);
         ns.x += &ns.tmp_dd;
         transpose_add(&mut ns.x, &ns.tmp_dd);
         Ok(())
@@ -1241,44 +1254,6 @@ pub struct Diagnostics {
     pub m: DMatrix<f64>,
     pub minv: DMatrix<f64>,
     pub c: DMatrix<f64>,
-}
-
-/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
-fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
-    assert_eq!(out.nrows(), a.ncols());
-    transpose_cols_into(out, a, 0);
-}
-
-/// `out = a[.., c0..c0 + p]ᵀ` with p = the rows of `out`: the transpose of a block of
-/// columns (row i of `a` from column c0 on becomes column i of `out`).
-fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
-    let (r, p) = (a.nrows(), out.nrows());
-    assert_eq!(out.ncols(), r);
-    assert!(c0 + p <= a.ncols());
-    if r == 0 || p == 0 {
-        return;
-    }
-    // Four columns c0 + t.. of `a` (contiguous) at a time become rows t..t + 4 of
-    // `out`: four streams read down the columns, four adjacent elements written to
-    // every column of `out`.
-    let a = &a.as_slice()[c0 * r..(c0 + p) * r];
-    let out = out.as_mut_slice();
-    let mut t = 0;
-    while t + 4 <= p {
-        let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
-        let (s2, s3) = (&a[(t + 2) * r..(t + 3) * r], &a[(t + 3) * r..(t + 4) * r]);
-        for (i, col) in out.chunks_exact_mut(p).enumerate() {
-            col[t..t + 4].copy_from_slice(&[s0[i], s1[i], s2[i], s3[i]]);
-        }
-        t += 4;
-    }
-    while t < p {
-        let src = &a[t * r..(t + 1) * r];
-        for (col, &x) in out.chunks_exact_mut(p).zip(src) {
-            col[t] = x;
-        }
-        t += 1;
-    }
 }
 
 /// `out += aᵀ`.

@@ -266,6 +266,51 @@ pub fn gemm_tn_sym(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>) {
     assert_eq!(c.shape(), (m, n));
     assert_eq!(m, n);
     gemm_tn_block(c, 1.0, a, b, 0.0, true);
+    mirror_upper(c);
+}
+
+/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
+pub fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    assert_eq!(out.nrows(), a.ncols());
+    transpose_cols_into(out, a, 0);
+}
+
+/// `out = a[.., c0..c0 + p]ᵀ` with p = the rows of `out`: the transpose of a block of
+/// columns (row i of `a` from column c0 on becomes column i of `out`).
+pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
+    let (r, p) = (a.nrows(), out.nrows());
+    assert_eq!(out.ncols(), r);
+    assert!(c0 + p <= a.ncols());
+    if r == 0 || p == 0 {
+        return;
+    }
+    // Four columns c0 + t.. of `a` (contiguous) at a time become rows t..t + 4 of
+    // `out`: four streams read down the columns, four adjacent elements written to
+    // every column of `out`.
+    let a = &a.as_slice()[c0 * r..(c0 + p) * r];
+    let out = out.as_mut_slice();
+    let mut t = 0;
+    while t + 4 <= p {
+        let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
+        let (s2, s3) = (&a[(t + 2) * r..(t + 3) * r], &a[(t + 3) * r..(t + 4) * r]);
+        for (i, col) in out.chunks_exact_mut(p).enumerate() {
+            col[t..t + 4].copy_from_slice(&[s0[i], s1[i], s2[i], s3[i]]);
+        }
+        t += 4;
+    }
+    while t < p {
+        let src = &a[t * r..(t + 1) * r];
+        for (col, &x) in out.chunks_exact_mut(p).zip(src) {
+            col[t] = x;
+        }
+        t += 1;
+    }
+}
+
+/// Copies the upper triangle of the square `c` onto its lower one (exactly symmetric).
+pub fn mirror_upper(c: &mut DMatrix<f64>) {
+    let n = c.nrows();
+    assert_eq!(c.ncols(), n);
     for j in 0..n {
         for i in (j + 1)..n {
             c[(i, j)] = c[(j, i)];
@@ -831,6 +876,8 @@ pub struct AlignWork {
     evecs: DMatrix<f64>,
     r: DMatrix<f64>,
     tmp: DMatrix<f64>,
+    /// wᵀ (d × n): wᵀw by the column kernel.
+    wt: DMatrix<f64>,
 }
 
 impl AlignWork {
@@ -844,6 +891,7 @@ impl AlignWork {
             evecs: DMatrix::zeros(d, d),
             r: DMatrix::zeros(d, d),
             tmp: DMatrix::zeros(n, d),
+            wt: DMatrix::zeros(d, n),
         }
     }
 }
@@ -914,7 +962,10 @@ const POLAR_SERIES_MAX: f64 = 1e-3;
 /// matrix to rounding as the eigen-decomposition used otherwise, for a fraction of
 /// its cost.
 pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigma: f64) -> f64 {
-    gemm_tn_sym(&mut work.xtx, w, w);
+    // wᵀw from wᵀ by the (vectorised) column kernel, upper triangle mirrored.
+    transpose_into(&mut work.wt, w);
+    gemm(&mut work.xtx, 1.0, &work.wt, w, 0.0);
+    mirror_upper(&mut work.xtx);
     let d = w.ncols();
     let mut e2 = 0.0;
     for j in 0..d {
