@@ -651,8 +651,89 @@ pub fn spd_inverse(a: &DMatrix<f64>, factor: &mut DMatrix<f64>, out: &mut DMatri
         4 => spd_inverse_n(a, l, x, 4),
         5 => spd_inverse_n(a, l, x, 5),
         6 => spd_inverse_n(a, l, x, 6),
-        _ => spd_inverse_n(a, l, x, n),
+        _ => spd_inverse_large(a, l, x, n),
     }
+}
+
+/// [`spd_inverse_n`] for larger matrices, with the same operations in the same order
+/// (the same bits, but for the sign of an exact zero in L⁻¹) arranged to vectorise and
+/// to overlap: the factor left-looking by columns (column j less l[j.., p] l_jp for
+/// p < j, contiguous runs), L⁻¹ by forward substitution of L X = I with all columns
+/// advancing together row by row (each element of a column as in the dot-product form:
+/// −(a + b + …) and ((0 − a) − b) − … round alike), and the product with four sums
+/// side by side.
+fn spd_inverse_large(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool {
+    let (a, l, x) = (&a[..n * n], &mut l[..n * n], &mut x[..n * n]);
+    l.copy_from_slice(a);
+    for j in 0..n {
+        let (done, rest) = l.split_at_mut(j * n);
+        let col = &mut rest[..n];
+        for cp in done.chunks_exact(n) {
+            let ljp = cp[j];
+            for (y, &v) in col[j..].iter_mut().zip(&cp[j..]) {
+                *y -= v * ljp;
+            }
+        }
+        let d = col[j];
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let ljj = d.sqrt();
+        col[j] = ljj;
+        for y in &mut col[j + 1..] {
+            *y /= ljj;
+        }
+    }
+    // L⁻¹ into x.
+    for (j, c) in x.chunks_exact_mut(n).enumerate() {
+        c.fill(0.0);
+        c[j] = 1.0;
+    }
+    for (k, lk) in l.chunks_exact(n).enumerate() {
+        let (lkk, below) = (lk[k], &lk[k + 1..]);
+        for c in x.chunks_exact_mut(n).take(k + 1) {
+            let xk = c[k] / lkk;
+            c[k] = xk;
+            for (y, &v) in c[k + 1..].iter_mut().zip(below) {
+                *y -= v * xk;
+            }
+        }
+    }
+    // (A⁻¹)_ij = Σ_{p ≥ i} (L⁻¹)_pi (L⁻¹)_pj for i ≥ j, in place as in `spd_inverse_n`,
+    // rows i..i + 4 of column j together (written after all four are summed).
+    for j in 0..n {
+        let mut i = j;
+        while i + 4 <= n {
+            let (ci, cj) = (i * n, j * n);
+            let mut s = [0.0; 4];
+            for t in 0..4 {
+                for p in i + t..i + 3 {
+                    s[t] += x[ci + t * n + p] * x[cj + p];
+                }
+            }
+            for p in i + 3..n {
+                let xj = x[cj + p];
+                for (t, st) in s.iter_mut().enumerate() {
+                    *st += x[ci + t * n + p] * xj;
+                }
+            }
+            x[cj + i..cj + i + 4].copy_from_slice(&s);
+            i += 4;
+        }
+        for i in i..n {
+            let mut s = 0.0;
+            for p in i..n {
+                s += x[i * n + p] * x[j * n + p];
+            }
+            x[j * n + i] = s;
+        }
+    }
+    for j in 0..n {
+        for i in (j + 1)..n {
+            x[i * n + j] = x[j * n + i];
+        }
+    }
+    true
 }
 
 /// The body of [`spd_inverse`] on n × n column-major slices (a constant n where it is
@@ -1015,4 +1096,33 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
     work.tmp.copy_from(w);
     gemm(w, 1.0, &work.tmp, &work.r, 0.0);
     smin
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spd_inverse_large_matches_the_dot_product_form() {
+        for n in 1..=20 {
+            let b = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 11) as f64 * 0.37 - 1.4);
+            let a = &b * b.transpose() + DMatrix::identity(n, n) * 0.01;
+            let (mut l1, mut x1) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+            let (mut l2, mut x2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+            assert!(spd_inverse_n(
+                a.as_slice(),
+                l1.as_mut_slice(),
+                x1.as_mut_slice(),
+                n
+            ));
+            assert!(spd_inverse_large(
+                a.as_slice(),
+                l2.as_mut_slice(),
+                x2.as_mut_slice(),
+                n
+            ));
+            assert_eq!(x1, x2, "n = {n}");
+            assert!((&a * &x2 - DMatrix::identity(n, n)).norm() < 1e-8);
+        }
+    }
 }
