@@ -145,7 +145,8 @@ struct Level {
     lambda_inv: DMatrix<f64>,
     lambda_dot: DMatrix<f64>,
     jbar: DMatrix<f64>,
-    /// The block column of J̄⁻¹ belonging to this level (eq. 13), n × d.
+    /// The block column of J̄⁻¹ belonging to level 1 (eq. 13), n × m_1 (empty for the
+    /// others: theirs is Z_iᵀ).
     jbar_inv: DMatrix<f64>,
     v: DVector<f64>,
     y_d: DVector<f64>,
@@ -245,7 +246,7 @@ impl Level {
             lambda_inv: DMatrix::zeros(d, d),
             lambda_dot: DMatrix::zeros(d, d),
             jbar: DMatrix::zeros(d, n),
-            jbar_inv: DMatrix::zeros(n, d),
+            jbar_inv: DMatrix::zeros(if i == 0 { n } else { 0 }, if i == 0 { d } else { 0 }),
             v: DVector::zeros(d),
             y_d: DVector::zeros(d),
             y_d2: DVector::zeros(d),
@@ -737,8 +738,7 @@ impl Controller {
         let n = self.n;
         hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        transpose_into(&mut self.mdot, &self.data.c);
-        self.mdot += &self.data.c;
+        sym_sum_transpose(&mut self.mdot, &self.data.c);
         self.out.gravity.copy_from(&self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
@@ -942,8 +942,7 @@ impl Controller {
         // The projection of level i inverts the Gram matrix of the levels above
         // it: its torque fades as that one becomes singular (crate docs).
         self.out.fade[i] = fade_factor(gc.ratio, eps);
-        // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-        transpose_into(&mut l.jbar_inv, &l.z);
+        // (J̄⁻¹)_i = Z_iᵀ (eq. 13): read as Z_iᵀ where it is applied, never formed.
         Ok(())
     }
 
@@ -1024,7 +1023,12 @@ impl Controller {
             let mu = &mut self.mu;
             for (i, l) in self.levels.iter().enumerate() {
                 self.tmp_n.copy_from(qd);
-                gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                if i == 0 {
+                    gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                } else {
+                    // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+                    gemv_t(&mut self.tmp_n, -1.0, &l.z, &l.v, 1.0);
+                }
                 mu.u.set_column(i, &self.tmp_n);
             }
             gemm(&mut mu.minv_cu, 1.0, &self.data.c, &mu.u, 0.0);
@@ -1207,7 +1211,13 @@ impl Controller {
                     * (&l.zdot * &self.data.m + &l.z * &self.mdot - &l.lambda_dot * &l.jbar)
             };
             jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&jd);
-            jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&l.jbar_inv);
+            // (J̄⁻¹)_1 = J_1^{M+}, (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+            let ji = if row == 0 {
+                l.jbar_inv.clone()
+            } else {
+                l.z.transpose()
+            };
+            jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&ji);
             lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
             row += l.d;
         }
@@ -1254,6 +1264,22 @@ pub struct Diagnostics {
     pub m: DMatrix<f64>,
     pub minv: DMatrix<f64>,
     pub c: DMatrix<f64>,
+}
+
+/// `out = cᵀ + c` (square), one pass: (cᵀ + c)_ij = c_ji + c_ij is the same sum, to the
+/// bit, as its mirror c_ij + c_ji, so the upper triangle is formed and mirrored.
+fn sym_sum_transpose(out: &mut DMatrix<f64>, c: &DMatrix<f64>) {
+    let n = c.nrows();
+    assert_eq!(c.shape(), (n, n));
+    assert_eq!(out.shape(), (n, n));
+    let (o, c) = (out.as_mut_slice(), c.as_slice());
+    for j in 0..n {
+        for i in 0..=j {
+            let x = c[i * n + j] + c[j * n + i];
+            o[j * n + i] = x;
+            o[i * n + j] = x;
+        }
+    }
 }
 
 /// `out += aᵀ`.
