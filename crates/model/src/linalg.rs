@@ -198,16 +198,32 @@ pub fn spd_inverse<
 /// [`cholesky_in_place`] for a contiguous column-major `n × n` slice `a` (a
 /// `DMatrix`'s storage), in the left-looking column form: column j is updated by the
 /// columns k < j as whole contiguous runs (`a[j.., j] −= a[j.., k] a[j, k]`), which
-/// vectorises. Every element still receives its products in increasing k and is
-/// divided by the pivot last, so the factor is bitwise that of [`cholesky_in_place`].
+/// vectorises (four columns k per pass). Every element still receives its products in
+/// increasing k and is divided by the pivot last, so the factor is bitwise that of
+/// [`cholesky_in_place`].
 /// The strict upper triangle is set to 0.
 pub fn cholesky_in_place_slice(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
     check("cholesky_in_place_slice (n × n)", n * n, a.len())?;
     for j in 0..n {
         let (done, rest) = a.split_at_mut(j * n);
         let col = &mut rest[..n];
-        for k in 0..j {
-            let ck = &done[k * n..(k + 1) * n];
+        // Four columns k at a time in one pass over column j (each element still
+        // receives its products in increasing k), then the rest one by one.
+        let mut quads = done.chunks_exact(4 * n);
+        for q in &mut quads {
+            let (c0, q) = q.split_at(n);
+            let (c1, q) = q.split_at(n);
+            let (c2, c3) = q.split_at(n);
+            let (l0, l1, l2, l3) = (c0[j], c1[j], c2[j], c3[j]);
+            for ((x, (&a0, &a1)), (&a2, &a3)) in col[j..]
+                .iter_mut()
+                .zip(c0[j..].iter().zip(&c1[j..]))
+                .zip(c2[j..].iter().zip(&c3[j..]))
+            {
+                *x = (((*x - a0 * l0) - a1 * l1) - a2 * l2) - a3 * l3;
+            }
+        }
+        for ck in quads.remainder().chunks_exact(n) {
             let ljk = ck[j];
             for (x, &l) in col[j..].iter_mut().zip(&ck[j..]) {
                 *x -= l * ljk;
