@@ -3,7 +3,8 @@
 use crate::ControlError;
 use crate::dense::{
     AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
-    gemm_tn_sym, gemv, gemv_t, null_space_basis, orthonormalize_polar, procrustes_align,
+    gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar, procrustes_align,
+    transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -144,7 +145,8 @@ struct Level {
     lambda_inv: DMatrix<f64>,
     lambda_dot: DMatrix<f64>,
     jbar: DMatrix<f64>,
-    /// The block column of J̄⁻¹ belonging to this level (eq. 13), n × d.
+    /// The block column of J̄⁻¹ belonging to level 1 (eq. 13), n × m_1 (empty for the
+    /// others: theirs is Z_iᵀ).
     jbar_inv: DMatrix<f64>,
     v: DVector<f64>,
     y_d: DVector<f64>,
@@ -244,7 +246,7 @@ impl Level {
             lambda_inv: DMatrix::zeros(d, d),
             lambda_dot: DMatrix::zeros(d, d),
             jbar: DMatrix::zeros(d, n),
-            jbar_inv: DMatrix::zeros(n, d),
+            jbar_inv: DMatrix::zeros(if i == 0 { n } else { 0 }, if i == 0 { d } else { 0 }),
             v: DVector::zeros(d),
             y_d: DVector::zeros(d),
             y_d2: DVector::zeros(d),
@@ -261,11 +263,13 @@ impl Level {
 struct NullSpace {
     qr_work: DMatrix<f64>,
     qr_q: DMatrix<f64>,
-    /// V_{i−1}: orthonormal basis (n × (n − k)).
+    /// V_{i−1}: orthonormal basis (n × (n − k)), and Vᵀ.
     v: DMatrix<f64>,
+    vt: DMatrix<f64>,
     v_prev: DMatrix<f64>,
     has_prev: bool,
     vdot: DMatrix<f64>,
+    vdot_t: DMatrix<f64>,
     gram: DMatrix<f64>,
     gram_inv: DMatrix<f64>,
     t1: DMatrix<f64>,
@@ -301,9 +305,11 @@ impl NullSpace {
             qr_work: DMatrix::zeros(nb, kb),
             qr_q: DMatrix::zeros(nb, nb),
             v: DMatrix::zeros(nb, nd),
+            vt: DMatrix::zeros(nd, nb),
             v_prev: DMatrix::zeros(nb, nd),
             has_prev: false,
             vdot: DMatrix::zeros(nb, nd),
+            vdot_t: DMatrix::zeros(nd, nb),
             gram: DMatrix::zeros(kb, kb),
             gram_inv: DMatrix::zeros(kb, kb),
             t1: DMatrix::zeros(kb, nd),
@@ -732,8 +738,7 @@ impl Controller {
         let n = self.n;
         hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        transpose_into(&mut self.mdot, &self.data.c);
-        self.mdot += &self.data.c;
+        sym_sum_transpose(&mut self.mdot, &self.data.c);
         self.out.gravity.copy_from(&self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
@@ -888,8 +893,10 @@ impl Controller {
             // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
             // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
             let ns = &mut self.basis;
-            transpose_into(&mut l.z, &ns.v);
-            transpose_into(&mut l.zdot, &ns.vdot);
+            // Vᵀ and V̇ᵀ of this cycle, handed over (the buffers swap; the null space
+            // forms both afresh every cycle).
+            std::mem::swap(&mut l.z, &mut ns.vt);
+            std::mem::swap(&mut l.zdot, &mut ns.vdot_t);
             l.lambda.copy_from(&ns.vtmv);
             l.lambda_inv.copy_from(&ns.s);
             l.lambda_dot.copy_from(&ns.x);
@@ -935,8 +942,7 @@ impl Controller {
         // The projection of level i inverts the Gram matrix of the levels above
         // it: its torque fades as that one becomes singular (crate docs).
         self.out.fade[i] = fade_factor(gc.ratio, eps);
-        // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-        transpose_into(&mut l.jbar_inv, &l.z);
+        // (J̄⁻¹)_i = Z_iᵀ (eq. 13): read as Z_iᵀ where it is applied, never formed.
         Ok(())
     }
 
@@ -1017,7 +1023,12 @@ impl Controller {
             let mu = &mut self.mu;
             for (i, l) in self.levels.iter().enumerate() {
                 self.tmp_n.copy_from(qd);
-                gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                if i == 0 {
+                    gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                } else {
+                    // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+                    gemv_t(&mut self.tmp_n, -1.0, &l.z, &l.v, 1.0);
+                }
                 mu.u.set_column(i, &self.tmp_n);
             }
             gemm(&mut mu.minv_cu, 1.0, &self.data.c, &mu.u, 0.0);
@@ -1097,13 +1108,19 @@ impl Controller {
         gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
         gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
         gemm(&mut ns.vdot, -1.0, jaug_t, &ns.t2, 0.0);
-        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇.
+        // S = (VᵀMV)⁻¹ (always positive definite) and X = V̇ᵀMV + VᵀṀV + VᵀMV̇; the
+        // products with Vᵀ and V̇ᵀ (= Z_r and Ż_r) by the column kernel, the symmetric
+        // ones with the upper triangle mirrored.
+        transpose_into(&mut ns.vt, &ns.v);
+        transpose_into(&mut ns.vdot_t, &ns.vdot);
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
-        gemm_tn_sym(&mut ns.vtmv, &ns.v, &ns.mv);
+        gemm(&mut ns.vtmv, 1.0, &ns.vt, &ns.mv, 0.0);
+        mirror_upper(&mut ns.vtmv);
         ns.s_cond = damped_spd_inverse(&ns.vtmv, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
-        gemm_tn_sym(&mut ns.x, &ns.v, &ns.mdv);
-        gemm_tn(&mut ns.tmp_dd, 1.0, &ns.vdot, &ns.mv, 0.0);
+        gemm(&mut ns.x, 1.0, &ns.vt, &ns.mdv, 0.0);
+        mirror_upper(&mut ns.x);
+        gemm(&mut ns.tmp_dd, 1.0, &ns.vdot_t, &ns.mv, 0.0);
         ns.x += &ns.tmp_dd;
         transpose_add(&mut ns.x, &ns.tmp_dd);
         Ok(())
@@ -1194,7 +1211,13 @@ impl Controller {
                     * (&l.zdot * &self.data.m + &l.z * &self.mdot - &l.lambda_dot * &l.jbar)
             };
             jbar_dot.view_mut((row, 0), (l.d, n)).copy_from(&jd);
-            jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&l.jbar_inv);
+            // (J̄⁻¹)_1 = J_1^{M+}, (J̄⁻¹)_i = Z_iᵀ (eq. 13).
+            let ji = if row == 0 {
+                l.jbar_inv.clone()
+            } else {
+                l.z.transpose()
+            };
+            jbar_inv.view_mut((0, row), (n, l.d)).copy_from(&ji);
             lambda.view_mut((row, row), (l.d, l.d)).copy_from(&l.lambda);
             row += l.d;
         }
@@ -1243,28 +1266,18 @@ pub struct Diagnostics {
     pub c: DMatrix<f64>,
 }
 
-/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
-fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
-    assert_eq!(out.nrows(), a.ncols());
-    transpose_cols_into(out, a, 0);
-}
-
-/// `out = a[.., c0..c0 + p]ᵀ` with p = the rows of `out`: the transpose of a block of
-/// columns (row i of `a` from column c0 on becomes column i of `out`).
-fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
-    let (r, p) = (a.nrows(), out.nrows());
-    assert_eq!(out.ncols(), r);
-    assert!(c0 + p <= a.ncols());
-    if r == 0 || p == 0 {
-        return;
-    }
-    // Column c0 + t of `a` (contiguous) becomes row t of `out` (one element per
-    // column of `out`).
-    let a = &a.as_slice()[c0 * r..(c0 + p) * r];
-    let out = out.as_mut_slice();
-    for (t, src) in a.chunks_exact(r).enumerate() {
-        for (col, &x) in out.chunks_exact_mut(p).zip(src) {
-            col[t] = x;
+/// `out = cᵀ + c` (square), one pass: (cᵀ + c)_ij = c_ji + c_ij is the same sum, to the
+/// bit, as its mirror c_ij + c_ji, so the upper triangle is formed and mirrored.
+fn sym_sum_transpose(out: &mut DMatrix<f64>, c: &DMatrix<f64>) {
+    let n = c.nrows();
+    assert_eq!(c.shape(), (n, n));
+    assert_eq!(out.shape(), (n, n));
+    let (o, c) = (out.as_mut_slice(), c.as_slice());
+    for j in 0..n {
+        for i in 0..=j {
+            let x = c[i * n + j] + c[j * n + i];
+            o[j * n + i] = x;
+            o[i * n + j] = x;
         }
     }
 }

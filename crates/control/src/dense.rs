@@ -49,22 +49,28 @@ fn gemm_cols(
     assert!(k == 0 || n == 0 || (k - 1) * b.ls + (n - 1) * b.js < b.data.len());
     #[cfg(target_arch = "x86_64")]
     if m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
-        unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
+        if std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
+            // checked above.
+            unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta) };
+        } else {
+            // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
+            unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
+        }
         return;
     }
-    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta);
 }
 
 /// Products of at least this many multiply-adds run in the AVX2 build of
-/// [`gemm_blocks`] where the CPU has it (four lanes instead of two; below this the
-/// products are too short to gain from the wider registers).
+/// [`gemm_blocks`] where the CPU has it (four lanes instead of two, four output columns
+/// at a time, fused multiply-adds where the CPU has them; below this the products are
+/// too short to gain from the wider registers).
 #[cfg(target_arch = "x86_64")]
-const AVX2_MIN_WORK: usize = 512;
+const AVX2_MIN_WORK: usize = 64;
 
-/// [`gemm_blocks`] compiled for AVX2. Only wider registers, no fused multiply-add: every
-/// product and sum is rounded as in the portable build, so the results are bitwise the
-/// same on every CPU.
+/// [`gemm_blocks`] compiled for AVX2 without fused multiply-adds: every product and
+/// sum is rounded as in the portable build (the CPUs with AVX2 but no FMA).
 ///
 /// # Safety
 /// The CPU must support AVX2, and the sizes must satisfy the checks of [`gemm_cols`].
@@ -78,12 +84,40 @@ unsafe fn gemm_cols_avx2(
     b: Strided,
     beta: f64,
 ) {
-    gemm_blocks(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<4, false>(c, alpha, a, (m, k, n), b, beta);
 }
 
-/// The row blocks of [`gemm_cols`] (sizes checked there).
+/// [`gemm_blocks`] compiled for AVX2 and FMA: every multiply-add of the sums is one
+/// fused operation (one rounding instead of two: half the arithmetic, and results that
+/// differ from the portable build's at the rounding level, the same on every CPU with
+/// these features).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and the sizes must satisfy the checks of
+/// [`gemm_cols`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gemm_cols_avx2_fma(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    (m, k, n): (usize, usize, usize),
+    b: Strided,
+    beta: f64,
+) {
+    gemm_blocks::<4, true>(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// `s + a b`, fused (one rounding) in the builds for FMA.
 #[inline(always)]
-fn gemm_blocks(
+fn madd<const FMA: bool>(s: f64, a: f64, b: f64) -> f64 {
+    if FMA { a.mul_add(b, s) } else { s + a * b }
+}
+
+/// The row blocks of [`gemm_cols`] (sizes checked there), `NC` output columns at a
+/// time.
+#[inline(always)]
+fn gemm_blocks<const NC: usize, const FMA: bool>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -95,23 +129,24 @@ fn gemm_blocks(
     while i < m {
         let w = MR.min(m - i);
         match w {
-            8 => rows::<8>(c, alpha, a, (m, k, n), i, b, beta),
-            7 => rows::<7>(c, alpha, a, (m, k, n), i, b, beta),
-            6 => rows::<6>(c, alpha, a, (m, k, n), i, b, beta),
-            5 => rows::<5>(c, alpha, a, (m, k, n), i, b, beta),
-            4 => rows::<4>(c, alpha, a, (m, k, n), i, b, beta),
-            3 => rows::<3>(c, alpha, a, (m, k, n), i, b, beta),
-            2 => rows::<2>(c, alpha, a, (m, k, n), i, b, beta),
-            _ => rows::<1>(c, alpha, a, (m, k, n), i, b, beta),
+            8 => rows::<8, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            7 => rows::<7, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            6 => rows::<6, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            5 => rows::<5, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            4 => rows::<4, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            3 => rows::<3, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            2 => rows::<2, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
+            _ => rows::<1, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
         }
         i += w;
     }
 }
 
-/// Rows i..i+W of [`gemm_cols`], one output column at a time (W accumulators, which
-/// the compiler keeps in vector registers across the rows).
+/// Rows i..i+W of [`gemm_cols`]: `NC` output columns at a time (W × NC accumulators,
+/// which the compiler keeps in vector registers across the rows: NC independent
+/// chains of additions instead of one), the remaining columns one at a time.
 #[inline(always)]
-fn rows<const W: usize>(
+fn rows<const W: usize, const NC: usize, const FMA: bool>(
     c: &mut [f64],
     alpha: f64,
     a: &[f64],
@@ -122,15 +157,38 @@ fn rows<const W: usize>(
 ) {
     debug_assert!(i + W <= m);
     let (ap, bp, cp) = (a.as_ptr(), b.data.as_ptr(), c.as_mut_ptr());
-    for j in 0..n {
+    let mut j = 0;
+    while j + NC <= n {
+        let mut s = [[0.0; W]; NC];
+        for l in 0..k {
+            // SAFETY: l < k and j + u < n, so l ls + (j + u) js ≤ (k − 1) ls + (n − 1) js,
+            // which `gemm_cols` checked to be inside b; l m + i + t < (k − 1) m + m =
+            // k m ≤ a.len() since i + t < i + W ≤ m.
+            let al: [f64; W] = std::array::from_fn(|t| unsafe { *ap.add(l * m + i + t) });
+            for (u, su) in s.iter_mut().enumerate() {
+                let bl = unsafe { *bp.add(l * b.ls + (j + u) * b.js) };
+                for (st, &at) in su.iter_mut().zip(&al) {
+                    *st = madd::<FMA>(*st, at, bl);
+                }
+            }
+        }
+        for (u, su) in s.iter().enumerate() {
+            for (t, &st) in su.iter().enumerate() {
+                // SAFETY: (j + u) m + i + t < (n − 1) m + m = m n ≤ c.len() (checked in
+                // `gemm_cols`).
+                let x = unsafe { &mut *cp.add((j + u) * m + i + t) };
+                *x = scale(alpha, st, beta, *x);
+            }
+        }
+        j += NC;
+    }
+    for j in j..n {
         let mut s = [0.0; W];
         for l in 0..k {
-            // SAFETY: l < k and j < n, so l ls + j js ≤ (k − 1) ls + (n − 1) js, which
-            // `gemm_cols` checked to be inside b; l m + i + t < (k − 1) m + m = k m ≤
-            // a.len() since i + t < i + W ≤ m.
+            // SAFETY: as above, with one column j < n.
             let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
             for (t, st) in s.iter_mut().enumerate() {
-                *st += unsafe { *ap.add(l * m + i + t) } * bl;
+                *st = madd::<FMA>(*st, unsafe { *ap.add(l * m + i + t) }, bl);
             }
         }
         for (t, &st) in s.iter().enumerate() {
@@ -208,6 +266,51 @@ pub fn gemm_tn_sym(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>) {
     assert_eq!(c.shape(), (m, n));
     assert_eq!(m, n);
     gemm_tn_block(c, 1.0, a, b, 0.0, true);
+    mirror_upper(c);
+}
+
+/// `out = aᵀ` (row i of `a`, a strided run, becomes column i of `out`).
+pub fn transpose_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
+    assert_eq!(out.nrows(), a.ncols());
+    transpose_cols_into(out, a, 0);
+}
+
+/// `out = a[.., c0..c0 + p]ᵀ` with p = the rows of `out`: the transpose of a block of
+/// columns (row i of `a` from column c0 on becomes column i of `out`).
+pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) {
+    let (r, p) = (a.nrows(), out.nrows());
+    assert_eq!(out.ncols(), r);
+    assert!(c0 + p <= a.ncols());
+    if r == 0 || p == 0 {
+        return;
+    }
+    // Four columns c0 + t.. of `a` (contiguous) at a time become rows t..t + 4 of
+    // `out`: four streams read down the columns, four adjacent elements written to
+    // every column of `out`.
+    let a = &a.as_slice()[c0 * r..(c0 + p) * r];
+    let out = out.as_mut_slice();
+    let mut t = 0;
+    while t + 4 <= p {
+        let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
+        let (s2, s3) = (&a[(t + 2) * r..(t + 3) * r], &a[(t + 3) * r..(t + 4) * r]);
+        for (i, col) in out.chunks_exact_mut(p).enumerate() {
+            col[t..t + 4].copy_from_slice(&[s0[i], s1[i], s2[i], s3[i]]);
+        }
+        t += 4;
+    }
+    while t < p {
+        let src = &a[t * r..(t + 1) * r];
+        for (col, &x) in out.chunks_exact_mut(p).zip(src) {
+            col[t] = x;
+        }
+        t += 1;
+    }
+}
+
+/// Copies the upper triangle of the square `c` onto its lower one (exactly symmetric).
+pub fn mirror_upper(c: &mut DMatrix<f64>) {
+    let n = c.nrows();
+    assert_eq!(c.ncols(), n);
     for j in 0..n {
         for i in (j + 1)..n {
             c[(i, j)] = c[(j, i)];
@@ -405,53 +508,110 @@ pub fn symmetric_eigen(
     max_sweeps: usize,
 ) {
     let n = a.nrows();
+    assert_eq!(a.shape(), (n, n));
+    assert_eq!(evecs.shape(), (n, n));
     evecs.fill_with_identity();
+    jacobi(a.as_mut_slice(), n, Some(evecs.as_mut_slice()), max_sweeps);
+    for i in 0..n {
+        evals[i] = a[(i, i)];
+    }
+}
+
+/// The eigenvalues alone of [`symmetric_eigen`] (the same rotations, so the same
+/// values to the bit, without accumulating the eigenvectors).
+pub fn symmetric_eigenvalues(a: &mut DMatrix<f64>, evals: &mut DVector<f64>, max_sweeps: usize) {
+    let n = a.nrows();
+    assert_eq!(a.shape(), (n, n));
+    jacobi(a.as_mut_slice(), n, None, max_sweeps);
+    for i in 0..n {
+        evals[i] = a[(i, i)];
+    }
+}
+
+/// Rotations whose parameters are formed together in [`jacobi`] (a stack buffer).
+const JACOBI_BATCH: usize = 8;
+
+/// The sweeps of [`symmetric_eigen`] on the column-major n × n slice `a`, rotating
+/// the columns of `v` along when given. Each sweep visits every pair (p, q) once in
+/// the round-robin order (n − 1 rounds of ⌊n/2⌋ disjoint pairs, n + 1 with a resting
+/// index for odd n; Golub & Van Loan § 8.5.5). A rotation of (p, q) leaves every
+/// other entry a_rs, r, s ∉ {p, q}, as it is, so the rotations of one round have
+/// their angles from the matrix at the start of the round: their divisions and
+/// square roots, which dominate small matrices, are formed side by side instead of
+/// one chain per rotation.
+fn jacobi(a: &mut [f64], n: usize, mut v: Option<&mut [f64]>, max_sweeps: usize) {
+    let a = &mut a[..n * n];
+    // Players of the round robin: an even count, index n resting when n is odd.
+    let players = n + (n & 1);
     for _ in 0..max_sweeps {
         let mut off = 0.0;
         let mut diag = 0.0;
-        for j in 0..n {
-            diag += a[(j, j)] * a[(j, j)];
-            for i in 0..j {
-                off += a[(i, j)] * a[(i, j)];
+        for (j, col) in a.chunks_exact(n).enumerate() {
+            diag += col[j] * col[j];
+            for &x in &col[..j] {
+                off += x * x;
             }
         }
         if off <= 1e-30 * diag || off == 0.0 {
             break;
         }
-        for p in 0..n {
-            for qi in (p + 1)..n {
-                let apq = a[(p, qi)];
-                if apq == 0.0 {
-                    continue;
+        for round in 0..players.saturating_sub(1) {
+            // Player at seat 0 stays; seat j ≥ 1 holds 1 + (j − 1 + round) mod (players − 1).
+            let seat = |j: usize| {
+                if j == 0 {
+                    0
+                } else {
+                    1 + (j - 1 + round) % (players - 1)
                 }
-                let theta = (a[(qi, qi)] - a[(p, p)]) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let akp = a[(k, p)];
-                    let akq = a[(k, qi)];
-                    a[(k, p)] = c * akp - s * akq;
-                    a[(k, qi)] = s * akp + c * akq;
+            };
+            let mut i = 0;
+            while i < players / 2 {
+                // Angles of up to JACOBI_BATCH pairs of the round, then their rotations.
+                let mut rot = [(0usize, 0usize, 0.0f64, 0.0f64); JACOBI_BATCH];
+                let mut count = 0;
+                while i < players / 2 && count < JACOBI_BATCH {
+                    let (x, y) = (seat(i), seat(players - 1 - i));
+                    i += 1;
+                    let (p, q) = (x.min(y), x.max(y));
+                    if q >= n {
+                        continue;
+                    }
+                    let apq = a[q * n + p];
+                    if apq == 0.0 {
+                        continue;
+                    }
+                    let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
+                    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                    let t = if theta == 0.0 { 1.0 } else { t };
+                    let c = 1.0 / (t * t + 1.0).sqrt();
+                    rot[count] = (p, q, c, t * c);
+                    count += 1;
                 }
-                for k in 0..n {
-                    let apk = a[(p, k)];
-                    let aqk = a[(qi, k)];
-                    a[(p, k)] = c * apk - s * aqk;
-                    a[(qi, k)] = s * apk + c * aqk;
-                }
-                for k in 0..n {
-                    let vkp = evecs[(k, p)];
-                    let vkq = evecs[(k, qi)];
-                    evecs[(k, p)] = c * vkp - s * vkq;
-                    evecs[(k, qi)] = s * vkp + c * vkq;
+                for &(p, q, c, s) in &rot[..count] {
+                    rotate_columns(a, n, p, q, c, s);
+                    for col in a.chunks_exact_mut(n) {
+                        let (apk, aqk) = (col[p], col[q]);
+                        col[p] = c * apk - s * aqk;
+                        col[q] = s * apk + c * aqk;
+                    }
+                    if let Some(v) = v.as_deref_mut() {
+                        rotate_columns(v, n, p, q, c, s);
+                    }
                 }
             }
         }
     }
-    for i in 0..n {
-        evals[i] = a[(i, i)];
+}
+
+/// Columns p < q of the column-major `x` (n rows) ← (c x_p − s x_q, s x_p + c x_q).
+#[inline(always)]
+fn rotate_columns(x: &mut [f64], n: usize, p: usize, q: usize, c: f64, s: f64) {
+    let (left, right) = x.split_at_mut(q * n);
+    let (xp, xq) = (&mut left[p * n..(p + 1) * n], &mut right[..n]);
+    for (u, w) in xp.iter_mut().zip(xq.iter_mut()) {
+        let (kp, kq) = (*u, *w);
+        *u = c * kp - s * kq;
+        *w = s * kp + c * kq;
     }
 }
 
@@ -491,8 +651,89 @@ pub fn spd_inverse(a: &DMatrix<f64>, factor: &mut DMatrix<f64>, out: &mut DMatri
         4 => spd_inverse_n(a, l, x, 4),
         5 => spd_inverse_n(a, l, x, 5),
         6 => spd_inverse_n(a, l, x, 6),
-        _ => spd_inverse_n(a, l, x, n),
+        _ => spd_inverse_large(a, l, x, n),
     }
+}
+
+/// [`spd_inverse_n`] for larger matrices, with the same operations in the same order
+/// (the same bits, but for the sign of an exact zero in L⁻¹) arranged to vectorise and
+/// to overlap: the factor left-looking by columns (column j less l[j.., p] l_jp for
+/// p < j, contiguous runs), L⁻¹ by forward substitution of L X = I with all columns
+/// advancing together row by row (each element of a column as in the dot-product form:
+/// −(a + b + …) and ((0 − a) − b) − … round alike), and the product with four sums
+/// side by side.
+fn spd_inverse_large(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool {
+    let (a, l, x) = (&a[..n * n], &mut l[..n * n], &mut x[..n * n]);
+    l.copy_from_slice(a);
+    for j in 0..n {
+        let (done, rest) = l.split_at_mut(j * n);
+        let col = &mut rest[..n];
+        for cp in done.chunks_exact(n) {
+            let ljp = cp[j];
+            for (y, &v) in col[j..].iter_mut().zip(&cp[j..]) {
+                *y -= v * ljp;
+            }
+        }
+        let d = col[j];
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let ljj = d.sqrt();
+        col[j] = ljj;
+        for y in &mut col[j + 1..] {
+            *y /= ljj;
+        }
+    }
+    // L⁻¹ into x.
+    for (j, c) in x.chunks_exact_mut(n).enumerate() {
+        c.fill(0.0);
+        c[j] = 1.0;
+    }
+    for (k, lk) in l.chunks_exact(n).enumerate() {
+        let (lkk, below) = (lk[k], &lk[k + 1..]);
+        for c in x.chunks_exact_mut(n).take(k + 1) {
+            let xk = c[k] / lkk;
+            c[k] = xk;
+            for (y, &v) in c[k + 1..].iter_mut().zip(below) {
+                *y -= v * xk;
+            }
+        }
+    }
+    // (A⁻¹)_ij = Σ_{p ≥ i} (L⁻¹)_pi (L⁻¹)_pj for i ≥ j, in place as in `spd_inverse_n`,
+    // rows i..i + 4 of column j together (written after all four are summed).
+    for j in 0..n {
+        let mut i = j;
+        while i + 4 <= n {
+            let (ci, cj) = (i * n, j * n);
+            let mut s = [0.0; 4];
+            for t in 0..4 {
+                for p in i + t..i + 3 {
+                    s[t] += x[ci + t * n + p] * x[cj + p];
+                }
+            }
+            for p in i + 3..n {
+                let xj = x[cj + p];
+                for (t, st) in s.iter_mut().enumerate() {
+                    *st += x[ci + t * n + p] * xj;
+                }
+            }
+            x[cj + i..cj + i + 4].copy_from_slice(&s);
+            i += 4;
+        }
+        for i in i..n {
+            let mut s = 0.0;
+            for p in i..n {
+                s += x[i * n + p] * x[j * n + p];
+            }
+            x[j * n + i] = s;
+        }
+    }
+    for j in 0..n {
+        for i in (j + 1)..n {
+            x[i * n + j] = x[j * n + i];
+        }
+    }
+    true
 }
 
 /// The body of [`spd_inverse`] on n × n column-major slices (a constant n where it is
@@ -567,6 +808,56 @@ pub struct Conditioning {
     pub damping: f64,
 }
 
+/// The conditioning of `a` when its exact inverse (in `out`, from the Cholesky factor)
+/// needs no damping, else None (the eigen-decomposition decides):
+/// 1. λ_min ≥ 1/‖A⁻¹‖_F and λ_max ≤ tr A: the ratio is at least 1/(‖A⁻¹‖_F tr A),
+///    accepted (and reported) when that clears [`EXACT_RATIO_FACTOR`] `× ε`. (A
+///    tighter bound, ‖A‖_F for tr A, would report a different ratio, and the safety
+///    layer's conflict fade reads the ratio up to 100 ε_c = 10⁻³.)
+/// 2. Otherwise the eigenvalues alone (no eigenvectors): the exact ratio, and no
+///    damping when it is at least ε — unless λ_min ≤ 1/max_i (A⁻¹)_ii and
+///    λ_max ≥ max_i a_ii already put the ratio below ε (damping certainly due).
+fn undamped_conditioning(
+    a: &DMatrix<f64>,
+    out: &DMatrix<f64>,
+    work: &mut SpdWork,
+    eps: f64,
+    floor: f64,
+) -> Option<Conditioning> {
+    let m = a.nrows();
+    let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
+    let bound = 1.0 / (out.norm() * trace);
+    if !(bound.is_finite() && trace >= floor) {
+        return None;
+    }
+    let accept = |ratio: f64| Conditioning {
+        ratio: ratio.min(1.0),
+        damping: 0.0,
+    };
+    if bound >= EXACT_RATIO_FACTOR * eps {
+        return Some(accept(bound));
+    }
+    let max_diag = |x: &DMatrix<f64>| (0..m).map(|i| x[(i, i)]).fold(0.0, f64::max);
+    let upper = 1.0 / (max_diag(out) * max_diag(a));
+    // NaN (a vanished diagonal) as well as below ε: the eigen-decomposition decides.
+    if upper.is_nan() || upper < eps {
+        return None;
+    }
+    work.a.copy_from(a);
+    symmetric_eigenvalues(&mut work.a, &mut work.evals, 30);
+    let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+    for &l in work.evals.iter() {
+        lmax = lmax.max(l);
+        lmin = lmin.min(l);
+    }
+    let ratio = if lmax > 0.0 {
+        lmin.max(0.0) / lmax
+    } else {
+        0.0
+    };
+    (ratio >= eps && lmax >= floor).then(|| accept(ratio))
+}
+
 /// Damped inverse of a symmetric positive semi-definite matrix `a` (m×m) into `out`:
 /// `(A + δ I)⁻¹` through its eigen-decomposition, with the damping
 /// `δ = ε λ_max (1 − r/ε)²` switched on smoothly when the eigenvalue ratio
@@ -575,12 +866,11 @@ pub struct Conditioning {
 /// (r ≥ ε) it is the exact inverse. The result is bounded by `1/(ε λ_max)` (and by
 /// `1/floor` when `a` vanishes altogether).
 ///
-/// Fast path: a Cholesky inverse, accepted when the guaranteed lower bound of the
-/// eigenvalue ratio, `1 / (‖A⁻¹‖_F · tr A)` (λ_min ≥ 1/‖A⁻¹‖_F, λ_max ≤ tr A), is at
-/// least [`EXACT_RATIO_FACTOR`] `× ε` — then no damping is due and the inverse is
-/// exact; the reported ratio is that lower bound. Otherwise the eigen-decomposition
-/// decides, and the reported ratio is exact (and so continuous in the state) wherever
-/// it is below `EXACT_RATIO_FACTOR × ε`.
+/// Fast path: a Cholesky inverse, kept whenever no damping is due (see
+/// [`undamped_conditioning`]: a guaranteed lower bound of the eigenvalue ratio first,
+/// the eigenvalues alone where it cannot decide). Otherwise the eigen-decomposition
+/// decides. The reported ratio is exact (and so continuous in the state) wherever it
+/// is below `EXACT_RATIO_FACTOR × ε`, else a lower bound of it.
 pub fn damped_spd_inverse(
     a: &DMatrix<f64>,
     out: &mut DMatrix<f64>,
@@ -595,16 +885,10 @@ pub fn damped_spd_inverse(
             damping: 0.0,
         };
     }
-    if spd_inverse(a, &mut work.a, out) {
-        let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
-        let inv_norm = out.norm();
-        let bound = 1.0 / (inv_norm * trace);
-        if bound.is_finite() && bound >= EXACT_RATIO_FACTOR * eps && trace >= floor {
-            return Conditioning {
-                ratio: bound.min(1.0),
-                damping: 0.0,
-            };
-        }
+    if spd_inverse(a, &mut work.a, out)
+        && let Some(c) = undamped_conditioning(a, out, work, eps, floor)
+    {
+        return c;
     }
     work.a.copy_from(a);
     symmetric_eigen(&mut work.a, &mut work.evals, &mut work.evecs, 30);
@@ -638,6 +922,30 @@ pub fn damped_spd_inverse(
     Conditioning { ratio, damping }
 }
 
+/// The inverse of [`damped_spd_inverse`] alone, for a caller that does not read the
+/// conditioning: the same matrix, but the Cholesky inverse is accepted as soon as a
+/// guaranteed lower bound of the eigenvalue ratio, 1/(‖A⁻¹‖_F ‖A‖_F) (λ_min ≥
+/// 1/‖A⁻¹‖_F, λ_max ≤ ‖A‖_F), shows that no damping is due (at least ε, with
+/// λ_max ≥ tr A / m clear of `floor`) — the ratio itself, which the eigen-decomposition
+/// would have to find below `EXACT_RATIO_FACTOR × ε`, is not needed.
+pub fn damped_spd_inverse_only(
+    a: &DMatrix<f64>,
+    out: &mut DMatrix<f64>,
+    work: &mut SpdWork,
+    eps: f64,
+    floor: f64,
+) {
+    let m = a.nrows();
+    if m > 0 && spd_inverse(a, &mut work.a, out) {
+        let trace: f64 = (0..m).map(|i| a[(i, i)]).sum();
+        let bound = 1.0 / (out.norm() * a.norm());
+        if bound.is_finite() && bound >= eps && trace >= m as f64 * floor {
+            return;
+        }
+    }
+    damped_spd_inverse(a, out, work, eps, floor);
+}
+
 /// Workspace of [`procrustes_align`] for bases with `d` columns.
 #[derive(Clone, Debug)]
 pub struct AlignWork {
@@ -649,6 +957,8 @@ pub struct AlignWork {
     evecs: DMatrix<f64>,
     r: DMatrix<f64>,
     tmp: DMatrix<f64>,
+    /// wᵀ (d × n): wᵀw by the column kernel.
+    wt: DMatrix<f64>,
 }
 
 impl AlignWork {
@@ -662,6 +972,7 @@ impl AlignWork {
             evecs: DMatrix::zeros(d, d),
             r: DMatrix::zeros(d, d),
             tmp: DMatrix::zeros(n, d),
+            wt: DMatrix::zeros(d, n),
         }
     }
 }
@@ -732,7 +1043,10 @@ const POLAR_SERIES_MAX: f64 = 1e-3;
 /// matrix to rounding as the eigen-decomposition used otherwise, for a fraction of
 /// its cost.
 pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigma: f64) -> f64 {
-    gemm_tn_sym(&mut work.xtx, w, w);
+    // wᵀw from wᵀ by the (vectorised) column kernel, upper triangle mirrored.
+    transpose_into(&mut work.wt, w);
+    gemm(&mut work.xtx, 1.0, &work.wt, w, 0.0);
+    mirror_upper(&mut work.xtx);
     let d = w.ncols();
     let mut e2 = 0.0;
     for j in 0..d {
@@ -782,4 +1096,33 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
     work.tmp.copy_from(w);
     gemm(w, 1.0, &work.tmp, &work.r, 0.0);
     smin
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spd_inverse_large_matches_the_dot_product_form() {
+        for n in 1..=20 {
+            let b = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 11) as f64 * 0.37 - 1.4);
+            let a = &b * b.transpose() + DMatrix::identity(n, n) * 0.01;
+            let (mut l1, mut x1) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+            let (mut l2, mut x2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+            assert!(spd_inverse_n(
+                a.as_slice(),
+                l1.as_mut_slice(),
+                x1.as_mut_slice(),
+                n
+            ));
+            assert!(spd_inverse_large(
+                a.as_slice(),
+                l2.as_mut_slice(),
+                x2.as_mut_slice(),
+                n
+            ));
+            assert_eq!(x1, x2, "n = {n}");
+            assert!((&a * &x2 - DMatrix::identity(n, n)).norm() < 1e-8);
+        }
+    }
 }

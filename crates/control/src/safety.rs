@@ -107,7 +107,7 @@
 //! Allocation-free after [`Safety::new`].
 
 use crate::ControlError;
-use crate::dense::{SpdWork, damped_spd_inverse};
+use crate::dense::{SpdWork, damped_spd_inverse_only};
 use hcc_model::Model;
 use nalgebra::{DMatrix, DVector};
 
@@ -641,7 +641,7 @@ impl Safety {
                     g[(a, b)] = c.w[(a, b)];
                 }
             }
-            damped_spd_inverse(
+            damped_spd_inverse_only(
                 g,
                 &mut self.g_inv[i],
                 &mut self.spd[i],

@@ -93,9 +93,17 @@ pub fn jacobian(
             continue;
         }
         let m = task.dim(n);
-        j.rows_mut(o, m).fill(0.0);
+        // A task of all the rows (a posture level): one contiguous fill.
+        let zero = |x: &mut DMatrix<f64>| {
+            if o == 0 && m == x.nrows() {
+                x.as_mut_slice().fill(0.0);
+            } else {
+                x.rows_mut(o, m).fill(0.0);
+            }
+        };
+        zero(j);
         if let Some(jd) = jdot.as_deref_mut() {
-            jd.rows_mut(o, m).fill(0.0);
+            zero(jd);
         }
         match task {
             TaskSpec::Joints { indices } => {

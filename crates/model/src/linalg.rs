@@ -198,16 +198,32 @@ pub fn spd_inverse<
 /// [`cholesky_in_place`] for a contiguous column-major `n × n` slice `a` (a
 /// `DMatrix`'s storage), in the left-looking column form: column j is updated by the
 /// columns k < j as whole contiguous runs (`a[j.., j] −= a[j.., k] a[j, k]`), which
-/// vectorises. Every element still receives its products in increasing k and is
-/// divided by the pivot last, so the factor is bitwise that of [`cholesky_in_place`].
+/// vectorises (four columns k per pass). Every element still receives its products in
+/// increasing k and is divided by the pivot last, so the factor is bitwise that of
+/// [`cholesky_in_place`].
 /// The strict upper triangle is set to 0.
 pub fn cholesky_in_place_slice(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
     check("cholesky_in_place_slice (n × n)", n * n, a.len())?;
     for j in 0..n {
         let (done, rest) = a.split_at_mut(j * n);
         let col = &mut rest[..n];
-        for k in 0..j {
-            let ck = &done[k * n..(k + 1) * n];
+        // Four columns k at a time in one pass over column j (each element still
+        // receives its products in increasing k), then the rest one by one.
+        let mut quads = done.chunks_exact(4 * n);
+        for q in &mut quads {
+            let (c0, q) = q.split_at(n);
+            let (c1, q) = q.split_at(n);
+            let (c2, c3) = q.split_at(n);
+            let (l0, l1, l2, l3) = (c0[j], c1[j], c2[j], c3[j]);
+            for ((x, (&a0, &a1)), (&a2, &a3)) in col[j..]
+                .iter_mut()
+                .zip(c0[j..].iter().zip(&c1[j..]))
+                .zip(c2[j..].iter().zip(&c3[j..]))
+            {
+                *x = (((*x - a0 * l0) - a1 * l1) - a2 * l2) - a3 * l3;
+            }
+        }
+        for ck in quads.remainder().chunks_exact(n) {
             let ljk = ck[j];
             for (x, &l) in col[j..].iter_mut().zip(&ck[j..]) {
                 *x -= l * ljk;
@@ -232,7 +248,8 @@ pub fn cholesky_in_place_slice(a: &mut [f64], n: usize) -> Result<(), LinalgErro
 /// together, one row of the substitutions at a time, so their divisions (whose latency
 /// dominates small solves) overlap instead of forming one chain per column. The forward
 /// substitution runs column-oriented (`b[i] −= l[i, k] b[k]` for i > k, contiguous in
-/// i), the backward one by dot products down the contiguous columns of `l`; every
+/// i), the backward one by dot products down the contiguous columns of `l`, four
+/// right-hand sides side by side; every
 /// element is formed by the same operations in the same order as in
 /// [`cholesky_solve_in_place`], so the solution is bitwise the same.
 pub fn cholesky_solve_slice(l: &[f64], n: usize, b: &mut [f64]) -> Result<(), LinalgError> {
@@ -272,12 +289,38 @@ fn solve_n(l: &[f64], b: &mut [f64], n: usize) {
     }
     // Lᵀ x = y
     for (i, li) in l.chunks_exact(n).enumerate().rev() {
-        for x in b.chunks_exact_mut(n) {
+        let (lt, lii) = (&li[i + 1..], li[i]);
+        // From n = 8 on four right-hand sides at a time, so that four chains of
+        // subtractions run side by side (each still in the same order).
+        let mut quads = b.chunks_exact_mut(if n >= 8 { 4 * n } else { b.len() + 1 });
+        for q in &mut quads {
+            let (x01, x23) = q.split_at_mut(2 * n);
+            let (x0, x1) = x01.split_at_mut(n);
+            let (x2, x3) = x23.split_at_mut(n);
+            let mut s = [x0[i], x1[i], x2[i], x3[i]];
+            let t = i + 1;
+            for (((&lki, &y0), (&y1, &y2)), &y3) in lt
+                .iter()
+                .zip(&x0[t..])
+                .zip(x1[t..].iter().zip(&x2[t..]))
+                .zip(&x3[t..])
+            {
+                s[0] -= lki * y0;
+                s[1] -= lki * y1;
+                s[2] -= lki * y2;
+                s[3] -= lki * y3;
+            }
+            x0[i] = s[0] / lii;
+            x1[i] = s[1] / lii;
+            x2[i] = s[2] / lii;
+            x3[i] = s[3] / lii;
+        }
+        for x in quads.into_remainder().chunks_exact_mut(n) {
             let mut s = x[i];
-            for (&lki, &xk) in li[i + 1..].iter().zip(&x[i + 1..]) {
+            for (&lki, &xk) in lt.iter().zip(&x[i + 1..]) {
                 s -= lki * xk;
             }
-            x[i] = s / li[i];
+            x[i] = s / lii;
         }
     }
 }
@@ -296,7 +339,7 @@ mod tests {
 
     #[test]
     fn factor_solve_inverse() {
-        for n in 1..8 {
+        for n in 1..13 {
             let a = spd(n);
             let mut l = a.clone();
             cholesky_in_place(&mut l).unwrap();
@@ -305,7 +348,7 @@ mod tests {
             let mut x = b.clone();
             cholesky_solve_in_place(&l, &mut x).unwrap();
             assert!((&a * &x - &b).norm() < 1e-10);
-            let mut bm = DMatrix::from_fn(n, 3, |i, j| (i + j) as f64);
+            let mut bm = DMatrix::from_fn(n, 6, |i, j| (i + j) as f64);
             let rhs = bm.clone();
             cholesky_solve_matrix_in_place(&l, &mut bm).unwrap();
             assert!((&a * &bm - &rhs).norm() < 1e-10);
