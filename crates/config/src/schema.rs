@@ -398,7 +398,7 @@ pub struct SafetySection {
     pub spring_saturation: Option<bool>,
     /// The velocity governor (the springs stop driving a joint near its velocity limit).
     pub velocity_governor: Option<bool>,
-    /// Velocity-limit joint damping rate, 1/s (default 0: off).
+    /// Velocity-limit joint damping rate, 1/s (default 100; 0: off).
     pub velocity_damping: Option<f64>,
     /// Null-space damping rate of faded levels, 1/s.
     pub null_space_damping: Option<f64>,

@@ -101,7 +101,7 @@
 //! rest), and below f_on of every limit nothing changes (bit for bit).
 //!
 //! **Velocity limits: the damping.** A joint in the band is also damped,
-//! −s(x_k) · `velocity_damping` · m_k q̇_k (default 50 1/s, 0 switches it off):
+//! −s(x_k) · `velocity_damping` · m_k q̇_k (default 100 1/s, 0 switches it off):
 //! dissipative and C¹ at the onset.
 //!
 //! Allocation-free after [`Safety::new`].
@@ -164,7 +164,7 @@ impl Default for SafetySpec {
             velocity_limit_full_fraction: 0.9,
             spring_saturation: true,
             velocity_governor: true,
-            velocity_damping: 50.0,
+            velocity_damping: 100.0,
             null_space_damping: 20.0,
             conflict_fade_ratio: 1e-5,
             fade_tank_max: 5.0,
