@@ -140,8 +140,11 @@ fn goals_gains_rejections_and_the_monitor() {
         assert!(refused.stderr.contains("dimensions"), "{}", refused.log());
 
         // A goal 10 cm away, over 1 s: accepted, and the TCP is there (< 1 mm)
-        // within the transition plus 2 s.
+        // within the transition plus 2 s of the controller's time (counted in
+        // its telemetry samples, one per answered state at 1 kHz; the wall
+        // clock of a loaded machine says nothing about the control).
         let t0 = Instant::now();
+        let seq0 = sample(&ns, &prefix, dir.path())["seq"].as_u64().unwrap();
         let out = hcc(
             &[
                 "goal",
@@ -163,18 +166,18 @@ fn goals_gains_rejections_and_the_monitor() {
         let reached = loop {
             let s = sample(&ns, &prefix, dir.path());
             let goal: Vec<f64> = serde_json::from_value(s["levels"][0]["goal"].clone()).unwrap();
+            let cycles = s["seq"].as_u64().unwrap().saturating_sub(seq0);
             if (goal[1] - 0.10).abs() < 1e-12 && error_norm(&s, 0) < 1e-3 {
-                break t0.elapsed();
+                break (cycles, t0.elapsed());
             }
-            assert!(
-                t0.elapsed() < Duration::from_secs(3),
-                "not there after 3 s: {s}"
-            );
+            assert!(cycles < 3000, "not there after 3 s of control: {s}");
+            assert!(t0.elapsed() < Duration::from_secs(120), "no progress: {s}");
             std::thread::sleep(Duration::from_millis(50));
         };
         println!(
-            "TCP within 1 mm of the new goal after {:.2} s",
-            reached.as_secs_f64()
+            "TCP within 1 mm of the new goal after {} control cycles ({:.2} s of wall time)",
+            reached.0,
+            reached.1.as_secs_f64()
         );
 
         // Bad setpoints: the controller's reason, a non-zero exit, nothing changed.
