@@ -59,7 +59,63 @@ fn gemm_cols(
         }
         return;
     }
+    if (1..=FIXED_MAX).contains(&m) && (1..=FIXED_MAX).contains(&k) {
+        FIXED[(m - 1) * FIXED_MAX + k - 1](c, alpha, a, n, b, beta);
+        return;
+    }
     gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// The largest row count and inner dimension of the fixed-size product builds.
+const FIXED_MAX: usize = 8;
+
+/// A build of the portable [`gemm_cols`] for one (m, k): `(c, alpha, a, n, b, beta)`.
+type FixedKernel = fn(&mut [f64], f64, &[f64], usize, Strided, f64);
+
+/// `[$f::<M, K>, …]` for M, K in 1..=8 (row-major in (M, K)).
+macro_rules! fixed_table {
+    ($f:ident) => {
+        fixed_table!(@m $f, [1 2 3 4 5 6 7 8])
+    };
+    (@m $f:ident, [$($m:literal)*]) => {
+        [$(
+            $f::<$m, 1>, $f::<$m, 2>, $f::<$m, 3>, $f::<$m, 4>,
+            $f::<$m, 5>, $f::<$m, 6>, $f::<$m, 7>, $f::<$m, 8>,
+        )*]
+    };
+}
+
+/// The portable products with m, k ≤ [`FIXED_MAX`], indexed by (m − 1) 8 + k − 1.
+static FIXED: [FixedKernel; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_cols);
+
+/// [`gemm_cols`] for m = M, k = K (sizes checked there): fully unrolled over the
+/// rows and the inner dimension, one output column at a time — the operations of
+/// [`gemm_blocks`] in the same order, without its loop set-up.
+fn fixed_cols<const M: usize, const K: usize>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    n: usize,
+    b: Strided,
+    beta: f64,
+) {
+    let a = &a[..M * K];
+    let c = &mut c[..M * n];
+    let bp = b.data.as_ptr();
+    for (j, cj) in c.chunks_exact_mut(M).enumerate() {
+        let mut s = [0.0; M];
+        for l in 0..K {
+            // SAFETY: l < K = k and j < n, so l ls + j js ≤ (k − 1) ls + (n − 1) js,
+            // which `gemm_cols` checked to be inside b.
+            let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
+            for (t, st) in s.iter_mut().enumerate() {
+                *st = madd::<false>(*st, a[l * M + t], bl);
+            }
+        }
+        for (x, &st) in cj.iter_mut().zip(&s) {
+            *x = scale(alpha, st, beta, *x);
+        }
+    }
 }
 
 /// Products of at least this many multiply-adds run in the AVX2 build of
