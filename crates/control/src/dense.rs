@@ -459,6 +459,10 @@ pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f6
     assert_eq!(n, y.len());
     let (a, x) = (a.as_slice(), x.as_slice());
     let y = y.as_mut_slice();
+    if (1..=FIXED_MAX).contains(&k) {
+        FIXED_T[k - 1](y, alpha, a, x, beta);
+        return;
+    }
     let mut j = 0;
     while j + 4 <= n {
         let c = &a[j * k..(j + 4) * k];
@@ -482,6 +486,34 @@ pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f6
         }
         y[j] = scale(alpha, s, beta, y[j]);
         j += 1;
+    }
+}
+
+/// A build of [`gemv_t`] for one dot-product length k: `(y, alpha, a, x, beta)`.
+type FixedKernelT = fn(&mut [f64], f64, &[f64], &[f64], f64);
+
+/// The [`gemv_t`] builds for k = 1..=8, indexed by k − 1.
+static FIXED_T: [FixedKernelT; FIXED_MAX] = [
+    fixed_dots::<1>,
+    fixed_dots::<2>,
+    fixed_dots::<3>,
+    fixed_dots::<4>,
+    fixed_dots::<5>,
+    fixed_dots::<6>,
+    fixed_dots::<7>,
+    fixed_dots::<8>,
+];
+
+/// [`gemv_t`] for columns of length K (sizes checked there): every y_j = x · a_j summed
+/// over l in increasing order, fully unrolled.
+fn fixed_dots<const K: usize>(y: &mut [f64], alpha: f64, a: &[f64], x: &[f64], beta: f64) {
+    let x: &[f64; K] = x.try_into().expect("x of length k");
+    for (yj, col) in y.iter_mut().zip(a.chunks_exact(K)) {
+        let mut s = 0.0;
+        for (&al, &xl) in col.iter().zip(x) {
+            s += al * xl;
+        }
+        *yj = scale(alpha, s, beta, *yj);
     }
 }
 
