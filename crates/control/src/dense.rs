@@ -50,6 +50,12 @@ fn gemm_cols(
     #[cfg(target_arch = "x86_64")]
     if m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2") {
         if std::arch::is_x86_feature_detected!("fma") {
+            if (1..=FIXED_MAX).contains(&m) && (1..=FIXED_MAX).contains(&k) {
+                // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
+                // checked above.
+                unsafe { FIXED_FMA[(m - 1) * FIXED_MAX + k - 1](c, alpha, a, n, b, beta) };
+                return;
+            }
             // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
             // checked above.
             unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta) };
@@ -87,6 +93,33 @@ macro_rules! fixed_table {
 
 /// The portable products with m, k ≤ [`FIXED_MAX`], indexed by (m − 1) 8 + k − 1.
 static FIXED: [FixedKernel; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_cols);
+
+/// A build of [`gemm_cols_avx2_fma`] for one (m, k).
+#[cfg(target_arch = "x86_64")]
+type FixedKernelFma = unsafe fn(&mut [f64], f64, &[f64], usize, Strided, f64);
+
+/// The AVX2 and FMA products with m, k ≤ [`FIXED_MAX`], indexed as [`FIXED`].
+#[cfg(target_arch = "x86_64")]
+static FIXED_FMA: [FixedKernelFma; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_cols_fma);
+
+/// [`gemm_cols_avx2_fma`] for m = M, k = K: its single row block with the inner loop
+/// fully unrolled (the same fused operations in the same order).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and the sizes must satisfy the checks of
+/// [`gemm_cols`] with m = M and k = K.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fixed_cols_fma<const M: usize, const K: usize>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    n: usize,
+    b: Strided,
+    beta: f64,
+) {
+    rows::<M, 4, true>(c, alpha, a, (M, K, n), 0, b, beta);
+}
 
 /// [`gemm_cols`] for m = M, k = K (sizes checked there): fully unrolled over the
 /// rows and the inner dimension, one output column at a time — the operations of
