@@ -929,8 +929,9 @@ impl Controller {
             gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
             gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
             gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+            // Z M Żᵀ = (Ż M Zᵀ)ᵀ, its elements the same sums of the same products.
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+            add_own_transpose(&mut l.lambda_dot);
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
             let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
             // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
@@ -1278,6 +1279,20 @@ fn sym_sum_transpose(out: &mut DMatrix<f64>, c: &DMatrix<f64>) {
             let x = c[i * n + j] + c[j * n + i];
             o[j * n + i] = x;
             o[i * n + j] = x;
+        }
+    }
+}
+
+/// `x = x + xᵀ` (square; exactly symmetric).
+fn add_own_transpose(x: &mut DMatrix<f64>) {
+    let n = x.nrows();
+    assert_eq!(x.ncols(), n);
+    let x = x.as_mut_slice();
+    for j in 0..n {
+        for i in 0..=j {
+            let s = x[i * n + j] + x[j * n + i];
+            x[j * n + i] = s;
+            x[i * n + j] = s;
         }
     }
 }
