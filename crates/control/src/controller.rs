@@ -2,9 +2,9 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
-    gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar, procrustes_align,
-    transpose_cols_into, transpose_into,
+    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
+    gemm_nt_leading, gemm_tn, gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar,
+    procrustes_align, transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -170,8 +170,8 @@ struct Projection {
     hdot: DMatrix<f64>,
     t: DMatrix<f64>,
     tdot: DMatrix<f64>,
+    /// Y_aug, formed for the classical form only.
     y_aug: DMatrix<f64>,
-    y_aug_dot: DMatrix<f64>,
     /// Vectors for the classical form N_i x = x − J_augᵀ G⁻¹ Y_aug x (eq. 8).
     y_k: DVector<f64>,
     y_top: DVector<f64>,
@@ -191,7 +191,6 @@ impl Projection {
             t: DMatrix::zeros(m, k),
             tdot: DMatrix::zeros(m, k),
             y_aug: DMatrix::zeros(k, n),
-            y_aug_dot: DMatrix::zeros(k, n),
             y_k: DVector::zeros(k),
             y_top: DVector::zeros(top),
             spd: SpdWork::new(k),
@@ -913,18 +912,17 @@ impl Controller {
             copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
             copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
             copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
-            // Y_aug, Ẏ_aug, Y_i and Ẏ_i: rows 0..k and k..k + m of Y and Ẏ.
-            transpose_cols_into(&mut p.y_aug, &self.yt, 0);
-            transpose_cols_into(&mut p.y_aug_dot, &self.yt_dot, 0);
+            // Y_i and Ẏ_i: rows k..k + m of Y and Ẏ; Y_aug and Ẏ_aug (rows 0..k) are
+            // read in place as the leading columns of Yᵀ = M⁻¹ Jᵀ and its derivative.
             transpose_cols_into(&mut l.z, &self.yt, k);
             transpose_cols_into(&mut l.zdot, &self.yt_dot, k);
             p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
             gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
             gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
             gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
-            gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
-            gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
-            gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
+            gemm_nt_leading(&mut l.z, -1.0, &p.t, &self.yt, 1.0);
+            gemm_nt_leading(&mut l.zdot, -1.0, &p.tdot, &self.yt, 1.0);
+            gemm_nt_leading(&mut l.zdot, -1.0, &p.t, &self.yt_dot, 1.0);
             // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
             gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
             gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
@@ -974,6 +972,7 @@ impl Controller {
                     Form::ClassicalProjector => {
                         // N_i J_iᵀ F_i with N_i = I − J_augᵀ G⁻¹ J_aug M⁻¹ (eq. 8).
                         let p = &mut l.proj;
+                        transpose_cols_into(&mut p.y_aug, &self.yt, 0);
                         gemv(&mut p.y_k, 1.0, &p.y_aug, &self.tmp_n, 0.0);
                         p.y_top.fill(0.0);
                         let (yk, gi) = (&p.y_k, &p.g_inv);

@@ -337,6 +337,26 @@ pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f
     gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
 }
 
+/// `c = alpha * a * b[.., ..k]ᵀ + beta * c` with k = the columns of `a`: [`gemm_nt`]
+/// with the leading columns of `b` (a prefix of its storage, nothing copied).
+pub fn gemm_nt_leading(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+) {
+    let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
+    assert!(k <= b.ncols());
+    assert_eq!(c.shape(), (m, n));
+    let b = Strided {
+        data: &b.as_slice()[..n * k],
+        ls: n,
+        js: 1,
+    };
+    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
+}
+
 /// `c = alpha * aᵀ * b + beta * c`: dot products of contiguous columns, a 4 × 2 block of
 /// them at a time (eight independent sums, each over l in increasing order).
 pub fn gemm_tn(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
@@ -487,11 +507,15 @@ pub fn gemv(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>
 
 /// `y = alpha * aᵀ * x + beta * y` (dot products of columns, four at a time).
 pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
-    let (k, n) = a.shape();
-    assert_eq!(k, x.len());
-    assert_eq!(n, y.len());
-    let (a, x) = (a.as_slice(), x.as_slice());
-    let y = y.as_mut_slice();
+    assert_eq!(a.shape(), (x.len(), y.len()));
+    gemv_t_slice(y.as_mut_slice(), alpha, a.as_slice(), x.as_slice(), beta);
+}
+
+/// [`gemv_t`] on slices: `a` column-major with columns of the length of `x`, as many
+/// as `y` has elements.
+fn gemv_t_slice(y: &mut [f64], alpha: f64, a: &[f64], x: &[f64], beta: f64) {
+    let (k, n) = (x.len(), y.len());
+    assert_eq!(a.len(), k * n);
     if (1..=FIXED_MAX).contains(&k) {
         FIXED_T[k - 1](y, alpha, a, x, beta);
         return;
