@@ -3,8 +3,8 @@
 use crate::ControlError;
 use crate::dense::{
     AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
-    gemm_nt_leading, gemm_tn, gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar,
-    procrustes_align, transpose_cols_into, transpose_into,
+    gemm_nt_leading, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, mirror_upper,
+    null_space_basis, orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -393,7 +393,6 @@ pub struct Controller {
     middle: bool,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
-    tmp_n3: DVector<f64>,
     /// Columns per level of the τ_μ chains (eq. 22).
     mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
@@ -464,7 +463,6 @@ impl Controller {
             frames: FrameWork::new(n),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
-            tmp_n3: DVector::zeros(n),
             mu: MuWork::new(n, r),
             safety,
             out,
@@ -1020,16 +1018,16 @@ impl Controller {
         if self.spec.coriolis_cancellation && self.spec.form != Form::KinematicProjector {
             // The levels' u as the columns of U, then C U, M⁻¹ C U (one solve for all
             // levels, whose substitutions overlap), M U and Ṁ U.
-            let mu = &mut self.mu;
-            for (i, l) in self.levels.iter().enumerate() {
-                self.tmp_n.copy_from(qd);
+            let (mu, n) = (&mut self.mu, self.n);
+            let us = mu.u.as_mut_slice().chunks_exact_mut(n);
+            for (i, (l, u)) in self.levels.iter().zip(us).enumerate() {
+                u.copy_from_slice(qd.as_slice());
                 if i == 0 {
-                    gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                    gemv_slices(u, -1.0, &l.jbar_inv, l.v.as_slice(), 1.0);
                 } else {
                     // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-                    gemv_t(&mut self.tmp_n, -1.0, &l.z, &l.v, 1.0);
+                    gemv_t_slices(u, -1.0, &l.z, l.v.as_slice(), 1.0);
                 }
-                mu.u.set_column(i, &self.tmp_n);
             }
             gemm(&mut mu.minv_cu, 1.0, &self.data.c, &mu.u, 0.0);
             hcc_model::linalg::cholesky_solve_slice(
@@ -1044,17 +1042,16 @@ impl Controller {
             }
             for i in 0..r {
                 let l = &mut self.levels[i];
-                self.tmp_n.copy_from(&mu.u.column(i));
-                self.tmp_n3.copy_from(&mu.minv_cu.column(i));
-                gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
+                let u = col(&mu.u, i, n);
+                let y_d = l.y_d.as_mut_slice();
+                gemv_slices(y_d, 1.0, &l.jbar, col(&mu.minv_cu, i, n), 0.0);
                 if i == 0 {
-                    gemv(&mut l.y_d, -1.0, &l.jdot, &self.tmp_n, 1.0);
+                    gemv_slices(y_d, -1.0, &l.jdot, u, 1.0);
                 } else {
-                    self.tmp_n2.copy_from(&mu.mu.column(i));
-                    gemv(&mut l.y_d3, 1.0, &l.zdot, &self.tmp_n2, 0.0);
-                    self.tmp_n3.copy_from(&mu.mdot_u.column(i));
-                    gemv(&mut l.y_d3, 1.0, &l.z, &self.tmp_n3, 1.0);
-                    gemv(&mut l.y_d2, 1.0, &l.jbar, &self.tmp_n, 0.0);
+                    let y_d3 = l.y_d3.as_mut_slice();
+                    gemv_slices(y_d3, 1.0, &l.zdot, col(&mu.mu, i, n), 0.0);
+                    gemv_slices(y_d3, 1.0, &l.z, col(&mu.mdot_u, i, n), 1.0);
+                    gemv_slices(l.y_d2.as_mut_slice(), 1.0, &l.jbar, u, 0.0);
                     gemv(&mut l.y_d3, -1.0, &l.lambda_dot, &l.y_d2, 1.0);
                     gemv(&mut l.y_d, -1.0, &l.lambda_inv, &l.y_d3, 1.0);
                 }
@@ -1294,6 +1291,11 @@ fn add_own_transpose(x: &mut DMatrix<f64>) {
             x[i * n + j] = s;
         }
     }
+}
+
+/// Column i of `x` (n rows) as a slice.
+fn col(x: &DMatrix<f64>, i: usize, n: usize) -> &[f64] {
+    &x.as_slice()[i * n..(i + 1) * n]
 }
 
 /// `out += aᵀ`.

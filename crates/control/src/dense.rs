@@ -494,21 +494,31 @@ fn gemm_tn_block(
 
 /// `y = alpha * a * x + beta * y` (the kernel of [`gemm`] with one column).
 pub fn gemv(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
+    gemv_slices(y.as_mut_slice(), alpha, a, x.as_slice(), beta);
+}
+
+/// [`gemv`] with `x` and `y` slices (e.g. columns of a matrix, nothing copied).
+pub fn gemv_slices(y: &mut [f64], alpha: f64, a: &DMatrix<f64>, x: &[f64], beta: f64) {
     let (m, k) = a.shape();
     assert_eq!(k, x.len());
     assert_eq!(m, y.len());
     let x = Strided {
-        data: x.as_slice(),
+        data: x,
         ls: 1,
         js: 0,
     };
-    gemm_cols(y.as_mut_slice(), alpha, a.as_slice(), (m, k, 1), x, beta);
+    gemm_cols(y, alpha, a.as_slice(), (m, k, 1), x, beta);
 }
 
 /// `y = alpha * aᵀ * x + beta * y` (dot products of columns, four at a time).
 pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
+    gemv_t_slices(y.as_mut_slice(), alpha, a, x.as_slice(), beta);
+}
+
+/// [`gemv_t`] with `x` and `y` slices (e.g. columns of a matrix, nothing copied).
+pub fn gemv_t_slices(y: &mut [f64], alpha: f64, a: &DMatrix<f64>, x: &[f64], beta: f64) {
     assert_eq!(a.shape(), (x.len(), y.len()));
-    gemv_t_slice(y.as_mut_slice(), alpha, a.as_slice(), x.as_slice(), beta);
+    gemv_t_slice(y, alpha, a.as_slice(), x, beta);
 }
 
 /// [`gemv_t`] on slices: `a` column-major with columns of the length of `x`, as many
