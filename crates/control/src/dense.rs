@@ -398,6 +398,10 @@ pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) 
     // every column of `out`.
     let a = &a.as_slice()[c0 * r..(c0 + p) * r];
     let out = out.as_mut_slice();
+    if p <= FIXED_MAX && r <= FIXED_MAX {
+        FIXED_TRANSPOSE[(p - 1) * FIXED_MAX + r - 1](out, a);
+        return;
+    }
     let mut t = 0;
     while t + 4 <= p {
         let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
@@ -413,6 +417,23 @@ pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) 
             col[t] = x;
         }
         t += 1;
+    }
+}
+
+/// A build of [`transpose_cols_into`] for one size: `(out, a)`.
+type FixedTranspose = fn(&mut [f64], &[f64]);
+
+/// The transposes of P columns of R rows, P, R ≤ [`FIXED_MAX`], indexed as [`FIXED`]
+/// by (P, R).
+static FIXED_TRANSPOSE: [FixedTranspose; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_transpose);
+
+/// `out` (R × P) = the transpose of the P contiguous columns of R rows in `a`, unrolled.
+fn fixed_transpose<const P: usize, const R: usize>(out: &mut [f64], a: &[f64]) {
+    let (out, a) = (&mut out[..P * R], &a[..P * R]);
+    for t in 0..P {
+        for i in 0..R {
+            out[i * P + t] = a[t * R + i];
+        }
     }
 }
 
