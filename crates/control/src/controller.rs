@@ -1329,9 +1329,37 @@ fn copy_block(
     assert!(dr + rows <= dm && sr + rows <= sm);
     assert!(dc + cols <= dst.ncols() && sc + cols <= src.ncols());
     let (d, s) = (dst.as_mut_slice(), src.as_slice());
+    // Short columns as fixed-size moves (no call of the general copy per column).
+    match rows {
+        1 => copy_cols::<1>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        2 => copy_cols::<2>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        3 => copy_cols::<3>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        4 => copy_cols::<4>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        5 => copy_cols::<5>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        6 => copy_cols::<6>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        _ => {
+            for j in 0..cols {
+                let o = (dc + j) * dm + dr;
+                let i = (sc + j) * sm + sr;
+                d[o..o + rows].copy_from_slice(&s[i..i + rows]);
+            }
+        }
+    }
+}
+
+/// `cols` columns of `R` elements from `s` (first at `si`, columns `ss` apart) to `d`
+/// (first at `di`, columns `ds` apart).
+#[inline(always)]
+fn copy_cols<const R: usize>(
+    d: &mut [f64],
+    s: &[f64],
+    (di, ds): (usize, usize),
+    (si, ss): (usize, usize),
+    cols: usize,
+) {
     for j in 0..cols {
-        let o = (dc + j) * dm + dr;
-        let i = (sc + j) * sm + sr;
-        d[o..o + rows].copy_from_slice(&s[i..i + rows]);
+        let (o, i) = (di + j * ds, si + j * ss);
+        let x: [f64; R] = s[i..i + R].try_into().expect("R elements");
+        d[o..o + R].copy_from_slice(&x);
     }
 }
