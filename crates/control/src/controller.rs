@@ -393,6 +393,8 @@ pub struct Controller {
     middle: bool,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
+    /// Level 1's damped inversion of J_1 M⁻¹ J_1ᵀ (the Gram matrix G of level 2).
+    first_cond: Conditioning,
     /// Columns per level of the τ_μ chains (eq. 22).
     mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
@@ -463,6 +465,7 @@ impl Controller {
             frames: FrameWork::new(n),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
+            first_cond: Conditioning::default(),
             mu: MuWork::new(n, r),
             safety,
             out,
@@ -870,6 +873,7 @@ impl Controller {
         let l = &mut self.levels[0];
         copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
         let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
+        self.first_cond = c;
         self.out.conditioning[0] = c.ratio;
         self.out.singular[0] = c.damping > 0.0;
         l.jbar.copy_from(&l.j);
@@ -885,7 +889,8 @@ impl Controller {
         if lowest {
             self.null_space()?;
         }
-        let l = &mut self.levels[i];
+        let (above, rest) = self.levels.split_at_mut(i);
+        let l = &mut rest[0];
         let (c, gc) = if lowest {
             // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
             // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
@@ -906,7 +911,6 @@ impl Controller {
             // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
             let p = &mut l.proj;
             let (k, m) = (p.k, l.m);
-            copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
             copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
             copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
             copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
@@ -914,7 +918,14 @@ impl Controller {
             // read in place as the leading columns of Yᵀ = M⁻¹ Jᵀ and its derivative.
             transpose_cols_into(&mut l.z, &self.yt, k);
             transpose_cols_into(&mut l.zdot, &self.yt_dot, k);
-            p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+            if i == 1 {
+                // G = J_1 M⁻¹ J_1ᵀ = Λ_1⁻¹: its damped inverse is level 1's Λ_1.
+                p.g_inv.copy_from(&above[0].lambda);
+                p.g_cond = self.first_cond;
+            } else {
+                copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
+                p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+            }
             gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
             gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
             gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
