@@ -2,7 +2,7 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
+    AlignWork, Conditioning, SpdWork, copy, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
     gemm_nt_leading, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, mirror_upper,
     null_space_basis, orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
 };
@@ -734,12 +734,12 @@ impl Controller {
         let eps = self.spec.singular_ratio;
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
         // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
-        self.chol.copy_from(&self.data.m);
+        copy(&mut self.chol, &self.data.m);
         let n = self.n;
         hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         sym_sum_transpose(&mut self.mdot, &self.data.c);
-        self.out.gravity.copy_from(&self.data.g);
+        copy(&mut self.out.gravity, &self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
         self.frames.invalidate();
@@ -780,7 +780,7 @@ impl Controller {
         // velocity limits (crate::safety); zero and not added where nothing acts.
         self.safety_torque(q, qd);
         // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
-        self.out.tau.copy_from(&self.out.tau_mu);
+        copy(&mut self.out.tau, &self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
         }
@@ -848,7 +848,7 @@ impl Controller {
             row += l.m;
         }
         transpose_into(&mut self.jtop_t, &self.jtop);
-        self.yt.copy_from(&self.jtop_t);
+        copy(&mut self.yt, &self.jtop_t);
         hcc_model::linalg::cholesky_solve_slice(self.chol.as_slice(), n, self.yt.as_mut_slice())
             .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
         gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
@@ -876,7 +876,7 @@ impl Controller {
         self.first_cond = c;
         self.out.conditioning[0] = c.ratio;
         self.out.singular[0] = c.damping > 0.0;
-        l.jbar.copy_from(&l.j);
+        copy(&mut l.jbar, &l.j);
         // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13); M⁻¹ J_1ᵀ is the first m_1
         // columns of M⁻¹ Jᵀ.
         gemm_leading(&mut l.jbar_inv, 1.0, &self.yt, &l.lambda, 0.0);
@@ -899,9 +899,9 @@ impl Controller {
             // forms both afresh every cycle).
             std::mem::swap(&mut l.z, &mut ns.vt);
             std::mem::swap(&mut l.zdot, &mut ns.vdot_t);
-            l.lambda.copy_from(&ns.vtmv);
-            l.lambda_inv.copy_from(&ns.s);
-            l.lambda_dot.copy_from(&ns.x);
+            copy(&mut l.lambda, &ns.vtmv);
+            copy(&mut l.lambda_inv, &ns.s);
+            copy(&mut l.lambda_dot, &ns.x);
             gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
             transpose_into(&mut l.jbar, &ns.jbar_t);
             (ns.s_cond, ns.gram_cond)
@@ -920,7 +920,7 @@ impl Controller {
             transpose_cols_into(&mut l.zdot, &self.yt_dot, k);
             if i == 1 {
                 // G = J_1 M⁻¹ J_1ᵀ = Λ_1⁻¹: its damped inverse is level 1's Λ_1.
-                p.g_inv.copy_from(&above[0].lambda);
+                copy(&mut p.g_inv, &above[0].lambda);
                 p.g_cond = self.first_cond;
             } else {
                 copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
@@ -992,7 +992,7 @@ impl Controller {
                             }
                             p.y_top[a] = s;
                         }
-                        tau_i.copy_from(&self.tmp_n);
+                        copy(tau_i, &self.tmp_n);
                         gemv_t(tau_i, 1.0, &self.jtop, &p.y_top, -1.0);
                     }
                     Form::KinematicProjector => {
@@ -1002,7 +1002,7 @@ impl Controller {
                         let ns = &mut self.basis;
                         gemv(&mut ns.y_k, 1.0, &self.jtop, &self.tmp_n, 0.0);
                         gemv(&mut ns.y_k2, 1.0, &ns.gram_inv, &ns.y_k, 0.0);
-                        tau_i.copy_from(&self.tmp_n);
+                        copy(tau_i, &self.tmp_n);
                         gemv_t(tau_i, 1.0, &self.jtop, &ns.y_k2, -1.0);
                     }
                 }
@@ -1010,8 +1010,8 @@ impl Controller {
             if self.out.fade[i] < 1.0 {
                 *tau_i *= self.out.fade[i];
             }
-            self.out.v[i].copy_from(&l.v);
-            self.out.task_error[i].copy_from(&l.err);
+            copy(&mut self.out.v[i], &l.v);
+            copy(&mut self.out.task_error[i], &l.err);
             self.out.potential[i] = l.potential;
             // S_i = ½ v_iᵀ Λ_i v_i + V_i (eqs. 26, 28).
             gemv(&mut l.y_d2, 1.0, &l.lambda, &l.v, 0.0);
@@ -1100,7 +1100,7 @@ impl Controller {
         if ns.has_prev {
             gemm(&mut ns.t1, 1.0, jaug, &ns.v_prev, 0.0);
             gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
-            ns.v.copy_from(&ns.v_prev);
+            copy(&mut ns.v, &ns.v_prev);
             gemm(&mut ns.v, -1.0, jaug_t, &ns.t2, 1.0);
             continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
         }
@@ -1110,7 +1110,7 @@ impl Controller {
                 procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
             }
         }
-        ns.v_prev.copy_from(&ns.v);
+        copy(&mut ns.v_prev, &ns.v);
         ns.has_prev = true;
         // V̇ = −J⁺ J̇ V (parallel transport).
         gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
@@ -1180,7 +1180,7 @@ impl Controller {
             l.xdot -= &l.goal_velocity;
         }
         // F_i = (∂V_i/∂x_i)ᵀ + D_i (ẋ_i − ẋ_{i,d}), ẋ_{i,d} = 0 for a fixed goal.
-        l.f.copy_from(&l.grad);
+        copy(&mut l.f, &l.grad);
         let mut sigma = 1.0;
         if governor > 0.0 {
             // Velocity governor: σ_i from the spring's power and the cosine between

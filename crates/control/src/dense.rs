@@ -288,6 +288,19 @@ fn rows<const W: usize, const NC: usize, const FMA: bool>(
     }
 }
 
+/// `dst = src` for matrices or vectors of the same shape, as one slice copy (nalgebra's
+/// `copy_from` goes element by element through its two-dimensional indexing).
+#[inline]
+pub fn copy<C: nalgebra::Dim>(
+    dst: &mut nalgebra::OMatrix<f64, nalgebra::Dyn, C>,
+    src: &nalgebra::OMatrix<f64, nalgebra::Dyn, C>,
+) where
+    nalgebra::DefaultAllocator: nalgebra::allocator::Allocator<nalgebra::Dyn, C>,
+{
+    assert_eq!(dst.shape(), src.shape());
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
 /// `c = alpha * a * b + beta * c`.
 pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     assert_eq!(b.ncols(), c.ncols());
@@ -1019,7 +1032,7 @@ fn undamped_conditioning(
     if upper.is_nan() || upper < eps {
         return None;
     }
-    work.a.copy_from(a);
+    copy(&mut work.a, a);
     symmetric_eigenvalues(&mut work.a, &mut work.evals, 30);
     let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
     for &l in work.evals.iter() {
@@ -1066,7 +1079,7 @@ pub fn damped_spd_inverse(
     {
         return c;
     }
-    work.a.copy_from(a);
+    copy(&mut work.a, a);
     symmetric_eigen(&mut work.a, &mut work.evals, &mut work.evecs, 30);
     let mut lmax: f64 = 0.0;
     let mut lmin = f64::INFINITY;
@@ -1195,9 +1208,9 @@ pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut Al
         return smin;
     }
     // R = X (XᵀX)^{-1/2}, then v ← v R.
-    work.xtx.copy_from(&work.r);
+    copy(&mut work.xtx, &work.r);
     gemm(&mut work.r, 1.0, &work.x, &work.xtx, 0.0);
-    work.tmp.copy_from(v);
+    copy(&mut work.tmp, v);
     gemm(v, 1.0, &work.tmp, &work.r, 0.0);
     smin
 }
@@ -1242,7 +1255,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
                 work.r[(i, j)] = if i == j { 1.0 } else { 0.0 } + coef * work.pow[(i, j)];
             }
         }
-        work.x.copy_from(&work.pow);
+        copy(&mut work.x, &work.pow);
         let mut pnorm = enorm;
         let mut k = 1.0;
         loop {
@@ -1261,7 +1274,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
             coef = next;
             k += 1.0;
         }
-        work.tmp.copy_from(w);
+        copy(&mut work.tmp, w);
         gemm(w, 1.0, &work.tmp, &work.r, 0.0);
         return smin_bound;
     }
@@ -1269,7 +1282,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
     if smin.is_nan() || smin <= min_sigma {
         return smin;
     }
-    work.tmp.copy_from(w);
+    copy(&mut work.tmp, w);
     gemm(w, 1.0, &work.tmp, &work.r, 0.0);
     smin
 }
