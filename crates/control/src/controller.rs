@@ -2,9 +2,9 @@
 
 use crate::ControlError;
 use crate::dense::{
-    AlignWork, Conditioning, SpdWork, damped_spd_inverse, gemm, gemm_leading, gemm_nt, gemm_tn,
-    gemv, gemv_t, mirror_upper, null_space_basis, orthonormalize_polar, procrustes_align,
-    transpose_cols_into, transpose_into,
+    AlignWork, Conditioning, SpdWork, copy, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
+    gemm_nt_leading, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, mirror_upper,
+    null_space_basis, orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -170,8 +170,8 @@ struct Projection {
     hdot: DMatrix<f64>,
     t: DMatrix<f64>,
     tdot: DMatrix<f64>,
+    /// Y_aug, formed for the classical form only.
     y_aug: DMatrix<f64>,
-    y_aug_dot: DMatrix<f64>,
     /// Vectors for the classical form N_i x = x − J_augᵀ G⁻¹ Y_aug x (eq. 8).
     y_k: DVector<f64>,
     y_top: DVector<f64>,
@@ -191,7 +191,6 @@ impl Projection {
             t: DMatrix::zeros(m, k),
             tdot: DMatrix::zeros(m, k),
             y_aug: DMatrix::zeros(k, n),
-            y_aug_dot: DMatrix::zeros(k, n),
             y_k: DVector::zeros(k),
             y_top: DVector::zeros(top),
             spd: SpdWork::new(k),
@@ -394,7 +393,8 @@ pub struct Controller {
     middle: bool,
     tmp_n: DVector<f64>,
     tmp_n2: DVector<f64>,
-    tmp_n3: DVector<f64>,
+    /// Level 1's damped inversion of J_1 M⁻¹ J_1ᵀ (the Gram matrix G of level 2).
+    first_cond: Conditioning,
     /// Columns per level of the τ_μ chains (eq. 22).
     mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
@@ -465,7 +465,7 @@ impl Controller {
             frames: FrameWork::new(n),
             tmp_n: DVector::zeros(n),
             tmp_n2: DVector::zeros(n),
-            tmp_n3: DVector::zeros(n),
+            first_cond: Conditioning::default(),
             mu: MuWork::new(n, r),
             safety,
             out,
@@ -734,12 +734,12 @@ impl Controller {
         let eps = self.spec.singular_ratio;
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
         // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
-        self.chol.copy_from(&self.data.m);
+        copy(&mut self.chol, &self.data.m);
         let n = self.n;
         hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         sym_sum_transpose(&mut self.mdot, &self.data.c);
-        self.out.gravity.copy_from(&self.data.g);
+        copy(&mut self.out.gravity, &self.data.g);
 
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
         self.frames.invalidate();
@@ -780,7 +780,7 @@ impl Controller {
         // velocity limits (crate::safety); zero and not added where nothing acts.
         self.safety_torque(q, qd);
         // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
-        self.out.tau.copy_from(&self.out.tau_mu);
+        copy(&mut self.out.tau, &self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
         }
@@ -848,7 +848,7 @@ impl Controller {
             row += l.m;
         }
         transpose_into(&mut self.jtop_t, &self.jtop);
-        self.yt.copy_from(&self.jtop_t);
+        copy(&mut self.yt, &self.jtop_t);
         hcc_model::linalg::cholesky_solve_slice(self.chol.as_slice(), n, self.yt.as_mut_slice())
             .map_err(|_| ControlError::Numerical("M⁻¹ Jᵀ"))?;
         gemm(&mut self.w, 1.0, &self.jtop, &self.yt, 0.0);
@@ -873,9 +873,10 @@ impl Controller {
         let l = &mut self.levels[0];
         copy_block(&mut l.lambda_inv, 0, 0, &self.w, 0, 0, l.m, l.m);
         let c = damped_spd_inverse(&l.lambda_inv, &mut l.lambda, &mut l.spd, eps, GRAM_FLOOR);
+        self.first_cond = c;
         self.out.conditioning[0] = c.ratio;
         self.out.singular[0] = c.damping > 0.0;
-        l.jbar.copy_from(&l.j);
+        copy(&mut l.jbar, &l.j);
         // (J̄⁻¹)_1 = J_1^{M+} = M⁻¹ J_1ᵀ Λ_1 (eq. 13); M⁻¹ J_1ᵀ is the first m_1
         // columns of M⁻¹ Jᵀ.
         gemm_leading(&mut l.jbar_inv, 1.0, &self.yt, &l.lambda, 0.0);
@@ -888,7 +889,8 @@ impl Controller {
         if lowest {
             self.null_space()?;
         }
-        let l = &mut self.levels[i];
+        let (above, rest) = self.levels.split_at_mut(i);
+        let l = &mut rest[0];
         let (c, gc) = if lowest {
             // Z_r = V_{r−1}ᵀ and Λ_r = Vᵀ M V (eq. 18) with its inverse S and derivative
             // X from the null space; J̄_r = S (M V)ᵀ (eq. 5).
@@ -897,9 +899,9 @@ impl Controller {
             // forms both afresh every cycle).
             std::mem::swap(&mut l.z, &mut ns.vt);
             std::mem::swap(&mut l.zdot, &mut ns.vdot_t);
-            l.lambda.copy_from(&ns.vtmv);
-            l.lambda_inv.copy_from(&ns.s);
-            l.lambda_dot.copy_from(&ns.x);
+            copy(&mut l.lambda, &ns.vtmv);
+            copy(&mut l.lambda_inv, &ns.s);
+            copy(&mut l.lambda_dot, &ns.x);
             gemm_nt(&mut ns.jbar_t, 1.0, &ns.mv, &ns.s, 0.0);
             transpose_into(&mut l.jbar, &ns.jbar_t);
             (ns.s_cond, ns.gram_cond)
@@ -909,28 +911,34 @@ impl Controller {
             // Ṫ = (Ḣ − T Ġ) G⁻¹ — the same Z_i as eq. (12), without a null-space basis.
             let p = &mut l.proj;
             let (k, m) = (p.k, l.m);
-            copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
             copy_block(&mut p.gdot, 0, 0, &self.w_dot, 0, 0, k, k);
             copy_block(&mut p.h, 0, 0, &self.w, k, 0, m, k);
             copy_block(&mut p.hdot, 0, 0, &self.w_dot, k, 0, m, k);
-            // Y_aug, Ẏ_aug, Y_i and Ẏ_i: rows 0..k and k..k + m of Y and Ẏ.
-            transpose_cols_into(&mut p.y_aug, &self.yt, 0);
-            transpose_cols_into(&mut p.y_aug_dot, &self.yt_dot, 0);
+            // Y_i and Ẏ_i: rows k..k + m of Y and Ẏ; Y_aug and Ẏ_aug (rows 0..k) are
+            // read in place as the leading columns of Yᵀ = M⁻¹ Jᵀ and its derivative.
             transpose_cols_into(&mut l.z, &self.yt, k);
             transpose_cols_into(&mut l.zdot, &self.yt_dot, k);
-            p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+            if i == 1 {
+                // G = J_1 M⁻¹ J_1ᵀ = Λ_1⁻¹: its damped inverse is level 1's Λ_1.
+                copy(&mut p.g_inv, &above[0].lambda);
+                p.g_cond = self.first_cond;
+            } else {
+                copy_block(&mut p.g, 0, 0, &self.w, 0, 0, k, k);
+                p.g_cond = damped_spd_inverse(&p.g, &mut p.g_inv, &mut p.spd, eps, GRAM_FLOOR);
+            }
             gemm(&mut p.t, 1.0, &p.h, &p.g_inv, 0.0);
             gemm(&mut p.hdot, -1.0, &p.t, &p.gdot, 1.0);
             gemm(&mut p.tdot, 1.0, &p.hdot, &p.g_inv, 0.0);
-            gemm(&mut l.z, -1.0, &p.t, &p.y_aug, 1.0);
-            gemm(&mut l.zdot, -1.0, &p.tdot, &p.y_aug, 1.0);
-            gemm(&mut l.zdot, -1.0, &p.t, &p.y_aug_dot, 1.0);
+            gemm_nt_leading(&mut l.z, -1.0, &p.t, &self.yt, 1.0);
+            gemm_nt_leading(&mut l.zdot, -1.0, &p.tdot, &self.yt, 1.0);
+            gemm_nt_leading(&mut l.zdot, -1.0, &p.t, &self.yt_dot, 1.0);
             // Λ_i = Z M Zᵀ (eq. 18) and Λ̇_i = Ż M Zᵀ + Z M Żᵀ + Z Ṁ Zᵀ.
             gemm(&mut l.zm, 1.0, &l.z, &self.data.m, 0.0);
             gemm(&mut l.zmdot, 1.0, &l.z, &self.mdot, 0.0);
             gemm_nt(&mut l.lambda, 1.0, &l.zm, &l.z, 0.0);
+            // Z M Żᵀ = (Ż M Zᵀ)ᵀ, its elements the same sums of the same products.
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zdot, &l.zm, 0.0);
-            gemm_nt(&mut l.lambda_dot, 1.0, &l.zm, &l.zdot, 1.0);
+            add_own_transpose(&mut l.lambda_dot);
             gemm_nt(&mut l.lambda_dot, 1.0, &l.zmdot, &l.z, 1.0);
             let c = damped_spd_inverse(&l.lambda, &mut l.lambda_inv, &mut l.spd, eps, GRAM_FLOOR);
             // J̄_i = (Z M Zᵀ)⁻¹ Z M (eq. 5).
@@ -973,6 +981,7 @@ impl Controller {
                     Form::ClassicalProjector => {
                         // N_i J_iᵀ F_i with N_i = I − J_augᵀ G⁻¹ J_aug M⁻¹ (eq. 8).
                         let p = &mut l.proj;
+                        transpose_cols_into(&mut p.y_aug, &self.yt, 0);
                         gemv(&mut p.y_k, 1.0, &p.y_aug, &self.tmp_n, 0.0);
                         p.y_top.fill(0.0);
                         let (yk, gi) = (&p.y_k, &p.g_inv);
@@ -983,7 +992,7 @@ impl Controller {
                             }
                             p.y_top[a] = s;
                         }
-                        tau_i.copy_from(&self.tmp_n);
+                        copy(tau_i, &self.tmp_n);
                         gemv_t(tau_i, 1.0, &self.jtop, &p.y_top, -1.0);
                     }
                     Form::KinematicProjector => {
@@ -993,7 +1002,7 @@ impl Controller {
                         let ns = &mut self.basis;
                         gemv(&mut ns.y_k, 1.0, &self.jtop, &self.tmp_n, 0.0);
                         gemv(&mut ns.y_k2, 1.0, &ns.gram_inv, &ns.y_k, 0.0);
-                        tau_i.copy_from(&self.tmp_n);
+                        copy(tau_i, &self.tmp_n);
                         gemv_t(tau_i, 1.0, &self.jtop, &ns.y_k2, -1.0);
                     }
                 }
@@ -1001,8 +1010,8 @@ impl Controller {
             if self.out.fade[i] < 1.0 {
                 *tau_i *= self.out.fade[i];
             }
-            self.out.v[i].copy_from(&l.v);
-            self.out.task_error[i].copy_from(&l.err);
+            copy(&mut self.out.v[i], &l.v);
+            copy(&mut self.out.task_error[i], &l.err);
             self.out.potential[i] = l.potential;
             // S_i = ½ v_iᵀ Λ_i v_i + V_i (eqs. 26, 28).
             gemv(&mut l.y_d2, 1.0, &l.lambda, &l.v, 0.0);
@@ -1020,16 +1029,16 @@ impl Controller {
         if self.spec.coriolis_cancellation && self.spec.form != Form::KinematicProjector {
             // The levels' u as the columns of U, then C U, M⁻¹ C U (one solve for all
             // levels, whose substitutions overlap), M U and Ṁ U.
-            let mu = &mut self.mu;
-            for (i, l) in self.levels.iter().enumerate() {
-                self.tmp_n.copy_from(qd);
+            let (mu, n) = (&mut self.mu, self.n);
+            let us = mu.u.as_mut_slice().chunks_exact_mut(n);
+            for (i, (l, u)) in self.levels.iter().zip(us).enumerate() {
+                u.copy_from_slice(qd.as_slice());
                 if i == 0 {
-                    gemv(&mut self.tmp_n, -1.0, &l.jbar_inv, &l.v, 1.0);
+                    gemv_slices(u, -1.0, &l.jbar_inv, l.v.as_slice(), 1.0);
                 } else {
                     // (J̄⁻¹)_i = Z_iᵀ (eq. 13).
-                    gemv_t(&mut self.tmp_n, -1.0, &l.z, &l.v, 1.0);
+                    gemv_t_slices(u, -1.0, &l.z, l.v.as_slice(), 1.0);
                 }
-                mu.u.set_column(i, &self.tmp_n);
             }
             gemm(&mut mu.minv_cu, 1.0, &self.data.c, &mu.u, 0.0);
             hcc_model::linalg::cholesky_solve_slice(
@@ -1044,17 +1053,16 @@ impl Controller {
             }
             for i in 0..r {
                 let l = &mut self.levels[i];
-                self.tmp_n.copy_from(&mu.u.column(i));
-                self.tmp_n3.copy_from(&mu.minv_cu.column(i));
-                gemv(&mut l.y_d, 1.0, &l.jbar, &self.tmp_n3, 0.0);
+                let u = col(&mu.u, i, n);
+                let y_d = l.y_d.as_mut_slice();
+                gemv_slices(y_d, 1.0, &l.jbar, col(&mu.minv_cu, i, n), 0.0);
                 if i == 0 {
-                    gemv(&mut l.y_d, -1.0, &l.jdot, &self.tmp_n, 1.0);
+                    gemv_slices(y_d, -1.0, &l.jdot, u, 1.0);
                 } else {
-                    self.tmp_n2.copy_from(&mu.mu.column(i));
-                    gemv(&mut l.y_d3, 1.0, &l.zdot, &self.tmp_n2, 0.0);
-                    self.tmp_n3.copy_from(&mu.mdot_u.column(i));
-                    gemv(&mut l.y_d3, 1.0, &l.z, &self.tmp_n3, 1.0);
-                    gemv(&mut l.y_d2, 1.0, &l.jbar, &self.tmp_n, 0.0);
+                    let y_d3 = l.y_d3.as_mut_slice();
+                    gemv_slices(y_d3, 1.0, &l.zdot, col(&mu.mu, i, n), 0.0);
+                    gemv_slices(y_d3, 1.0, &l.z, col(&mu.mdot_u, i, n), 1.0);
+                    gemv_slices(l.y_d2.as_mut_slice(), 1.0, &l.jbar, u, 0.0);
                     gemv(&mut l.y_d3, -1.0, &l.lambda_dot, &l.y_d2, 1.0);
                     gemv(&mut l.y_d, -1.0, &l.lambda_inv, &l.y_d3, 1.0);
                 }
@@ -1092,7 +1100,7 @@ impl Controller {
         if ns.has_prev {
             gemm(&mut ns.t1, 1.0, jaug, &ns.v_prev, 0.0);
             gemm(&mut ns.t2, 1.0, &ns.gram_inv, &ns.t1, 0.0);
-            ns.v.copy_from(&ns.v_prev);
+            copy(&mut ns.v, &ns.v_prev);
             gemm(&mut ns.v, -1.0, jaug_t, &ns.t2, 1.0);
             continued = orthonormalize_polar(&mut ns.v, &mut ns.align, MIN_OVERLAP) > MIN_OVERLAP;
         }
@@ -1102,7 +1110,7 @@ impl Controller {
                 procrustes_align(&mut ns.v, &ns.v_prev, &mut ns.align);
             }
         }
-        ns.v_prev.copy_from(&ns.v);
+        copy(&mut ns.v_prev, &ns.v);
         ns.has_prev = true;
         // V̇ = −J⁺ J̇ V (parallel transport).
         gemm(&mut ns.t1, 1.0, jaug_dot, &ns.v, 0.0);
@@ -1172,7 +1180,7 @@ impl Controller {
             l.xdot -= &l.goal_velocity;
         }
         // F_i = (∂V_i/∂x_i)ᵀ + D_i (ẋ_i − ẋ_{i,d}), ẋ_{i,d} = 0 for a fixed goal.
-        l.f.copy_from(&l.grad);
+        copy(&mut l.f, &l.grad);
         let mut sigma = 1.0;
         if governor > 0.0 {
             // Velocity governor: σ_i from the spring's power and the cosine between
@@ -1282,6 +1290,25 @@ fn sym_sum_transpose(out: &mut DMatrix<f64>, c: &DMatrix<f64>) {
     }
 }
 
+/// `x = x + xᵀ` (square; exactly symmetric).
+fn add_own_transpose(x: &mut DMatrix<f64>) {
+    let n = x.nrows();
+    assert_eq!(x.ncols(), n);
+    let x = x.as_mut_slice();
+    for j in 0..n {
+        for i in 0..=j {
+            let s = x[i * n + j] + x[j * n + i];
+            x[j * n + i] = s;
+            x[i * n + j] = s;
+        }
+    }
+}
+
+/// Column i of `x` (n rows) as a slice.
+fn col(x: &DMatrix<f64>, i: usize, n: usize) -> &[f64] {
+    &x.as_slice()[i * n..(i + 1) * n]
+}
+
 /// `out += aᵀ`.
 fn transpose_add(out: &mut DMatrix<f64>, a: &DMatrix<f64>) {
     let (r, c) = a.shape();
@@ -1313,9 +1340,37 @@ fn copy_block(
     assert!(dr + rows <= dm && sr + rows <= sm);
     assert!(dc + cols <= dst.ncols() && sc + cols <= src.ncols());
     let (d, s) = (dst.as_mut_slice(), src.as_slice());
+    // Short columns as fixed-size moves (no call of the general copy per column).
+    match rows {
+        1 => copy_cols::<1>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        2 => copy_cols::<2>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        3 => copy_cols::<3>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        4 => copy_cols::<4>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        5 => copy_cols::<5>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        6 => copy_cols::<6>(d, s, (dc * dm + dr, dm), (sc * sm + sr, sm), cols),
+        _ => {
+            for j in 0..cols {
+                let o = (dc + j) * dm + dr;
+                let i = (sc + j) * sm + sr;
+                d[o..o + rows].copy_from_slice(&s[i..i + rows]);
+            }
+        }
+    }
+}
+
+/// `cols` columns of `R` elements from `s` (first at `si`, columns `ss` apart) to `d`
+/// (first at `di`, columns `ds` apart).
+#[inline(always)]
+fn copy_cols<const R: usize>(
+    d: &mut [f64],
+    s: &[f64],
+    (di, ds): (usize, usize),
+    (si, ss): (usize, usize),
+    cols: usize,
+) {
     for j in 0..cols {
-        let o = (dc + j) * dm + dr;
-        let i = (sc + j) * sm + sr;
-        d[o..o + rows].copy_from_slice(&s[i..i + rows]);
+        let (o, i) = (di + j * ds, si + j * ss);
+        let x: [f64; R] = s[i..i + R].try_into().expect("R elements");
+        d[o..o + R].copy_from_slice(&x);
     }
 }

@@ -50,6 +50,12 @@ fn gemm_cols(
     #[cfg(target_arch = "x86_64")]
     if m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2") {
         if std::arch::is_x86_feature_detected!("fma") {
+            if (1..=FIXED_MAX).contains(&m) && (1..=FIXED_MAX).contains(&k) {
+                // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
+                // checked above.
+                unsafe { FIXED_FMA[(m - 1) * FIXED_MAX + k - 1](c, alpha, a, n, b, beta) };
+                return;
+            }
             // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
             // checked above.
             unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta) };
@@ -59,7 +65,90 @@ fn gemm_cols(
         }
         return;
     }
+    if (1..=FIXED_MAX).contains(&m) && (1..=FIXED_MAX).contains(&k) {
+        FIXED[(m - 1) * FIXED_MAX + k - 1](c, alpha, a, n, b, beta);
+        return;
+    }
     gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta);
+}
+
+/// The largest row count and inner dimension of the fixed-size product builds.
+const FIXED_MAX: usize = 8;
+
+/// A build of the portable [`gemm_cols`] for one (m, k): `(c, alpha, a, n, b, beta)`.
+type FixedKernel = fn(&mut [f64], f64, &[f64], usize, Strided, f64);
+
+/// `[$f::<M, K>, …]` for M, K in 1..=8 (row-major in (M, K)).
+macro_rules! fixed_table {
+    ($f:ident) => {
+        fixed_table!(@m $f, [1 2 3 4 5 6 7 8])
+    };
+    (@m $f:ident, [$($m:literal)*]) => {
+        [$(
+            $f::<$m, 1>, $f::<$m, 2>, $f::<$m, 3>, $f::<$m, 4>,
+            $f::<$m, 5>, $f::<$m, 6>, $f::<$m, 7>, $f::<$m, 8>,
+        )*]
+    };
+}
+
+/// The portable products with m, k ≤ [`FIXED_MAX`], indexed by (m − 1) 8 + k − 1.
+static FIXED: [FixedKernel; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_cols);
+
+/// A build of [`gemm_cols_avx2_fma`] for one (m, k).
+#[cfg(target_arch = "x86_64")]
+type FixedKernelFma = unsafe fn(&mut [f64], f64, &[f64], usize, Strided, f64);
+
+/// The AVX2 and FMA products with m, k ≤ [`FIXED_MAX`], indexed as [`FIXED`].
+#[cfg(target_arch = "x86_64")]
+static FIXED_FMA: [FixedKernelFma; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_cols_fma);
+
+/// [`gemm_cols_avx2_fma`] for m = M, k = K: its single row block with the inner loop
+/// fully unrolled (the same fused operations in the same order).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and the sizes must satisfy the checks of
+/// [`gemm_cols`] with m = M and k = K.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fixed_cols_fma<const M: usize, const K: usize>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    n: usize,
+    b: Strided,
+    beta: f64,
+) {
+    rows::<M, 4, true>(c, alpha, a, (M, K, n), 0, b, beta);
+}
+
+/// [`gemm_cols`] for m = M, k = K (sizes checked there): fully unrolled over the
+/// rows and the inner dimension, one output column at a time — the operations of
+/// [`gemm_blocks`] in the same order, without its loop set-up.
+fn fixed_cols<const M: usize, const K: usize>(
+    c: &mut [f64],
+    alpha: f64,
+    a: &[f64],
+    n: usize,
+    b: Strided,
+    beta: f64,
+) {
+    let a = &a[..M * K];
+    let c = &mut c[..M * n];
+    let bp = b.data.as_ptr();
+    for (j, cj) in c.chunks_exact_mut(M).enumerate() {
+        let mut s = [0.0; M];
+        for l in 0..K {
+            // SAFETY: l < K = k and j < n, so l ls + j js ≤ (k − 1) ls + (n − 1) js,
+            // which `gemm_cols` checked to be inside b.
+            let bl = unsafe { *bp.add(l * b.ls + j * b.js) };
+            for (t, st) in s.iter_mut().enumerate() {
+                *st = madd::<false>(*st, a[l * M + t], bl);
+            }
+        }
+        for (x, &st) in cj.iter_mut().zip(&s) {
+            *x = scale(alpha, st, beta, *x);
+        }
+    }
 }
 
 /// Products of at least this many multiply-adds run in the AVX2 build of
@@ -199,6 +288,19 @@ fn rows<const W: usize, const NC: usize, const FMA: bool>(
     }
 }
 
+/// `dst = src` for matrices or vectors of the same shape, as one slice copy (nalgebra's
+/// `copy_from` goes element by element through its two-dimensional indexing).
+#[inline]
+pub fn copy<C: nalgebra::Dim>(
+    dst: &mut nalgebra::OMatrix<f64, nalgebra::Dyn, C>,
+    src: &nalgebra::OMatrix<f64, nalgebra::Dyn, C>,
+) where
+    nalgebra::DefaultAllocator: nalgebra::allocator::Allocator<nalgebra::Dyn, C>,
+{
+    assert_eq!(dst.shape(), src.shape());
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
 /// `c = alpha * a * b + beta * c`.
 pub fn gemm(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     assert_eq!(b.ncols(), c.ncols());
@@ -248,6 +350,26 @@ pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f
     gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
 }
 
+/// `c = alpha * a * b[.., ..k]ᵀ + beta * c` with k = the columns of `a`: [`gemm_nt`]
+/// with the leading columns of `b` (a prefix of its storage, nothing copied).
+pub fn gemm_nt_leading(
+    c: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    beta: f64,
+) {
+    let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
+    assert!(k <= b.ncols());
+    assert_eq!(c.shape(), (m, n));
+    let b = Strided {
+        data: &b.as_slice()[..n * k],
+        ls: n,
+        js: 1,
+    };
+    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
+}
+
 /// `c = alpha * aᵀ * b + beta * c`: dot products of contiguous columns, a 4 × 2 block of
 /// them at a time (eight independent sums, each over l in increasing order).
 pub fn gemm_tn(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
@@ -289,6 +411,10 @@ pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) 
     // every column of `out`.
     let a = &a.as_slice()[c0 * r..(c0 + p) * r];
     let out = out.as_mut_slice();
+    if p <= FIXED_MAX && r <= FIXED_MAX {
+        FIXED_TRANSPOSE[(p - 1) * FIXED_MAX + r - 1](out, a);
+        return;
+    }
     let mut t = 0;
     while t + 4 <= p {
         let (s0, s1) = (&a[t * r..(t + 1) * r], &a[(t + 1) * r..(t + 2) * r]);
@@ -304,6 +430,23 @@ pub fn transpose_cols_into(out: &mut DMatrix<f64>, a: &DMatrix<f64>, c0: usize) 
             col[t] = x;
         }
         t += 1;
+    }
+}
+
+/// A build of [`transpose_cols_into`] for one size: `(out, a)`.
+type FixedTranspose = fn(&mut [f64], &[f64]);
+
+/// The transposes of P columns of R rows, P, R ≤ [`FIXED_MAX`], indexed as [`FIXED`]
+/// by (P, R).
+static FIXED_TRANSPOSE: [FixedTranspose; FIXED_MAX * FIXED_MAX] = fixed_table!(fixed_transpose);
+
+/// `out` (R × P) = the transpose of the P contiguous columns of R rows in `a`, unrolled.
+fn fixed_transpose<const P: usize, const R: usize>(out: &mut [f64], a: &[f64]) {
+    let (out, a) = (&mut out[..P * R], &a[..P * R]);
+    for t in 0..P {
+        for i in 0..R {
+            out[i * P + t] = a[t * R + i];
+        }
     }
 }
 
@@ -385,24 +528,42 @@ fn gemm_tn_block(
 
 /// `y = alpha * a * x + beta * y` (the kernel of [`gemm`] with one column).
 pub fn gemv(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
+    gemv_slices(y.as_mut_slice(), alpha, a, x.as_slice(), beta);
+}
+
+/// [`gemv`] with `x` and `y` slices (e.g. columns of a matrix, nothing copied).
+pub fn gemv_slices(y: &mut [f64], alpha: f64, a: &DMatrix<f64>, x: &[f64], beta: f64) {
     let (m, k) = a.shape();
     assert_eq!(k, x.len());
     assert_eq!(m, y.len());
     let x = Strided {
-        data: x.as_slice(),
+        data: x,
         ls: 1,
         js: 0,
     };
-    gemm_cols(y.as_mut_slice(), alpha, a.as_slice(), (m, k, 1), x, beta);
+    gemm_cols(y, alpha, a.as_slice(), (m, k, 1), x, beta);
 }
 
 /// `y = alpha * aᵀ * x + beta * y` (dot products of columns, four at a time).
 pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f64>, beta: f64) {
-    let (k, n) = a.shape();
-    assert_eq!(k, x.len());
-    assert_eq!(n, y.len());
-    let (a, x) = (a.as_slice(), x.as_slice());
-    let y = y.as_mut_slice();
+    gemv_t_slices(y.as_mut_slice(), alpha, a, x.as_slice(), beta);
+}
+
+/// [`gemv_t`] with `x` and `y` slices (e.g. columns of a matrix, nothing copied).
+pub fn gemv_t_slices(y: &mut [f64], alpha: f64, a: &DMatrix<f64>, x: &[f64], beta: f64) {
+    assert_eq!(a.shape(), (x.len(), y.len()));
+    gemv_t_slice(y, alpha, a.as_slice(), x, beta);
+}
+
+/// [`gemv_t`] on slices: `a` column-major with columns of the length of `x`, as many
+/// as `y` has elements.
+fn gemv_t_slice(y: &mut [f64], alpha: f64, a: &[f64], x: &[f64], beta: f64) {
+    let (k, n) = (x.len(), y.len());
+    assert_eq!(a.len(), k * n);
+    if (1..=FIXED_MAX).contains(&k) {
+        FIXED_T[k - 1](y, alpha, a, x, beta);
+        return;
+    }
     let mut j = 0;
     while j + 4 <= n {
         let c = &a[j * k..(j + 4) * k];
@@ -426,6 +587,34 @@ pub fn gemv_t(y: &mut DVector<f64>, alpha: f64, a: &DMatrix<f64>, x: &DVector<f6
         }
         y[j] = scale(alpha, s, beta, y[j]);
         j += 1;
+    }
+}
+
+/// A build of [`gemv_t`] for one dot-product length k: `(y, alpha, a, x, beta)`.
+type FixedKernelT = fn(&mut [f64], f64, &[f64], &[f64], f64);
+
+/// The [`gemv_t`] builds for k = 1..=8, indexed by k − 1.
+static FIXED_T: [FixedKernelT; FIXED_MAX] = [
+    fixed_dots::<1>,
+    fixed_dots::<2>,
+    fixed_dots::<3>,
+    fixed_dots::<4>,
+    fixed_dots::<5>,
+    fixed_dots::<6>,
+    fixed_dots::<7>,
+    fixed_dots::<8>,
+];
+
+/// [`gemv_t`] for columns of length K (sizes checked there): every y_j = x · a_j summed
+/// over l in increasing order, fully unrolled.
+fn fixed_dots<const K: usize>(y: &mut [f64], alpha: f64, a: &[f64], x: &[f64], beta: f64) {
+    let x: &[f64; K] = x.try_into().expect("x of length k");
+    for (yj, col) in y.iter_mut().zip(a.chunks_exact(K)) {
+        let mut s = 0.0;
+        for (&al, &xl) in col.iter().zip(x) {
+            s += al * xl;
+        }
+        *yj = scale(alpha, s, beta, *yj);
     }
 }
 
@@ -843,7 +1032,7 @@ fn undamped_conditioning(
     if upper.is_nan() || upper < eps {
         return None;
     }
-    work.a.copy_from(a);
+    copy(&mut work.a, a);
     symmetric_eigenvalues(&mut work.a, &mut work.evals, 30);
     let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
     for &l in work.evals.iter() {
@@ -890,7 +1079,7 @@ pub fn damped_spd_inverse(
     {
         return c;
     }
-    work.a.copy_from(a);
+    copy(&mut work.a, a);
     symmetric_eigen(&mut work.a, &mut work.evals, &mut work.evecs, 30);
     let mut lmax: f64 = 0.0;
     let mut lmin = f64::INFINITY;
@@ -1019,9 +1208,9 @@ pub fn procrustes_align(v: &mut DMatrix<f64>, prev: &DMatrix<f64>, work: &mut Al
         return smin;
     }
     // R = X (XᵀX)^{-1/2}, then v ← v R.
-    work.xtx.copy_from(&work.r);
+    copy(&mut work.xtx, &work.r);
     gemm(&mut work.r, 1.0, &work.x, &work.xtx, 0.0);
-    work.tmp.copy_from(v);
+    copy(&mut work.tmp, v);
     gemm(v, 1.0, &work.tmp, &work.r, 0.0);
     smin
 }
@@ -1066,7 +1255,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
                 work.r[(i, j)] = if i == j { 1.0 } else { 0.0 } + coef * work.pow[(i, j)];
             }
         }
-        work.x.copy_from(&work.pow);
+        copy(&mut work.x, &work.pow);
         let mut pnorm = enorm;
         let mut k = 1.0;
         loop {
@@ -1085,7 +1274,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
             coef = next;
             k += 1.0;
         }
-        work.tmp.copy_from(w);
+        copy(&mut work.tmp, w);
         gemm(w, 1.0, &work.tmp, &work.r, 0.0);
         return smin_bound;
     }
@@ -1093,7 +1282,7 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
     if smin.is_nan() || smin <= min_sigma {
         return smin;
     }
-    work.tmp.copy_from(w);
+    copy(&mut work.tmp, w);
     gemm(w, 1.0, &work.tmp, &work.r, 0.0);
     smin
 }

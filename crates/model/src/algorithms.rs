@@ -593,17 +593,16 @@ pub fn frame_jacobian(model: &Model, data: &Data, frame: FrameId, out: &mut DMat
             return;
         }
     };
+    // Column-major 6 × n: column j is out[6 j..6 j + 6].
+    let out = out.as_mut_slice();
     out.fill(0.0);
     let p = o_m.translation.vector;
     if let Some(b) = body {
-        for j in 0..=b {
-            let s = &data.scratch.s[j];
+        for (s, col) in data.scratch.s[..=b].iter().zip(out.chunks_exact_mut(6)) {
             let w = ang(s);
             let v = lin(s) + w.cross(&p);
-            for r in 0..3 {
-                out[(r, j)] = v[r];
-                out[(r + 3, j)] = w[r];
-            }
+            col[..3].copy_from_slice(v.as_slice());
+            col[3..].copy_from_slice(w.as_slice());
         }
     }
 }
@@ -630,20 +629,18 @@ pub fn frame_jacobian_time_variation(
             return;
         }
     };
+    let out = out.as_mut_slice();
     out.fill(0.0);
     let p = o_m.translation.vector;
     if let Some(b) = body {
         let vb = &data.v[b];
         let pdot = lin(vb) + ang(vb).cross(&p);
-        for j in 0..=b {
-            let s = &data.scratch.s[j];
-            let sd = &data.scratch.sdot[j];
+        let (s, sdot) = (&data.scratch.s[..=b], &data.scratch.sdot[..=b]);
+        for ((s, sd), col) in s.iter().zip(sdot).zip(out.chunks_exact_mut(6)) {
             let wd = ang(sd);
             let v = lin(sd) + wd.cross(&p) + ang(s).cross(&pdot);
-            for r in 0..3 {
-                out[(r, j)] = v[r];
-                out[(r + 3, j)] = wd[r];
-            }
+            col[..3].copy_from_slice(v.as_slice());
+            col[3..].copy_from_slice(wd.as_slice());
         }
     }
 }

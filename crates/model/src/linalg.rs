@@ -204,6 +204,23 @@ pub fn spd_inverse<
 /// The strict upper triangle is set to 0.
 pub fn cholesky_in_place_slice(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
     check("cholesky_in_place_slice (n × n)", n * n, a.len())?;
+    // Robot sizes run in a build for their size (loops unrolled, index checks folded).
+    match n {
+        1 => factor_n(a, 1),
+        2 => factor_n(a, 2),
+        3 => factor_n(a, 3),
+        4 => factor_n(a, 4),
+        5 => factor_n(a, 5),
+        6 => factor_n(a, 6),
+        7 => factor_n(a, 7),
+        _ => factor_n(a, n),
+    }
+}
+
+/// [`cholesky_in_place_slice`] (size checked there), inlined into its builds per size.
+#[inline(always)]
+fn factor_n(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
+    let a = &mut a[..n * n];
     for j in 0..n {
         let (done, rest) = a.split_at_mut(j * n);
         let col = &mut rest[..n];
