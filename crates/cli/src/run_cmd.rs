@@ -546,22 +546,12 @@ fn write_derived(
     Ok(true)
 }
 
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let mut scenario = Scenario::load(&args.config)?;
-    if let Some(d) = args.duration {
-        scenario
-            .set_duration(d)
-            .with_context(|| format!("--duration {d}"))?;
-    }
-    let launch = Launch::new(&args, &scenario)?;
-    let recording = launch.out.join(RECORDING_FILE);
-
-    // Subscribe before the children start, so that no sample is missed. The
-    // receiver drains at a low real-time priority when permitted (the
-    // daemons' warning already says when SCHED_FIFO is not), also in
-    // lockstep, whose daemons run at normal priority as fast as they can:
-    // there it drains every 100 µs (at 1 ms a loaded machine lost samples of
-    // a lockstep run now and then).
+/// The recorder's receiver of a run. It drains at a low real-time priority
+/// when permitted (the daemons' warning already says when SCHED_FIFO is not),
+/// also in lockstep, whose daemons run at normal priority as fast as they
+/// can: there it drains every 100 µs (at 1 ms a loaded machine lost samples
+/// of a lockstep run now and then).
+fn start_receiver(args: &RunArgs, launch: &Launch) -> anyhow::Result<Receiver> {
     let priority = (!args.no_rt).then_some(capture::RECEIVER_PRIORITY);
     let poll = if launch.mode == "lockstep" {
         capture::LOCKSTEP_POLL
@@ -578,6 +568,21 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(w) = &receiver.priority_warning {
         tracing::debug!("{w}");
     }
+    Ok(receiver)
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let mut scenario = Scenario::load(&args.config)?;
+    if let Some(d) = args.duration {
+        scenario
+            .set_duration(d)
+            .with_context(|| format!("--duration {d}"))?;
+    }
+    let launch = Launch::new(&args, &scenario)?;
+    let recording = launch.out.join(RECORDING_FILE);
+
+    // Subscribe before the children start, so that no sample is missed.
+    let receiver = start_receiver(&args, &launch)?;
     let clock = hcc_record::mcap_log::clock_pair();
     let mut recorder = StreamRecorder::create(
         &recording,

@@ -917,11 +917,7 @@ fn spd_inverse_large(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool 
             x[j * n + i] = s;
         }
     }
-    for j in 0..n {
-        for i in (j + 1)..n {
-            x[i * n + j] = x[j * n + i];
-        }
-    }
+    mirror_lower_into_upper(x, n);
     true
 }
 
@@ -975,12 +971,19 @@ fn spd_inverse_n(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool {
             x[j * n + i] = s;
         }
     }
+    mirror_lower_into_upper(x, n);
+    true
+}
+
+/// The upper triangle of the n × n column-major `x` from its lower one (the last
+/// step of both inversions above: their product forms the lower triangle only).
+#[inline(always)]
+fn mirror_lower_into_upper(x: &mut [f64], n: usize) {
     for j in 0..n {
         for i in (j + 1)..n {
             x[i * n + j] = x[j * n + i];
         }
     }
-    true
 }
 
 /// [`damped_spd_inverse`] reports the exact eigenvalue ratio below this multiple of
