@@ -910,11 +910,7 @@ fn spd_inverse_large(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool 
             i += 4;
         }
         for i in i..n {
-            let mut s = 0.0;
-            for p in i..n {
-                s += x[i * n + p] * x[j * n + p];
-            }
-            x[j * n + i] = s;
+            x[j * n + i] = inverse_entry(x, n, i, j);
         }
     }
     mirror_lower_into_upper(x, n);
@@ -964,15 +960,22 @@ fn spd_inverse_n(a: &[f64], l: &mut [f64], x: &mut [f64], n: usize) -> bool {
     // use of (L⁻¹)_ij, and column i > j is still intact.
     for j in 0..n {
         for i in j..n {
-            let mut s = 0.0;
-            for p in i..n {
-                s += x[i * n + p] * x[j * n + p];
-            }
-            x[j * n + i] = s;
+            x[j * n + i] = inverse_entry(x, n, i, j);
         }
     }
     mirror_lower_into_upper(x, n);
     true
+}
+
+/// (A⁻¹)_ij = Σ_{p ≥ i} (L⁻¹)_pi (L⁻¹)_pj for i ≥ j, with L⁻¹ in the n × n
+/// column-major `x` (column i from row i down, column j likewise).
+#[inline(always)]
+fn inverse_entry(x: &[f64], n: usize, i: usize, j: usize) -> f64 {
+    let mut s = 0.0;
+    for p in i..n {
+        s += x[i * n + p] * x[j * n + p];
+    }
+    s
 }
 
 /// The upper triangle of the n × n column-major `x` from its lower one (the last
