@@ -646,6 +646,8 @@ fn sweep_safety_overrides(s: &mut Scenario) -> bool {
             "conflict_fade_ratio" => sp.conflict_fade_ratio = x,
             "velocity_damping" => sp.velocity_damping = x,
             "fade_tank_max" => sp.fade_tank_max = x,
+            "velocity_limit_fraction" => sp.velocity_limit_fraction = x,
+            "velocity_limit_full_fraction" => sp.velocity_limit_full_fraction = x,
             _ => panic!("SWEEP_SAFETY: unknown field {k:?}"),
         }
     }
