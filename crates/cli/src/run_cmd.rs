@@ -62,7 +62,7 @@ const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// A running simulator that publishes nothing for this long is considered hung.
 const STALL_TIMEOUT: Duration = Duration::from_secs(10);
 /// `hcc-sim --lockstep-max-speed` of a lockstep run: at most five times
-/// faster than real time (a 3 s scenario in 0.6 s).
+/// faster than real time (a 3 s scenario in at least 0.6 s; about 1 s measured).
 const LOCKSTEP_MAX_SPEED: f64 = 5.0;
 
 /// `hcc-sim --lockstep-timeout-ms` of a lockstep run: a command missing
@@ -285,10 +285,10 @@ impl Launch {
             sim_args.extend([
                 "--lockstep-timeout-ms".to_string(),
                 format!("{LOCKSTEP_TIMEOUT_MS:?}"),
-                // The recorder is not in the lockstep: at most this many times
-                // real time, its queues (128 samples) last 25 ms at 1 kHz
-                // instead of the few ms of an unpaced run, which host stalls
-                // of the recorder's CPU exceeded now and then (samples lost).
+                // The recorder is not in the lockstep: at five times a 1 kHz
+                // rate its queues (128 samples) last 25 ms instead of the few
+                // ms of an unpaced run, which host stalls of the recorder's
+                // CPU exceeded now and then (samples lost).
                 "--lockstep-max-speed".to_string(),
                 format!("{LOCKSTEP_MAX_SPEED:?}"),
             ]);

@@ -388,8 +388,8 @@ impl Cycle {
                         let lead = self.settings.hybrid_lead_ns;
                         if self.settings.warm_up
                             && self.decider.step_ns().is_some_and(|s| 3 * s <= lead)
+                            && self.decider.warm_up(&self.state)
                         {
-                            self.decider.warm_up();
                             self.warm_ups += 1;
                         }
                     }

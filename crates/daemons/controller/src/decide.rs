@@ -130,12 +130,9 @@ pub struct Decider {
     clock_seq: u64,
     /// Rate limit and low-pass between the law and the saturation.
     output: OutputPipeline,
-    /// Cache warm-up: a copy of the law, stepped on the last valid state while
+    /// Cache warm-up: a copy of the law, stepped on the last decided state while
     /// the loop waits ([`Decider::warm_up`]); its output is discarded.
     warm: Option<Box<Controller>>,
-    warm_q: [f64; MAX_JOINTS],
-    warm_qd: [f64; MAX_JOINTS],
-    warm_ready: bool,
 }
 
 impl Decider {
@@ -164,9 +161,6 @@ impl Decider {
         let warm = settings.warm_up.then(|| Box::new(controller.clone()));
         Ok(Decider {
             warm,
-            warm_q: [0.0; MAX_JOINTS],
-            warm_qd: [0.0; MAX_JOINTS],
-            warm_ready: false,
             commander,
             output: OutputPipeline::new(&settings.output, settings.period_ns as f64 * 1e-9),
             controller,
@@ -219,17 +213,20 @@ impl Decider {
         self.step_ns
     }
 
-    /// Cache warm-up (`CycleSettings::warm_up`): steps a copy of the law on the
-    /// last valid state, so that the law's code is in the caches and its
-    /// branches in the predictors when the next state comes (the copy's data is
-    /// its own). Nothing of it reaches a command; allocation-free. Does nothing
-    /// when off or before the first valid state.
-    pub fn warm_up(&mut self) {
-        let n = self.n;
-        if let Some(twin) = self.warm.as_deref_mut()
-            && self.warm_ready
-        {
-            let _ = twin.step(&self.warm_q[..n], &self.warm_qd[..n]);
+    /// Cache warm-up (`CycleSettings::warm_up`): steps a copy of the law on
+    /// `state`, the state of the last decision, if the law ran on it (a valid
+    /// state), so that the law's code is in the caches and its branches in the
+    /// predictors when the next state comes (the copy's data is its own).
+    /// Nothing of it reaches a command; allocation-free. Does nothing when off,
+    /// before the first valid state and after a state the law did not run on.
+    /// Returns whether the copy was stepped.
+    pub fn warm_up(&mut self, state: &JointState) -> bool {
+        match self.warm.as_deref_mut() {
+            Some(twin) if self.step_ns.is_some() => {
+                let _ = twin.step(state.q(), state.qd());
+                true
+            }
+            _ => false,
         }
     }
 
@@ -473,11 +470,6 @@ impl Decider {
         };
         tau[..n].copy_from_slice(out.tau.as_slice());
         self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
-        if self.warm.is_some() {
-            self.warm_q[..n].copy_from_slice(state.q());
-            self.warm_qd[..n].copy_from_slice(state.qd());
-            self.warm_ready = true;
-        }
         self.have_valid = true;
         if out.any_singular {
             self.counters.telemetry.singular_cycles += 1;

@@ -283,18 +283,20 @@ fn the_decision_step_allocates_nothing() {
             .receive_setpoint(&setpoints[k as usize], k)
             .unwrap_or(0);
         let answer = decider.decide(&states[k as usize], k * 1_000_000);
-        decider.warm_up();
-        (answer, code)
+        let warmed = decider.warm_up(&states[k as usize]);
+        (answer, code, warmed)
     };
     let rt = RtSection::enter();
     for k in 0..WARM_UP {
         decide(&mut decider, k);
     }
     let before = thread_stats();
+    let mut warm_ups = 0u64;
     let mut answers = [0u64; 2];
     let mut setpoint_answers = [0u64; 2];
     for k in WARM_UP..2 * WARM_UP {
-        let (answer, code) = decide(&mut decider, k);
+        let (answer, code, warmed) = decide(&mut decider, k);
+        warm_ups += u64::from(warmed);
         setpoint_answers[usize::from(code != 0)] += 1;
         match answer {
             Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
@@ -306,6 +308,7 @@ fn the_decision_step_allocates_nothing() {
     drop(rt);
     println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
     assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
+    assert!(warm_ups > 0, "the warm-up never ran");
     let c = decider.counters().telemetry;
     assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
     // Setpoints accepted and rejected, every cycle.
