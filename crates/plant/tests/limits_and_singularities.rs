@@ -470,6 +470,30 @@ fn classify(log: &[Sample], seconds: f64, eps: f64) -> Unsettled {
     }
 }
 
+/// When a run settles for good: the first time t from which every later sample
+/// is at rest (max abs(q̇) < 0.01 rad/s over the preceding 0.1 s) or converged
+/// (TCP < 1 mm, orientation < 10 mrad); infinity if the last one is neither.
+fn settle_time(log: &[Sample]) -> f64 {
+    let ok = |i: usize| {
+        let s = &log[i];
+        let recent = log[..=i]
+            .iter()
+            .rev()
+            .take_while(|p| p.t > s.t - 0.1)
+            .flat_map(|p| p.qd.iter().map(|x| x.abs()))
+            .fold(0.0, f64::max);
+        recent < 0.01 || (s.errors[0] < 1e-3 && s.errors[1] < 1e-2)
+    };
+    let mut t = f64::INFINITY;
+    for i in (0..log.len()).rev() {
+        if !ok(i) {
+            break;
+        }
+        t = log[i].t;
+    }
+    t
+}
+
 /// The shortest time in which the joints can cover the distance from `q0` to `q`
 /// with every joint at `fraction` of its URDF velocity limit (max_k |Δq_k| / (f v_k)).
 fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f64) -> f64 {
@@ -488,7 +512,11 @@ fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f
 /// `SWEEP_SECONDS` sets the time per goal, `SWEEP_DETAIL` prints every goal not
 /// settled and every one over a velocity limit, `SWEEP_SAFETY` changes `[safety]`
 /// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`,
-/// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I).
+/// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I;
+/// `SWEEP_GAIN_SCALE=s` every level s times faster, K_i × s², D_i × s;
+/// `SWEEP_HORIZON=T` runs each goal for T s as well and prints, for the goals
+/// not settled in time, when they settle for good and how far their end
+/// configuration is from the start at the URDF velocity limits).
 /// Every goal not settled is classified ([`Unsettled`]). With the defaults (3 s,
 /// at least 100 goals, no `SWEEP_SAFETY`) at least 35 % must settle: 43 % of the
 /// first 100 goals and 42.8 % of 500 do with the conflict fade (31 % and 31.6 %
@@ -515,6 +543,14 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
     let mut classes = std::collections::BTreeMap::new();
     let mut travel_min = Vec::new();
     let mut overridden = false;
+    // `SWEEP_HORIZON`: also run each goal this long (s) and report, for the goals
+    // not settled by `seconds`, whether they settle by then and how far their end
+    // configuration is from the start at the URDF velocity limits.
+    let horizon: f64 = std::env::var("SWEEP_HORIZON")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.0);
+    let mut late = Vec::new();
     for g in 0..goals {
         let radius = rng.range(0.3, 1.4);
         let (az, el) = (rng.range(-3.1, 3.1), rng.range(-0.8, 1.2));
@@ -537,9 +573,26 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             }
             overridden = true;
         }
-        let log = run(scenario.clone(), seconds);
-        assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
-        let (beyond, speed) = limit_figures(&scenario, &log);
+        if let Ok(v) = std::env::var("SWEEP_GAIN_SCALE") {
+            // Every level s times faster: K_i × s², D_i × s (the damping ratios kept).
+            let x: f64 = v.parse().unwrap();
+            for l in &mut scenario.spec.levels {
+                l.stiffness *= x * x;
+                l.damping *= x;
+            }
+            overridden = true;
+        }
+        let full = run(scenario.clone(), seconds.max(horizon));
+        // The run up to `seconds` (the simulation is deterministic: a longer run
+        // has the shorter one as its prefix).
+        let cut = if horizon > seconds {
+            full.partition_point(|s| s.t < seconds - 1e-9)
+        } else {
+            full.len()
+        };
+        let log = &full[..cut];
+        assert!(full.iter().all(|s| s.finite), "goal {g}: a NaN");
+        let (beyond, speed) = limit_figures(&scenario, &full);
         worst_beyond = worst_beyond.max(beyond);
         worst_speed = worst_speed.max(speed);
         assert!(
@@ -548,7 +601,7 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         );
         if std::env::var_os("SWEEP_DETAIL").is_some() && speed > 1.0 {
             let (mut best, mut at) = (0.0, (0, 0));
-            for (c, smp) in log.iter().enumerate() {
+            for (c, smp) in full.iter().enumerate() {
                 for (k, j) in joints.iter().enumerate() {
                     let r = smp.qd[k].abs() / j.velocity_limit;
                     if r > best {
@@ -557,7 +610,7 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
                     }
                 }
             }
-            let smp = &log[at.0];
+            let smp = &full[at.0];
             println!(
                 "goal {g}: speed {best:.2} × limit at joint {} t = {:.3} s; guard {} faded {} governor {:.2} saturated {}; q {:.2?}",
                 at.1 + 1,
@@ -569,15 +622,24 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
                 smp.q
             );
         }
-        let rest = max_speed(&log, seconds - 0.1) < 0.01;
+        let rest = max_speed(log, seconds - 0.1) < 0.01;
         let last = log.last().unwrap();
         let converged = last.errors[0] < 1e-3 && last.errors[1] < 1e-2;
         if rest || converged {
             settled += 1;
         } else {
-            let class = classify(&log, seconds, eps);
+            let class = classify(log, seconds, eps);
             let q0: Vec<f64> = scenario.q0.iter().copied().collect();
             let t_min = shortest_move(&joints, &q0, &last.q, 0.9);
+            if horizon > seconds {
+                // Where the goal settles given the horizon, and whether any motion
+                // within the URDF velocity limits could have got there by `seconds`.
+                let end = full.last().unwrap();
+                let settled_late = max_speed(&full, horizon - 0.1) < 0.01
+                    || (end.errors[0] < 1e-3 && end.errors[1] < 1e-2);
+                let reach = shortest_move(&joints, &q0, &end.q, 1.0);
+                late.push((g, class, settled_late, reach, settle_time(&full)));
+            }
             *classes.entry(class).or_insert(0usize) += 1;
             if class == Unsettled::Travelling {
                 travel_min.push(t_min);
@@ -585,7 +647,7 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             unsettled.push((
                 g,
                 class,
-                max_speed(&log, seconds - 0.1),
+                max_speed(log, seconds - 0.1),
                 last.errors[0],
                 last.errors[1],
                 radius,
@@ -619,6 +681,33 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
     println!(
         "sweep: not settled by class {classes:?}; travelling: shortest time from the start to where they are at 0.9 of the velocity limits {travel_min:.2?} s"
     );
+    if horizon > seconds {
+        let settled_late: Vec<_> = late.iter().filter(|l| l.2).collect();
+        let out_of_time = settled_late.iter().filter(|l| l.3 > seconds).count();
+        let mut by_class = std::collections::BTreeMap::new();
+        for l in &settled_late {
+            let e = by_class.entry(l.1).or_insert((0usize, 0usize));
+            e.0 += 1;
+            if l.3 > seconds {
+                e.1 += 1;
+            }
+        }
+        let mut reach: Vec<f64> = settled_late.iter().map(|l| l.3).collect();
+        reach.sort_by(f64::total_cmp);
+        let mut times = std::collections::BTreeMap::new();
+        for l in &late {
+            times.entry(l.1).or_insert_with(Vec::new).push(l.4);
+        }
+        for (class, t) in &mut times {
+            t.sort_by(f64::total_cmp);
+            println!("sweep: {class:?}: settled at {t:.1?} s (inf: not by {horizon} s)");
+        }
+        println!(
+            "sweep: of the {} goals not settled by {seconds} s, {} settle by {horizon} s; of those, {out_of_time} end where no motion within the URDF velocity limits gets by {seconds} s (max_k |Δq_k|/v_k > {seconds} s); by class (settled by {horizon} s, of which out of time): {by_class:?}; max_k |Δq_k|/v_k of those settled: {reach:.2?} s",
+            late.len(),
+            settled_late.len()
+        );
+    }
     if seconds == 3.0 && goals >= 100 && !overridden {
         assert!(
             settled as f64 >= 0.35 * goals as f64,
@@ -648,6 +737,8 @@ fn sweep_safety_overrides(s: &mut Scenario) -> bool {
             "fade_tank_max" => sp.fade_tank_max = x,
             "velocity_limit_fraction" => sp.velocity_limit_fraction = x,
             "velocity_limit_full_fraction" => sp.velocity_limit_full_fraction = x,
+            "joint_limit_margin" => sp.joint_limit_margin = x,
+            "joint_limit_damping_ratio" => sp.joint_limit_damping_ratio = x,
             _ => panic!("SWEEP_SAFETY: unknown field {k:?}"),
         }
     }
