@@ -835,6 +835,7 @@ impl Measured<'_> {
                 "controller_warm_up": self.warm_up(),
                 "controller_warm_ups": pair.controller.counter("warm_ups"),
                 "notifications_skipped": pair.controller.counter("notifications_skipped"),
+                "controller_commands_in_preloaned_samples": pair.controller.counter("commands_in_preloaned_samples"),
                 "controller_torque_path_system_allocs": pair.controller.counter("torque_path_system_allocs_after_warm_up"),
                 "controller_connection_updates": pair.controller.counter("connection_updates"),
                 "cores": {"sim": args.sim_core, "controller": args.controller_core},

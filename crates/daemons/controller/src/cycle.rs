@@ -23,12 +23,13 @@ use std::sync::atomic::Ordering;
 use hcc_config::WaitStrategy;
 use hcc_control::Controller;
 use hcc_msgs::ipc::{
-    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, SETPOINT_BUFFER,
-    Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher, UpdateConnections,
+    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, PreLoan,
+    SETPOINT_BUFFER, Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher,
+    UpdateConnections,
 };
 use hcc_msgs::{
     CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryCounters, TelemetryTimings,
-    monotonic_now_ns,
+    TorqueCommand, monotonic_now_ns,
 };
 
 use crate::decide::{Answer, Decider};
@@ -228,6 +229,8 @@ pub struct Cycle {
     warmed: bool,
     /// Cache warm-ups run since start-up.
     warm_ups: u64,
+    /// The next command's sample, loaned while waiting (off the path).
+    command_loan: PreLoan<TorqueCommand>,
 }
 
 impl Cycle {
@@ -249,6 +252,7 @@ impl Cycle {
             status: Arc::new(Status::default()),
             warmed: false,
             warm_ups: 0,
+            command_loan: PreLoan::new(),
         })
     }
 
@@ -283,6 +287,15 @@ impl Cycle {
         self.warm_ups
     }
 
+    /// Commands sent in a sample loaned while waiting, and loans while
+    /// waiting that failed (that cycle's send then loaned on the path).
+    pub fn preloaned_sends(&self) -> (u64, u64) {
+        (
+            self.command_loan.preloaned_sends(),
+            self.command_loan.loan_failures(),
+        )
+    }
+
     /// What the connection upkeep did so far (off the torque path).
     pub fn upkeep(&self) -> rt::UpkeepCounts {
         self.upkeep.counts()
@@ -298,6 +311,13 @@ impl Cycle {
         }
     }
 
+    /// Loans the next command's sample now, off the path from a state to its
+    /// command (called by every step of the wait; nothing to do while a
+    /// sample is in hand). Allocation-free.
+    pub fn prepare_send(&mut self, ports: &Ports) {
+        self.command_loan.refill(&ports.commands);
+    }
+
     /// The control law.
     pub fn controller(&self) -> &Controller {
         self.decider.controller()
@@ -310,9 +330,9 @@ impl Cycle {
     pub fn run_once(&mut self, ports: &Ports) -> Outcome {
         let mut notified = false;
         loop {
-            if self.take_newest(ports) {
+            if let Some(sample) = Self::take_newest(ports) {
                 let wake = monotonic_now_ns();
-                return self.answer(ports, wake);
+                return self.answer(ports, wake, &sample);
             }
             if notified {
                 // A notification without a new sample: consume it, or the
@@ -331,14 +351,15 @@ impl Cycle {
         }
     }
 
-    /// Drains the state queue; keeps the newest sample in `self.state`.
-    fn take_newest(&mut self, ports: &Ports) -> bool {
-        let mut got = false;
+    /// Drains the state queue; returns the newest sample (older ones are
+    /// released as newer ones come). The sample is read in place, in shared
+    /// memory: it is copied into `self.state` only once its command is out.
+    fn take_newest(ports: &Ports) -> Option<hcc_msgs::ipc::StateSample> {
+        let mut newest = None;
         while let Ok(Some(sample)) = ports.states.receive() {
-            self.state = *sample;
-            got = true;
+            newest = Some(sample);
         }
-        got
+        newest
     }
 
     /// Blocks on `state_ready` until a notification or the stale deadline
@@ -358,6 +379,7 @@ impl Cycle {
     /// a notification is pending.
     fn wait_step(&mut self, ports: &Ports, now: u64) -> bool {
         self.upkeep_connections(ports);
+        self.prepare_send(ports);
         match self.settings.wait {
             WaitStrategy::Event => self.event_wait(ports, now),
             WaitStrategy::Hybrid => {
@@ -413,8 +435,8 @@ impl Cycle {
         self.status.publish(&self.decider.counters());
     }
 
-    /// Notes the arrival of the state in `self.state` at `wake` (ns).
-    fn note_state(&mut self, wake: u64) {
+    /// Notes the arrival of `state` at `wake` (ns).
+    fn note_state(&mut self, state: &JointState, wake: u64) {
         self.last_state_ns = Some(wake);
         self.last_wake_ns = wake;
         self.stale_deadline_ns = wake.saturating_add(self.settings.stale_timeout_ns);
@@ -423,24 +445,25 @@ impl Cycle {
         status.last_state_ns.store(wake, Ordering::Relaxed);
         status
             .last_state_seq
-            .store(self.state.header.seq, Ordering::Relaxed);
+            .store(state.header.seq, Ordering::Relaxed);
         if self.decider.peer_lost() {
             status.peer_lost.store(false, Ordering::Relaxed);
         }
     }
 
-    /// Answers the state in `self.state`, received at `wake` (ns).
-    fn answer(&mut self, ports: &Ports, wake: u64) -> Outcome {
+    /// Answers `state` (read in place in its sample), received at `wake`
+    /// (ns); keeps a copy in `self.state` once the command is out.
+    fn answer(&mut self, ports: &Ports, wake: u64, state: &JointState) -> Outcome {
         let period = self
             .last_state_ns
             .is_some()
             .then(|| wake.saturating_sub(self.last_wake_ns));
-        self.note_state(wake);
+        self.note_state(state, wake);
         self.warmed = false;
         // Setpoints waiting for this state first (they arrived earlier), then
         // every newly queued one (at most the queue's length: bounded work),
         // in arrival order: the order in which a client sent them.
-        let clock = self.decider.setpoint_clock(&self.state);
+        let clock = self.decider.setpoint_clock(state);
         self.decider.apply_due_setpoints(clock);
         for _ in 0..SETPOINT_BUFFER {
             let Ok(Some(setpoint)) = ports.setpoints.receive() else {
@@ -449,29 +472,34 @@ impl Cycle {
             self.decider.receive_setpoint(&setpoint, clock);
         }
         let taken = monotonic_now_ns();
-        let answer = self.decider.decide(&self.state, wake);
+        let answer = self.decider.decide(state, wake);
         if let Some(step_ns) = self.decider.step_ns() {
             self.timings.step.record(step_ns);
         }
         let Answer::Command(mode) = answer else {
+            self.state = *state;
             self.status.publish(&self.decider.counters());
             return Outcome::Duplicate;
         };
         let decided = monotonic_now_ns();
         let command = self.decider.stamp_command(decided);
-        let mut send_failures = u64::from(ports.commands.send_copy(*command).is_err());
+        let mut send_failures =
+            u64::from(self.command_loan.send(&ports.commands, *command).is_err());
         let published = monotonic_now_ns();
-        if self.state.flags & STATE_FLAG_DRIVER_POLLS_COMMANDS == 0 {
+        if state.flags & STATE_FLAG_DRIVER_POLLS_COMMANDS == 0 {
             send_failures += u64::from(ports.command_ready.notify().is_err());
         } else {
             self.notifications_skipped += 1;
         }
         let sent = monotonic_now_ns();
+        // The command is out: keep the state (the hybrid wait's anchor, the
+        // warm-up's input).
+        self.state = *state;
         // The state's notification, consumed now that it is answered.
         let _ = ports.state_ready.try_wait(|_| {});
         let compute_ns = sent.saturating_sub(wake);
         self.max_compute_ns = self.max_compute_ns.max(compute_ns);
-        let latency = wake as i64 - self.state.header.stamp_ns as i64;
+        let latency = wake as i64 - state.header.stamp_ns as i64;
         let t = &mut self.timings;
         t.compute.record(compute_ns);
         t.wakeup.record_signed(latency);

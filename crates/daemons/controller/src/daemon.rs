@@ -361,6 +361,13 @@ fn write_stats(
         cycle.notifications_skipped(),
     );
     stats.counters.insert("warm_ups".into(), cycle.warm_ups());
+    let (preloaned, loan_failures) = cycle.preloaned_sends();
+    stats
+        .counters
+        .insert("commands_in_preloaned_samples".into(), preloaned);
+    stats
+        .counters
+        .insert("command_preloan_failures".into(), loan_failures);
     if let Some(allocs) = torque_path_allocs {
         stats
             .counters

@@ -104,6 +104,11 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             let mut ok = setpoint_pub
                 .send_copy(setpoints[k as usize % setpoints.len()])
                 .is_ok();
+            // Every other cycle as after a wait (the command's sample loaned
+            // before the state comes), else as a state already waiting.
+            if k % 2 == 0 {
+                cycle.prepare_send(&ports);
+            }
             let Ok(sample) = state_pub.loan_uninit() else {
                 return (false, Occupancy { after: 0 });
             };
@@ -184,6 +189,15 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
             after.pool_high_water,
         );
         assert_eq!(failures, 0, "cycles that did not round-trip correctly");
+        // Both ways of sending ran: in a sample loaned while waiting, and
+        // loaned on the spot.
+        let (preloaned, loan_failures) = cycle.preloaned_sends();
+        assert_eq!(loan_failures, 0);
+        let total = WARM_UP + CYCLES;
+        assert!(
+            preloaned >= total / 2 && preloaned < total,
+            "{preloaned} of {total}"
+        );
         assert_eq!(counters.invalid_states, 0);
         assert_eq!(counters.missed_states, 0);
         assert_eq!(counters.send_failures, 0);

@@ -37,7 +37,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::{Scenario, SimMode};
-use hcc_msgs::ipc::{self, Services};
+use hcc_msgs::ipc::{self, PreLoan, Services};
 use hcc_msgs::{
     JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, ServiceNames, TorqueCommand, monotonic_now_ns,
 };
@@ -173,11 +173,15 @@ pub struct SimLoop<'a> {
     published_ns: u64,
     /// The answer to the current state was received (and its latency recorded).
     answered: bool,
+    /// When the last command was taken from the queue, ns.
+    received_ns: u64,
     counts: PeriodCounts,
     overruns: u64,
     /// Connections to peers that appeared or left, made while waiting for
     /// the tick (not by the next state's send).
     upkeep: hcc_rt::ConnectionUpkeep,
+    /// The next state's sample, loaned while waiting for the tick.
+    state_loan: PreLoan<JointState>,
 }
 
 impl<'a> SimLoop<'a> {
@@ -201,9 +205,11 @@ impl<'a> SimLoop<'a> {
             answer_stamp: LatencyHistogram::new(),
             published_ns: 0,
             answered: false,
+            received_ns: 0,
             counts: PeriodCounts::default(),
             overruns: 0,
             upkeep: hcc_rt::ConnectionUpkeep::new(),
+            state_loan: PreLoan::new(),
         }
     }
 
@@ -227,7 +233,7 @@ impl<'a> SimLoop<'a> {
         if self.poll_commands {
             self.state.flags |= STATE_FLAG_DRIVER_POLLS_COMMANDS;
         }
-        let _ = self.ports.states.send_copy(self.state);
+        let _ = self.state_loan.send(&self.ports.states, self.state);
         let _ = self.ports.state_ready.notify();
     }
 
@@ -237,9 +243,8 @@ impl<'a> SimLoop<'a> {
         let got = self.receive_commands();
         if got && !self.answered {
             self.answered = true;
-            let now = monotonic_now_ns();
             self.state_to_command
-                .record(now.saturating_sub(self.published_ns));
+                .record(self.received_ns.saturating_sub(self.published_ns));
         }
         // The notifications are consumed after the receipt time is taken
         // (a polling driver gets none).
@@ -283,9 +288,16 @@ impl<'a> SimLoop<'a> {
         }
     }
 
-    /// Takes every queued command into `newest`; true if the newest answers state k.
+    /// Takes every queued command into `newest`; true if the newest answers
+    /// state k. `received_ns`: when the first of them was taken (before the
+    /// queue is drained).
     fn receive_commands(&mut self) -> bool {
+        let mut first = true;
         while let Ok(Some(c)) = self.ports.commands.receive() {
+            if first {
+                self.received_ns = monotonic_now_ns();
+                first = false;
+            }
             self.newest = Some(*c);
         }
         self.newest
@@ -359,9 +371,11 @@ impl<'a> SimLoop<'a> {
         let mut next = monotonic_now_ns() + period_ns;
         loop {
             self.wait_for_answer((self.published_ns + window_ns).min(next));
-            let (ports, upkeep) = (self.ports, &mut self.upkeep);
+            let (ports, upkeep, loan) = (self.ports, &mut self.upkeep, &mut self.state_loan);
             self.wait.sleep_until_with(next, || {
                 upkeep.run(&ports.connections());
+                // The next state's sample, loaned now rather than on the path.
+                loan.refill(&ports.states);
             });
             let now = monotonic_now_ns();
             self.lateness.record(now.saturating_sub(next));
@@ -676,6 +690,11 @@ impl SimLoop<'_> {
                     .count_above((period_ns * COMMAND_WINDOW_FRACTION) as u64),
             ),
             ("overruns", self.overruns),
+            (
+                "states_in_preloaned_samples",
+                self.state_loan.preloaned_sends(),
+            ),
+            ("state_preloan_failures", self.state_loan.loan_failures()),
         ] {
             stats.counters.insert(name.into(), value);
         }
