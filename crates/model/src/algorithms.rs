@@ -55,6 +55,9 @@ pub struct Scratch {
     ics: Vec<Vector6<f64>>,
     bcts: Vec<Vector6<f64>>,
     w: Vec<Vector6<f64>>,
+    /// `S_k`, `Ic_k S_k` and `Bc_kᵀ S_k` component by component (18 runs of n: element
+    /// c of the vector of body k at `c n + k`), for the Coriolis fill down the columns.
+    by_component: Vec<f64>,
 }
 
 impl Data {
@@ -84,6 +87,7 @@ impl Data {
                 ics: v6.clone(),
                 bcts: v6.clone(),
                 w: v6,
+                by_component: vec![0.0; 18 * n],
             },
         }
     }
@@ -355,10 +359,7 @@ fn kinematics(model: &Model, data: &mut Data, q: &DVector<f64>, qd: Option<&DVec
     let mut a_parent = Vector6::zeros();
     for (i, joint) in model.joints.iter().enumerate() {
         // Joint frame before the motion, then the joint motion about/along the axis.
-        let r_pre = mul33(
-            &r_parent,
-            joint.placement.rotation.to_rotation_matrix().matrix(),
-        );
+        let r_pre = mul33(&r_parent, &joint.placement_rotation);
         let mut p = p_parent + mul3v(&r_parent, &joint.placement.translation.vector);
         let z = mul3v(&r_pre, &joint.axis);
         let (r, s) = match joint.kind {
@@ -482,23 +483,103 @@ fn coriolis_pass(model: &Model, data: &mut Data) {
         sc.bcts[i] = join(Vector3::zeros(), f_c.cross(&sl) + mul3tv(&br_c, &sa));
         sc.w[i] = sc.ic[i].mul(&sc.sdot[i]) + join(-f_c.cross(&sa), mul3v(&br_c, &sa));
     }
-    // Column j of C (contiguous) from the per-joint vectors, sliced to n once.
     assert_eq!(data.c.shape(), (n, n));
-    let (s, sdot, ics, bcts, w) = (
-        &sc.s[..n],
-        &sc.sdot[..n],
-        &sc.ics[..n],
-        &sc.bcts[..n],
-        &sc.w[..n],
-    );
-    for (j, col) in data.c.as_mut_slice().chunks_exact_mut(n).enumerate() {
-        let (col, sj, sdj, wj) = (&mut col[..n], &s[j], &sdot[j], &w[j]);
-        for (k, ck) in col.iter_mut().enumerate() {
-            *ck = if k >= j {
-                dot6(&ics[k], sdj) + dot6(&bcts[k], sj)
-            } else {
-                dot6(&s[k], wj)
-            };
+    if n < COMPONENT_FILL_MIN {
+        // Column j of C (contiguous) from the per-joint vectors, sliced to n once.
+        let (s, sdot, ics, bcts, w) = (
+            &sc.s[..n],
+            &sc.sdot[..n],
+            &sc.ics[..n],
+            &sc.bcts[..n],
+            &sc.w[..n],
+        );
+        for (j, col) in data.c.as_mut_slice().chunks_exact_mut(n).enumerate() {
+            let (col, sj, sdj, wj) = (&mut col[..n], &s[j], &sdot[j], &w[j]);
+            for (k, ck) in col.iter_mut().enumerate() {
+                *ck = if k >= j {
+                    dot6(&ics[k], sdj) + dot6(&bcts[k], sj)
+                } else {
+                    dot6(&s[k], wj)
+                };
+            }
+        }
+        return;
+    }
+    assert_eq!(sc.by_component.len(), 18 * n);
+    for (c, run) in sc.by_component.chunks_exact_mut(n).enumerate() {
+        let (v, c) = match c / 6 {
+            0 => (&sc.s, c),
+            1 => (&sc.ics, c - 6),
+            _ => (&sc.bcts, c - 12),
+        };
+        for (x, vk) in run.iter_mut().zip(v) {
+            *x = vk[c];
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (just checked).
+        unsafe { coriolis_fill_avx2(data.c.as_mut_slice(), sc, n) };
+        return;
+    }
+    coriolis_fill(data.c.as_mut_slice(), sc, n);
+}
+
+/// The smallest n for which C is filled down its columns by [`coriolis_fill`] (below,
+/// the columns are too short to gain from it, and the dot products run directly on the
+/// per-joint vectors).
+const COMPONENT_FILL_MIN: usize = 8;
+
+/// [`coriolis_fill`] compiled for AVX2 (four rows per instruction; no fused
+/// multiply-adds, so the same roundings).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn coriolis_fill_avx2(c: &mut [f64], sc: &Scratch, n: usize) {
+    coriolis_fill(c, sc, n);
+}
+
+/// C (n × n, column-major `c`) from the per-joint vectors of [`coriolis_pass`], column
+/// j down its rows k from the component runs of `S_k`, `Ic_k S_k` and `Bc_kᵀ S_k`, so
+/// that consecutive rows are formed side by side in vector registers. Every element
+/// is the sum of products of [`dot6`] (`(Ic_k S_k)ᵀ Ṡ_j + (Bc_kᵀ S_k)ᵀ S_j` for k ≥ j,
+/// `S_kᵀ w_j` for k < j) in the same order, so C is bitwise that of the dot products.
+#[inline(always)]
+fn coriolis_fill(c: &mut [f64], sc: &Scratch, n: usize) {
+    let by = &sc.by_component[..18 * n];
+    let run = |c: usize| &by[c * n..(c + 1) * n];
+    let s: [&[f64]; 6] = std::array::from_fn(run);
+    let ics: [&[f64]; 6] = std::array::from_fn(|c| run(6 + c));
+    let bcts: [&[f64]; 6] = std::array::from_fn(|c| run(12 + c));
+    for (j, col) in c[..n * n].chunks_exact_mut(n).enumerate() {
+        let (sj, sdj, wj) = (&sc.s[j].data.0[0], &sc.sdot[j].data.0[0], &sc.w[j].data.0[0]);
+        let (upper, lower) = col.split_at_mut(j);
+        // k < j: S_kᵀ w_j.
+        for (k, ck) in upper.iter_mut().enumerate() {
+            *ck = s[0][k] * wj[0]
+                + s[1][k] * wj[1]
+                + s[2][k] * wj[2]
+                + s[3][k] * wj[3]
+                + s[4][k] * wj[4]
+                + s[5][k] * wj[5];
+        }
+        // k ≥ j: (Ic_k S_k)ᵀ Ṡ_j + (Bc_kᵀ S_k)ᵀ S_j.
+        for (k, ck) in (j..n).zip(lower.iter_mut()) {
+            let a = ics[0][k] * sdj[0]
+                + ics[1][k] * sdj[1]
+                + ics[2][k] * sdj[2]
+                + ics[3][k] * sdj[3]
+                + ics[4][k] * sdj[4]
+                + ics[5][k] * sdj[5];
+            let b = bcts[0][k] * sj[0]
+                + bcts[1][k] * sj[1]
+                + bcts[2][k] * sj[2]
+                + bcts[3][k] * sj[3]
+                + bcts[4][k] * sj[4]
+                + bcts[5][k] * sj[5];
+            *ck = a + b;
         }
     }
 }
