@@ -1160,6 +1160,7 @@ impl Controller {
             model,
             data,
             tasks,
+            &mut self.frames,
             q,
             &l.stiffness,
             &l.goal,

@@ -554,7 +554,11 @@ fn coriolis_fill(c: &mut [f64], sc: &Scratch, n: usize) {
     let ics: [&[f64]; 6] = std::array::from_fn(|c| run(6 + c));
     let bcts: [&[f64]; 6] = std::array::from_fn(|c| run(12 + c));
     for (j, col) in c[..n * n].chunks_exact_mut(n).enumerate() {
-        let (sj, sdj, wj) = (&sc.s[j].data.0[0], &sc.sdot[j].data.0[0], &sc.w[j].data.0[0]);
+        let (sj, sdj, wj) = (
+            &sc.s[j].data.0[0],
+            &sc.sdot[j].data.0[0],
+            &sc.w[j].data.0[0],
+        );
         let (upper, lower) = col.split_at_mut(j);
         // k < j: S_kᵀ w_j.
         for (k, ck) in upper.iter_mut().enumerate() {
@@ -650,10 +654,7 @@ fn frame_info(
 pub fn frame_placement(model: &Model, data: &Data, frame: FrameId) -> Isometry3<f64> {
     match frame_info(model, data, frame) {
         Some((_, o_m)) => o_m,
-        None => Isometry3::from_parts(
-            Translation3::new(f64::NAN, f64::NAN, f64::NAN),
-            UnitQuaternion::identity(),
-        ),
+        None => nan_placement(),
     }
 }
 
@@ -665,27 +666,8 @@ pub fn frame_placement(model: &Model, data: &Data, frame: FrameId) -> Isometry3<
 /// the task Jacobians `J_i` of the paper's eq. (2)).
 /// `out` of the wrong size or an unknown frame: `out` is filled with NaN.
 pub fn frame_jacobian(model: &Model, data: &Data, frame: FrameId, out: &mut DMatrix<f64>) {
-    let n = model.nq();
     let info = frame_info(model, data, frame);
-    let (body, o_m) = match info {
-        Some(x) if out.nrows() == 6 && out.ncols() == n && data.nq() == n => x,
-        _ => {
-            out.fill(f64::NAN);
-            return;
-        }
-    };
-    // Column-major 6 × n: column j is out[6 j..6 j + 6].
-    let out = out.as_mut_slice();
-    out.fill(0.0);
-    let p = o_m.translation.vector;
-    if let Some(b) = body {
-        for (s, col) in data.scratch.s[..=b].iter().zip(out.chunks_exact_mut(6)) {
-            let w = ang(s);
-            let v = lin(s) + w.cross(&p);
-            col[..3].copy_from_slice(v.as_slice());
-            col[3..].copy_from_slice(w.as_slice());
-        }
-    }
+    jacobian_at(model, data, info.as_ref(), out);
 }
 
 /// Time derivative J̇ of [`frame_jacobian`] (same convention) into `out`.
@@ -701,8 +683,79 @@ pub fn frame_jacobian_time_variation(
     frame: FrameId,
     out: &mut DMatrix<f64>,
 ) {
-    let n = model.nq();
     let info = frame_info(model, data, frame);
+    jacobian_time_variation_at(model, data, info.as_ref(), out);
+}
+
+/// [`frame_jacobian`] into `j` and, when given, [`frame_jacobian_time_variation`] into
+/// `jdot` for one frame, its world placement formed once for both; returns that
+/// placement ([`frame_placement`], a NaN translation for an unknown frame), so that a
+/// caller that also needs it does not form it again. Requires
+/// [`forward_kinematics_vel`] first (or [`forward_kinematics`] without `jdot`).
+pub fn frame_jacobians(
+    model: &Model,
+    data: &Data,
+    frame: FrameId,
+    j: &mut DMatrix<f64>,
+    jdot: Option<&mut DMatrix<f64>>,
+) -> Isometry3<f64> {
+    let info = frame_info(model, data, frame);
+    jacobian_at(model, data, info.as_ref(), j);
+    if let Some(jdot) = jdot {
+        jacobian_time_variation_at(model, data, info.as_ref(), jdot);
+    }
+    match info {
+        Some((_, o_m)) => o_m,
+        None => nan_placement(),
+    }
+}
+
+/// The placement of [`frame_placement`] for an unknown frame.
+fn nan_placement() -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(f64::NAN, f64::NAN, f64::NAN),
+        UnitQuaternion::identity(),
+    )
+}
+
+/// The body of [`frame_jacobian`] for a frame's body and placement from [`frame_info`].
+fn jacobian_at(
+    model: &Model,
+    data: &Data,
+    info: Option<&(Option<usize>, Isometry3<f64>)>,
+    out: &mut DMatrix<f64>,
+) {
+    let n = model.nq();
+    let (body, o_m) = match info {
+        Some(x) if out.nrows() == 6 && out.ncols() == n && data.nq() == n => x,
+        _ => {
+            out.fill(f64::NAN);
+            return;
+        }
+    };
+    // Column-major 6 × n: column j is out[6 j..6 j + 6].
+    let out = out.as_mut_slice();
+    out.fill(0.0);
+    let p = o_m.translation.vector;
+    if let Some(b) = *body {
+        for (s, col) in data.scratch.s[..=b].iter().zip(out.chunks_exact_mut(6)) {
+            let w = ang(s);
+            let v = lin(s) + w.cross(&p);
+            col[..3].copy_from_slice(v.as_slice());
+            col[3..].copy_from_slice(w.as_slice());
+        }
+    }
+}
+
+/// The body of [`frame_jacobian_time_variation`] for a frame's body and placement from
+/// [`frame_info`].
+fn jacobian_time_variation_at(
+    model: &Model,
+    data: &Data,
+    info: Option<&(Option<usize>, Isometry3<f64>)>,
+    out: &mut DMatrix<f64>,
+) {
+    let n = model.nq();
     let (body, o_m) = match info {
         Some(x) if out.nrows() == 6 && out.ncols() == n && data.nq() == n => x,
         _ => {
@@ -713,7 +766,7 @@ pub fn frame_jacobian_time_variation(
     let out = out.as_mut_slice();
     out.fill(0.0);
     let p = o_m.translation.vector;
-    if let Some(b) = body {
+    if let Some(b) = *body {
         let vb = &data.v[b];
         let pdot = lin(vb) + ang(vb).cross(&p);
         let (s, sdot) = (&data.scratch.s[..=b], &data.scratch.sdot[..=b]);
