@@ -55,6 +55,8 @@ pub struct Scratch {
     ics: Vec<Vector6<f64>>,
     bcts: Vec<Vector6<f64>>,
     w: Vec<Vector6<f64>>,
+    /// (sin q_i, cos q_i) of the revolute joints.
+    sin_cos: Vec<(f64, f64)>,
     /// `S_k`, `Ic_k S_k` and `Bc_kᵀ S_k` component by component (18 runs of n: element
     /// c of the vector of body k at `c n + k`), for the Coriolis fill down the columns.
     by_component: Vec<f64>,
@@ -87,6 +89,7 @@ impl Data {
                 ics: v6.clone(),
                 bcts: v6.clone(),
                 w: v6,
+                sin_cos: vec![(0.0, 1.0); n],
                 by_component: vec![0.0; 18 * n],
             },
         }
@@ -204,10 +207,9 @@ fn mul3tv(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
     )
 }
 
-/// Rotation by `angle` about the unit `axis` (Rodrigues' formula,
-/// `R = cos θ 1 + sin θ [a]× + (1 − cos θ) a aᵀ`).
-fn axis_angle(axis: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
-    let (s, c) = angle.sin_cos();
+/// Rotation by the angle θ with (`s`, `c`) = (sin θ, cos θ) about the unit `axis`
+/// (Rodrigues' formula, `R = cos θ 1 + sin θ [a]× + (1 − cos θ) a aᵀ`).
+fn axis_angle(axis: &Vector3<f64>, (s, c): (f64, f64)) -> Matrix3<f64> {
     let a = &axis.data.0[0];
     let t = 1.0 - c;
     mat3([
@@ -353,6 +355,13 @@ fn dims_ok(model: &Model, data: &Data, vecs: &[&DVector<f64>]) -> bool {
 /// also velocities, `Ṡ` and bias accelerations (zero without `qd`).
 fn kinematics(model: &Model, data: &mut Data, q: &DVector<f64>, qd: Option<&DVector<f64>>) {
     let sc = &mut data.scratch;
+    // The sines and cosines of the joint angles first: independent calls, which the
+    // CPU overlaps here (inside the recursion each would wait on the one before).
+    for ((sc_i, joint), &qi) in sc.sin_cos.iter_mut().zip(&model.joints).zip(q.iter()) {
+        if joint.kind == JointKind::Revolute {
+            *sc_i = qi.sin_cos();
+        }
+    }
     let mut r_parent = Matrix3::identity();
     let mut p_parent = Vector3::zeros();
     let mut v_parent = Vector6::zeros();
@@ -364,7 +373,7 @@ fn kinematics(model: &Model, data: &mut Data, q: &DVector<f64>, qd: Option<&DVec
         let z = mul3v(&r_pre, &joint.axis);
         let (r, s) = match joint.kind {
             JointKind::Revolute => (
-                mul33(&r_pre, &axis_angle(&joint.axis, q[i])),
+                mul33(&r_pre, &axis_angle(&joint.axis, sc.sin_cos[i])),
                 join(p.cross(&z), z),
             ),
             JointKind::Prismatic => {
