@@ -262,11 +262,11 @@ fn factor_n(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
 
 /// [`cholesky_solve_in_place`] for contiguous column-major storage: `l` the `n × n`
 /// factor, `b` the right-hand sides, `b.len() / n` columns of `n`. From n = 8 on the
-/// right-hand sides are solved [`LANES`] at a time, interleaved (element i of the four
+/// right-hand sides are solved four at a time, interleaved (element i of the four
 /// side by side), so every step of the substitutions is one vector operation across
 /// them: the divisions and the long subtraction chains of the back substitution run
 /// four wide (in one AVX register where the CPU has AVX2) instead of one after the
-/// other. Smaller factors are solved column by column ([`solve_columns`]). Either way
+/// other. Smaller factors are solved column by column (`solve_columns`). Either way
 /// every element is formed by the same operations in the same order as in
 /// [`cholesky_solve_in_place`] (separate multiplications and subtractions, over k in
 /// increasing order, divided by the pivot last), so the solution is bitwise the same.
