@@ -943,3 +943,58 @@ pub fn compute_all_terms(model: &Model, data: &mut Data, q: &DVector<f64>, qd: &
         data.nle[k] = s;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fmt::Write as _;
+
+    /// An n-joint chain (axes alternating z / y / x, offsets and centres of mass off
+    /// the axes), long enough for the Coriolis fill by components.
+    fn chain(n: usize) -> Model {
+        let mut s =
+            String::from("<?xml version=\"1.0\"?>\n<robot name=\"c\">\n<link name=\"l0\"/>\n");
+        for k in 0..n {
+            let axis = ["0 0 1", "0 1 0", "1 0 0"][k % 3];
+            let m = 1.0 + 0.1 * k as f64;
+            writeln!(
+                s,
+                "<link name=\"l{}\"><inertial><origin xyz=\"0.01 -0.02 0.05\" rpy=\"0.1 0.2 0.3\"/>\
+                 <mass value=\"{m}\"/><inertia ixx=\"0.02\" ixy=\"0.001\" ixz=\"0\" iyy=\"0.025\" \
+                 iyz=\"0.002\" izz=\"0.015\"/></inertial></link>\
+                 <joint name=\"j{k}\" type=\"revolute\"><parent link=\"l{k}\"/><child link=\"l{}\"/>\
+                 <origin xyz=\"0.02 0 0.1\" rpy=\"0 0.1 0\"/><axis xyz=\"{axis}\"/>\
+                 <limit lower=\"-3\" upper=\"3\" effort=\"10\" velocity=\"2\"/></joint>",
+                k + 1,
+                k + 1
+            )
+            .unwrap();
+        }
+        s.push_str("</robot>\n");
+        Model::from_urdf_str(&s, None, &format!("l{n}"), None).unwrap()
+    }
+
+    #[test]
+    fn coriolis_fill_by_components_is_bitwise_the_dot_products() {
+        for n in [8, 10, 13] {
+            let model = chain(n);
+            let mut data = Data::new(&model);
+            let q = DVector::from_fn(n, |i, _| 0.3 * (i as f64 + 1.0).sin());
+            let qd = DVector::from_fn(n, |i, _| 0.5 * (0.7 * i as f64).cos());
+            compute_all_terms(&model, &mut data, &q, &qd);
+            let sc = &data.scratch;
+            let reference = DMatrix::from_fn(n, n, |k, j| {
+                if k >= j {
+                    dot6(&sc.ics[k], &sc.sdot[j]) + dot6(&sc.bcts[k], &sc.s[j])
+                } else {
+                    dot6(&sc.s[k], &sc.w[j])
+                }
+            });
+            assert_eq!(data.c, reference, "n = {n}");
+            // The portable build as well (the CPUs without AVX2).
+            let mut c = DMatrix::zeros(n, n);
+            coriolis_fill(c.as_mut_slice(), sc, n);
+            assert_eq!(c, reference, "portable, n = {n}");
+        }
+    }
+}

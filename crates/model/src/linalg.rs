@@ -568,13 +568,24 @@ mod tests {
             let mut l = spd(n);
             cholesky_in_place(&mut l).unwrap();
             for cols in 1..=7 {
-                let mut bm = DMatrix::from_fn(n, cols, |i, j| (i as f64 - 3.0) * 0.7 + j as f64);
+                let mut bm = rhs_of(n, cols);
                 let mut bs = bm.clone();
                 cholesky_solve_in_place(&l, &mut bm).unwrap();
                 cholesky_solve_slice(l.as_slice(), n, bs.as_mut_slice()).unwrap();
                 assert_eq!(bs, bm, "n = {n}, {cols} columns");
+                if n <= INTERLEAVED_MAX {
+                    // The portable build of the interleaved form too (the CPUs without
+                    // AVX2).
+                    let mut bp = rhs_of(n, cols);
+                    solve_interleaved::<false>(l.as_slice(), bp.as_mut_slice(), n);
+                    assert_eq!(bp, bm, "portable, n = {n}, {cols} columns");
+                }
             }
         }
+    }
+
+    fn rhs_of(n: usize, cols: usize) -> DMatrix<f64> {
+        DMatrix::from_fn(n, cols, |i, j| (i as f64 - 3.0) * 0.7 + j as f64)
     }
 
     #[test]
