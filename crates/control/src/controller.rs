@@ -3,8 +3,8 @@
 use crate::ControlError;
 use crate::dense::{
     AlignWork, Conditioning, SpdWork, copy, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
-    gemm_nt_leading, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, mirror_upper,
-    null_space_basis, orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
+    gemm_nt_leading, gemm_sym, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, null_space_basis,
+    orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
 };
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
@@ -1122,12 +1122,10 @@ impl Controller {
         transpose_into(&mut ns.vt, &ns.v);
         transpose_into(&mut ns.vdot_t, &ns.vdot);
         gemm(&mut ns.mv, 1.0, &self.data.m, &ns.v, 0.0);
-        gemm(&mut ns.vtmv, 1.0, &ns.vt, &ns.mv, 0.0);
-        mirror_upper(&mut ns.vtmv);
+        gemm_sym(&mut ns.vtmv, &ns.vt, &ns.mv);
         ns.s_cond = damped_spd_inverse(&ns.vtmv, &mut ns.s, &mut ns.spd_d, eps, GRAM_FLOOR);
         gemm(&mut ns.mdv, 1.0, &self.mdot, &ns.v, 0.0);
-        gemm(&mut ns.x, 1.0, &ns.vt, &ns.mdv, 0.0);
-        mirror_upper(&mut ns.x);
+        gemm_sym(&mut ns.x, &ns.vt, &ns.mdv);
         gemm(&mut ns.tmp_dd, 1.0, &ns.vdot_t, &ns.mv, 0.0);
         ns.x += &ns.tmp_dd;
         transpose_add(&mut ns.x, &ns.tmp_dd);
@@ -1160,6 +1158,7 @@ impl Controller {
             model,
             data,
             tasks,
+            &mut self.frames,
             q,
             &l.stiffness,
             &l.goal,

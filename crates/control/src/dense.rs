@@ -58,10 +58,10 @@ fn gemm_cols(
             }
             // SAFETY: the CPU supports AVX2 and FMA (just checked); the bounds are
             // checked above.
-            unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta) };
+            unsafe { gemm_cols_avx2_fma(c, alpha, a, (m, k, n), b, beta, m) };
         } else {
             // SAFETY: the CPU supports AVX2 (just checked); the bounds are checked above.
-            unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta) };
+            unsafe { gemm_cols_avx2(c, alpha, a, (m, k, n), b, beta, m) };
         }
         return;
     }
@@ -69,7 +69,7 @@ fn gemm_cols(
         FIXED[(m - 1) * FIXED_MAX + k - 1](c, alpha, a, n, b, beta);
         return;
     }
-    gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<1, false>(c, alpha, a, (m, k, n), b, beta, m);
 }
 
 /// The largest row count and inner dimension of the fixed-size product builds.
@@ -172,8 +172,9 @@ unsafe fn gemm_cols_avx2(
     (m, k, n): (usize, usize, usize),
     b: Strided,
     beta: f64,
+    rows_end: usize,
 ) {
-    gemm_blocks::<4, false>(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<4, false>(c, alpha, a, (m, k, n), b, beta, rows_end);
 }
 
 /// [`gemm_blocks`] compiled for AVX2 and FMA: every multiply-add of the sums is one
@@ -193,8 +194,9 @@ unsafe fn gemm_cols_avx2_fma(
     (m, k, n): (usize, usize, usize),
     b: Strided,
     beta: f64,
+    rows_end: usize,
 ) {
-    gemm_blocks::<4, true>(c, alpha, a, (m, k, n), b, beta);
+    gemm_blocks::<4, true>(c, alpha, a, (m, k, n), b, beta, rows_end);
 }
 
 /// `s + a b`, fused (one rounding) in the builds for FMA.
@@ -204,7 +206,7 @@ fn madd<const FMA: bool>(s: f64, a: f64, b: f64) -> f64 {
 }
 
 /// The row blocks of [`gemm_cols`] (sizes checked there), `NC` output columns at a
-/// time.
+/// time; rows `rows_end..m` are left as they are (all rows: `rows_end` = m).
 #[inline(always)]
 fn gemm_blocks<const NC: usize, const FMA: bool>(
     c: &mut [f64],
@@ -213,10 +215,12 @@ fn gemm_blocks<const NC: usize, const FMA: bool>(
     (m, k, n): (usize, usize, usize),
     b: Strided,
     beta: f64,
+    rows_end: usize,
 ) {
+    debug_assert!(rows_end <= m);
     let mut i = 0;
-    while i < m {
-        let w = MR.min(m - i);
+    while i < rows_end {
+        let w = MR.min(rows_end - i);
         match w {
             8 => rows::<8, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
             7 => rows::<7, NC, FMA>(c, alpha, a, (m, k, n), i, b, beta),
@@ -335,6 +339,60 @@ pub fn gemm_leading(
         b,
         beta,
     );
+}
+
+/// `c = a b` for a product known to be symmetric (e.g. Vᵀ (M V) with M symmetric and
+/// Vᵀ stored): only the upper triangle is formed (with the diagonal blocks of the
+/// kernel; the strict lower triangle is left undefined), then mirrored onto the lower
+/// one, so the result is exactly symmetric at about half the cost. Every upper element
+/// is the same sum as in [`gemm`] (the same kernel for the same sizes), so the result
+/// is bitwise that of [`gemm`] followed by [`mirror_upper`].
+pub fn gemm_sym(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>) {
+    let (m, k, n) = (a.nrows(), a.ncols(), b.ncols());
+    assert_eq!(b.nrows(), k);
+    assert_eq!(c.shape(), (m, n));
+    assert_eq!(m, n);
+    let (a, bd, cs) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    // The kernel `gemm_cols` would choose for the whole product (FMA or not decides
+    // the roundings).
+    #[cfg(target_arch = "x86_64")]
+    let (avx2, fma) = {
+        let avx2 = m * k * n >= AVX2_MIN_WORK && std::arch::is_x86_feature_detected!("avx2");
+        (avx2, avx2 && std::arch::is_x86_feature_detected!("fma"))
+    };
+    // Four columns at a time, rows down to the last of them.
+    let mut j = 0;
+    while j < n {
+        let cols = 4.min(n - j);
+        let rows_end = (j + cols).min(m);
+        let b = Strided {
+            data: &bd[j * k..(j + cols) * k],
+            ls: 1,
+            js: k,
+        };
+        let c = &mut cs[j * m..(j + cols) * m];
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            if fma {
+                // SAFETY: the CPU supports AVX2 and FMA (checked above); a is m × k,
+                // b k × cols and c m × cols, as `gemm_cols` requires.
+                unsafe { gemm_cols_avx2_fma(c, 1.0, a, (m, k, cols), b, 0.0, rows_end) };
+            } else {
+                // SAFETY: the CPU supports AVX2 (checked above); sizes as above.
+                unsafe { gemm_cols_avx2(c, 1.0, a, (m, k, cols), b, 0.0, rows_end) };
+            }
+            j += cols;
+            continue;
+        }
+        gemm_blocks::<1, false>(c, 1.0, a, (m, k, cols), b, 0.0, rows_end);
+        j += cols;
+    }
+    // The upper triangle onto the lower one (as `mirror_upper`).
+    for j in 0..n {
+        for i in (j + 1)..n {
+            cs[j * n + i] = cs[i * n + j];
+        }
+    }
 }
 
 /// `c = alpha * a * bᵀ + beta * c`.
@@ -1240,8 +1298,7 @@ const POLAR_SERIES_MAX: f64 = 1e-3;
 pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigma: f64) -> f64 {
     // wᵀw from wᵀ by the (vectorised) column kernel, upper triangle mirrored.
     transpose_into(&mut work.wt, w);
-    gemm(&mut work.xtx, 1.0, &work.wt, w, 0.0);
-    mirror_upper(&mut work.xtx);
+    gemm_sym(&mut work.xtx, &work.wt, w);
     let d = w.ncols();
     let mut e2 = 0.0;
     for j in 0..d {
@@ -1296,6 +1353,32 @@ pub fn orthonormalize_polar(w: &mut DMatrix<f64>, work: &mut AlignWork, min_sigm
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gemm_sym_is_bitwise_gemm_then_mirror() {
+        // Below and above the AVX2 threshold, partial and full column groups.
+        for (n, k) in [
+            (1, 3),
+            (2, 5),
+            (3, 7),
+            (5, 2),
+            (6, 9),
+            (9, 32),
+            (18, 32),
+            (23, 11),
+        ] {
+            let v = DMatrix::from_fn(k, n, |i, j| ((i * 5 + j * 3) % 7) as f64 * 0.31 - 0.9);
+            let w = DMatrix::from_fn(k, k, |i, j| 1.0 / (1.0 + i as f64 + j as f64));
+            let wv = &w * &v;
+            let vt = v.transpose();
+            let mut full = DMatrix::zeros(n, n);
+            gemm(&mut full, 1.0, &vt, &wv, 0.0);
+            mirror_upper(&mut full);
+            let mut sym = DMatrix::from_element(n, n, f64::NAN);
+            gemm_sym(&mut sym, &vt, &wv);
+            assert_eq!(sym, full, "n = {n}, k = {k}");
+        }
+    }
 
     #[test]
     fn spd_inverse_large_matches_the_dot_product_form() {

@@ -8,15 +8,18 @@ use hcc_model::{Data, FrameId, Model};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 /// Scratch of [`jacobian`]: the 6 × n frame Jacobian and its time variation of the
-/// last frame evaluated. Consecutive tasks on one frame (e.g. TCP position and
-/// orientation) compute them once per cycle; call [`FrameWork::invalidate`] when the
-/// state in `Data` changes.
+/// last frame evaluated, and the world placement of the last frame formed. Consecutive
+/// tasks on one frame (e.g. TCP position and orientation, their Jacobians and their
+/// potentials) form them once per cycle; call [`FrameWork::invalidate`] when the state
+/// in `Data` changes.
 #[derive(Clone, Debug)]
 pub struct FrameWork {
     j: DMatrix<f64>,
     jdot: DMatrix<f64>,
     /// The frame the buffers hold, and whether `jdot` is valid for it.
     cached: Option<(FrameId, bool)>,
+    /// The last frame placed and its placement ([`hcc_model::frame_placement`]).
+    placed: Option<(FrameId, Isometry3<f64>)>,
 }
 
 impl FrameWork {
@@ -26,12 +29,27 @@ impl FrameWork {
             j: DMatrix::zeros(6, n),
             jdot: DMatrix::zeros(6, n),
             cached: None,
+            placed: None,
         }
     }
 
     /// Forgets the cached frame (the state changed).
     pub fn invalidate(&mut self) {
         self.cached = None;
+        self.placed = None;
+    }
+
+    /// The world placement of `frame` ([`hcc_model::frame_placement`]), formed once per
+    /// state.
+    pub fn placement(&mut self, model: &Model, data: &Data, frame: FrameId) -> Isometry3<f64> {
+        if let Some((f, o_m)) = self.placed
+            && f == frame
+        {
+            return o_m;
+        }
+        let o_m = hcc_model::frame_placement(model, data, frame);
+        self.placed = Some((frame, o_m));
+        o_m
     }
 
     fn load(&mut self, model: &Model, data: &Data, frame: FrameId, with_jdot: bool) {
@@ -41,11 +59,10 @@ impl FrameWork {
         {
             return;
         }
-        hcc_model::frame_jacobian(model, data, frame, &mut self.j);
-        if with_jdot {
-            hcc_model::frame_jacobian_time_variation(model, data, frame, &mut self.jdot);
-        }
+        let jdot = with_jdot.then_some(&mut self.jdot);
+        let o_m = hcc_model::frame_jacobians(model, data, frame, &mut self.j, jdot);
         self.cached = Some((frame, with_jdot));
+        self.placed = Some((frame, o_m));
     }
 }
 
@@ -163,13 +180,14 @@ impl PotentialWork {
 /// The task error x̃_i (`err`; quaternion rows 2 R_d ε ≈ the rotation vector, world
 /// axes), V_i (returned) and its gradient conjugate to ẋ_i = J_i q̇ (`grad`; for
 /// quaternion rows R_d (ηI + \[ε\]×) (K e)_rows, world axes) of one level at the
-/// state in `data`. V_i = ½ eᵀ K e over the stacked errors e (e = 2ε for quaternion
+/// state in `data` (frame placements through `frames`, shared with the Jacobians). V_i = ½ eᵀ K e over the stacked errors e (e = 2ε for quaternion
 /// rows): for a single orientation task V = 2 εᵀ K ε (the spec's potential).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn potential(
     model: &Model,
     data: &Data,
     tasks: &[TaskSpec],
+    frames: &mut FrameWork,
     q: &DVector<f64>,
     stiffness: &DMatrix<f64>,
     goal: &DVector<f64>,
@@ -180,9 +198,8 @@ pub(crate) fn potential(
     let n = model.nq();
     let mut o = 0;
     for (t, task) in tasks.iter().enumerate() {
-        let placement: Option<Isometry3<f64>> = task
-            .frame()
-            .map(|f| hcc_model::frame_placement(model, data, f));
+        let placement: Option<Isometry3<f64>> =
+            task.frame().map(|f| frames.placement(model, data, f));
         match task {
             TaskSpec::Position { axes, .. } => {
                 let p = placement.expect("frame task").translation.vector;

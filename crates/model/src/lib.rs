@@ -42,6 +42,9 @@ pub struct Joint {
     pub kind: JointKind,
     /// Placement of the joint frame in the frame of the previous body (or of the root link).
     pub placement: Isometry3<f64>,
+    /// The rotation of `placement` as a matrix, formed once when the model is built
+    /// (the kinematics reads it every cycle; keep it in step when changing `placement`).
+    pub placement_rotation: Matrix3<f64>,
     /// Unit axis in the joint frame.
     pub axis: Vector3<f64>,
     /// Inertia of everything rigidly attached after this joint and before the next movable

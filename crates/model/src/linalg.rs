@@ -261,38 +261,217 @@ fn factor_n(a: &mut [f64], n: usize) -> Result<(), LinalgError> {
 }
 
 /// [`cholesky_solve_in_place`] for contiguous column-major storage: `l` the `n × n`
-/// factor, `b` the right-hand sides, `b.len() / n` columns of `n`. All columns advance
-/// together, one row of the substitutions at a time, so their divisions (whose latency
-/// dominates small solves) overlap instead of forming one chain per column. The forward
-/// substitution runs column-oriented (`b[i] −= l[i, k] b[k]` for i > k, contiguous in
-/// i), the backward one by dot products down the contiguous columns of `l`, four
-/// right-hand sides side by side; every
-/// element is formed by the same operations in the same order as in
-/// [`cholesky_solve_in_place`], so the solution is bitwise the same.
+/// factor, `b` the right-hand sides, `b.len() / n` columns of `n`. From n = 8 on the
+/// right-hand sides are solved four at a time, interleaved (element i of the four
+/// side by side), so every step of the substitutions is one vector operation across
+/// them: the divisions and the long subtraction chains of the back substitution run
+/// four wide (in one AVX register where the CPU has AVX2) instead of one after the
+/// other. Smaller factors are solved column by column (`solve_columns`). Either way
+/// every element is formed by the same operations in the same order as in
+/// [`cholesky_solve_in_place`] (separate multiplications and subtractions, over k in
+/// increasing order, divided by the pivot last), so the solution is bitwise the same.
 pub fn cholesky_solve_slice(l: &[f64], n: usize, b: &mut [f64]) -> Result<(), LinalgError> {
     check("cholesky_solve_slice (n × n factor)", n * n, l.len())?;
     if n == 0 {
         return Ok(());
     }
     check("cholesky_solve_slice (rhs rows)", 0, b.len() % n)?;
-    // Robot sizes run in a build for their size (loops unrolled, index checks folded).
-    match n {
-        1 => solve_n(l, b, 1),
-        2 => solve_n(l, b, 2),
-        3 => solve_n(l, b, 3),
-        4 => solve_n(l, b, 4),
-        5 => solve_n(l, b, 5),
-        6 => solve_n(l, b, 6),
-        7 => solve_n(l, b, 7),
-        _ => solve_n(l, b, n),
+    if !(INTERLEAVED_MIN..=INTERLEAVED_MAX).contains(&n) {
+        // Robot sizes run in a build for their size (loops unrolled, index checks
+        // folded).
+        match n {
+            1 => solve_columns(l, b, 1),
+            2 => solve_columns(l, b, 2),
+            3 => solve_columns(l, b, 3),
+            4 => solve_columns(l, b, 4),
+            5 => solve_columns(l, b, 5),
+            6 => solve_columns(l, b, 6),
+            7 => solve_columns(l, b, 7),
+            _ => solve_columns(l, b, n),
+        }
+        return Ok(());
     }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (just checked).
+        unsafe { solve_interleaved_avx2(l, b, n) };
+        return Ok(());
+    }
+    solve_interleaved::<false>(l, b, n);
     Ok(())
 }
 
-/// The substitutions of [`cholesky_solve_slice`] (sizes checked there; a constant n
-/// where it is inlined with one, the same operations in the same order either way).
+/// Right-hand sides per interleaved block of [`cholesky_solve_slice`] (one AVX2 register).
+const LANES: usize = 4;
+
+/// The smallest n solved interleaved: below it the columns' short chains, advanced
+/// together by [`solve_columns`], overlap well enough and the interleaving does not pay.
+const INTERLEAVED_MIN: usize = 8;
+
+/// The largest n solved interleaved (the block lives on the stack, n × [`LANES`]
+/// values); larger factors take [`solve_columns`].
+const INTERLEAVED_MAX: usize = 64;
+
+/// [`solve_interleaved`] compiled for AVX2 (no fused multiply-adds: the same roundings).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn solve_interleaved_avx2(l: &[f64], b: &mut [f64], n: usize) {
+    solve_interleaved::<true>(l, b, n);
+}
+
+/// The substitutions of [`cholesky_solve_slice`] for [`INTERLEAVED_MIN`] ≤ n ≤
+/// [`INTERLEAVED_MAX`] (sizes checked there; `AVX`: the lane operations as AVX
+/// instructions, only in [`solve_interleaved_avx2`]). Every full group of [`LANES`] right-hand sides is interleaved in
+/// place (element i of the four side by side), the last, partial group in a block on
+/// the stack (its lanes past the last column zero, and they stay zero); every row of
+/// the substitutions then runs over all groups before the next, so that their chains
+/// of divisions and subtractions overlap.
 #[inline(always)]
-fn solve_n(l: &[f64], b: &mut [f64], n: usize) {
+fn solve_interleaved<const AVX: bool>(l: &[f64], b: &mut [f64], n: usize) {
+    let l = &l[..n * n];
+    let mut tmp = [0.0; LANES * INTERLEAVED_MAX];
+    let tmp = &mut tmp[..LANES * n];
+    let mut tail = [[0.0; LANES]; INTERLEAVED_MAX];
+    let tail = &mut tail[..n];
+    let full = b.len() / (LANES * n) * (LANES * n);
+    let (head, rest) = b.split_at_mut(full);
+    for group in head.chunks_exact_mut(LANES * n) {
+        tmp.copy_from_slice(group);
+        for (i, x) in group.chunks_exact_mut(LANES).enumerate() {
+            for (u, xu) in x.iter_mut().enumerate() {
+                *xu = tmp[u * n + i];
+            }
+        }
+    }
+    for (u, x) in rest.chunks_exact(n).enumerate() {
+        for (ti, &xi) in tail.iter_mut().zip(x) {
+            ti[u] = xi;
+        }
+    }
+    let (groups, _) = head.as_chunks_mut::<LANES>();
+    let has_tail = !rest.is_empty();
+    // The groups, each n rows of LANES: the interleaved ones in `b`, then the tail.
+    macro_rules! each_group {
+        (|$t:ident| $body:block) => {
+            for $t in groups.chunks_exact_mut(n) $body
+            if has_tail {
+                let $t = &mut *tail;
+                $body
+            }
+        };
+    }
+    // L y = b, column-oriented: y_k = b_k / l_kk, then b_i −= l_ik y_k for i > k.
+    for (k, lk) in l.chunks_exact(n).enumerate() {
+        let (lkk, lt) = (lk[k], &lk[k + 1..]);
+        each_group!(|t| {
+            let (done, below) = t.split_at_mut(k + 1);
+            let yk = div_lanes::<AVX>(&done[k], lkk);
+            done[k] = yk;
+            for (ti, &lik) in below.iter_mut().zip(lt) {
+                sub_scaled::<AVX>(ti, lik, &yk);
+            }
+        });
+    }
+    // Lᵀ x = y: x_i = (y_i − Σ_{k>i} l_ki x_k) / l_ii down the contiguous column i.
+    for (i, li) in l.chunks_exact(n).enumerate().rev() {
+        let (lii, lt) = (li[i], &li[i + 1..]);
+        each_group!(|t| {
+            let (upto, below) = t.split_at_mut(i + 1);
+            let mut s = upto[i];
+            for (tk, &lki) in below.iter().zip(lt) {
+                sub_scaled::<AVX>(&mut s, lki, tk);
+            }
+            upto[i] = div_lanes::<AVX>(&s, lii);
+        });
+    }
+    for group in head.chunks_exact_mut(LANES * n) {
+        tmp.copy_from_slice(group);
+        for (u, x) in group.chunks_exact_mut(n).enumerate() {
+            for (i, xi) in x.iter_mut().enumerate() {
+                *xi = tmp[i * LANES + u];
+            }
+        }
+    }
+    for (u, x) in rest.chunks_exact_mut(n).enumerate() {
+        for (xi, ti) in x.iter_mut().zip(tail.iter()) {
+            *xi = ti[u];
+        }
+    }
+}
+
+/// `x −= a y` lane by lane: a multiplication, then a subtraction (the roundings of the
+/// scalar form); one AVX multiply and subtract where `AVX`.
+#[inline(always)]
+fn sub_scaled<const AVX: bool>(x: &mut [f64; LANES], a: f64, y: &[f64; LANES]) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: `AVX` is only set in the build for AVX2 (`solve_interleaved_avx2`), which
+        // runs only where the CPU has it.
+        unsafe { sub_scaled_avx(x, a, y) };
+        return;
+    }
+    for (xu, &yu) in x.iter_mut().zip(y) {
+        *xu -= a * yu;
+    }
+}
+
+/// `x / d` lane by lane; one AVX division where `AVX`.
+#[inline(always)]
+fn div_lanes<const AVX: bool>(x: &[f64; LANES], d: f64) -> [f64; LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: as in `sub_scaled`.
+        return unsafe { div_lanes_avx(x, d) };
+    }
+    std::array::from_fn(|u| x[u] / d)
+}
+
+/// [`sub_scaled`] in AVX registers.
+///
+/// # Safety
+/// The CPU must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn sub_scaled_avx(x: &mut [f64; LANES], a: f64, y: &[f64; LANES]) {
+    use std::arch::x86_64::{_mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd};
+    use std::arch::x86_64::{_mm256_storeu_pd, _mm256_sub_pd};
+    // SAFETY: x and y are four f64 each (unaligned loads and stores).
+    unsafe {
+        let (xv, yv) = (_mm256_loadu_pd(x.as_ptr()), _mm256_loadu_pd(y.as_ptr()));
+        let r = _mm256_sub_pd(xv, _mm256_mul_pd(_mm256_set1_pd(a), yv));
+        _mm256_storeu_pd(x.as_mut_ptr(), r);
+    }
+}
+
+/// [`div_lanes`] in an AVX register.
+///
+/// # Safety
+/// The CPU must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn div_lanes_avx(x: &[f64; LANES], d: f64) -> [f64; LANES] {
+    use std::arch::x86_64::{_mm256_div_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm256_storeu_pd};
+    let mut out = [0.0; LANES];
+    // SAFETY: x and out are four f64 each (unaligned loads and stores).
+    unsafe {
+        let r = _mm256_div_pd(_mm256_loadu_pd(x.as_ptr()), _mm256_set1_pd(d));
+        _mm256_storeu_pd(out.as_mut_ptr(), r);
+    }
+    out
+}
+
+/// The substitutions of [`cholesky_solve_slice`] for large factors, column by column:
+/// the forward one column-oriented (`b[i] −= l[i, k] b[k]` for i > k, contiguous in
+/// i), the backward one by dot products down the contiguous columns of `l`, four
+/// right-hand sides side by side (the same operations in the same order as the
+/// interleaved form).
+#[inline(always)]
+fn solve_columns(l: &[f64], b: &mut [f64], n: usize) {
     let l = &l[..n * n];
     // L y = b
     for (k, lk) in l.chunks_exact(n).enumerate() {
@@ -307,8 +486,6 @@ fn solve_n(l: &[f64], b: &mut [f64], n: usize) {
     // Lᵀ x = y
     for (i, li) in l.chunks_exact(n).enumerate().rev() {
         let (lt, lii) = (&li[i + 1..], li[i]);
-        // From n = 8 on four right-hand sides at a time, so that four chains of
-        // subtractions run side by side (each still in the same order).
         let mut quads = b.chunks_exact_mut(if n >= 8 { 4 * n } else { b.len() + 1 });
         for q in &mut quads {
             let (x01, x23) = q.split_at_mut(2 * n);
@@ -381,6 +558,34 @@ mod tests {
             cholesky_solve_slice(ls.as_slice(), n, bs.as_mut_slice()).unwrap();
             assert_eq!(bs, bm);
         }
+    }
+
+    #[test]
+    fn solve_slice_is_bitwise_the_generic_solve() {
+        // Both sides of the interleaved block size, 1–7 right-hand sides (partly
+        // filled blocks), and the column form past it.
+        for n in [8, 20, 33, 64, 65, 70] {
+            let mut l = spd(n);
+            cholesky_in_place(&mut l).unwrap();
+            for cols in 1..=7 {
+                let mut bm = rhs_of(n, cols);
+                let mut bs = bm.clone();
+                cholesky_solve_in_place(&l, &mut bm).unwrap();
+                cholesky_solve_slice(l.as_slice(), n, bs.as_mut_slice()).unwrap();
+                assert_eq!(bs, bm, "n = {n}, {cols} columns");
+                if n <= INTERLEAVED_MAX {
+                    // The portable build of the interleaved form too (the CPUs without
+                    // AVX2).
+                    let mut bp = rhs_of(n, cols);
+                    solve_interleaved::<false>(l.as_slice(), bp.as_mut_slice(), n);
+                    assert_eq!(bp, bm, "portable, n = {n}, {cols} columns");
+                }
+            }
+        }
+    }
+
+    fn rhs_of(n: usize, cols: usize) -> DMatrix<f64> {
+        DMatrix::from_fn(n, cols, |i, j| (i as f64 - 3.0) * 0.7 + j as f64)
     }
 
     #[test]

@@ -387,6 +387,7 @@ fn chain_joint(
         name: j.name.clone(),
         kind,
         placement,
+        placement_rotation: *placement.rotation.to_rotation_matrix().matrix(),
         axis: axis / norm,
         inertia: SpatialInertia {
             mass: 0.0,
