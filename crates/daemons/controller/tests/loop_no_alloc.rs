@@ -75,7 +75,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                     .unwrap()
                     .with_duration(0.005)
                     .with_apply_at(at);
-                if k % 2 == 0 {
+                if k.is_multiple_of(2) {
                     sp.with_stiffness(&[1000.0 + (k % 100) as f64; 2]).unwrap()
                 } else {
                     sp
@@ -106,7 +106,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                 .is_ok();
             // Every other cycle as after a wait (the command's sample loaned
             // before the state comes), else as a state already waiting.
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 cycle.prepare_send(&ports);
             }
             let Ok(sample) = state_pub.loan_uninit() else {
