@@ -472,7 +472,7 @@ impl Cycle {
             self.decider.receive_setpoint(&setpoint, clock);
         }
         let taken = monotonic_now_ns();
-        let answer = self.decider.decide(state, wake);
+        let answer = self.decider.decide_command(state, wake);
         if let Some(step_ns) = self.decider.step_ns() {
             self.timings.step.record(step_ns);
         }
@@ -493,8 +493,9 @@ impl Cycle {
         }
         let sent = monotonic_now_ns();
         // The command is out: keep the state (the hybrid wait's anchor, the
-        // warm-up's input).
+        // warm-up's input) and fill the telemetry of this decision.
         self.state = *state;
+        self.decider.fill_telemetry();
         // The state's notification, consumed now that it is answered.
         let _ = ports.state_ready.try_wait(|_| {});
         let compute_ns = sent.saturating_sub(wake);

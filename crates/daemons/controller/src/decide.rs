@@ -124,6 +124,9 @@ pub struct Decider {
     peer_lost: bool,
     /// Duration of `Controller::step` in the last decision, ns.
     step_ns: Option<u64>,
+    /// The telemetry of the last command not yet filled: (state's sequence
+    /// number, mode, whether the law ran) — [`Decider::fill_telemetry`].
+    pending_telemetry: Option<(u64, CommandMode, bool)>,
     /// Setpoints: checks, transitions, answers.
     commander: Commander,
     /// State sequence number of the last well-formed state (setpoint timing).
@@ -182,6 +185,7 @@ impl Decider {
             last_accepted_ns: 0,
             peer_lost: false,
             step_ns: None,
+            pending_telemetry: None,
             clock_seq: 0,
         })
     }
@@ -284,6 +288,19 @@ impl Decider {
     /// command → saturate. For [`Answer::Command`], the command and the
     /// telemetry content are left in the buffers. Allocation-free.
     pub fn decide(&mut self, state: &JointState, wake_ns: u64) -> Answer {
+        let answer = self.decide_command(state, wake_ns);
+        self.fill_telemetry();
+        answer
+    }
+
+    /// [`Decider::decide`] without the telemetry: only the command is left in
+    /// its buffer, the telemetry is filled by [`Decider::fill_telemetry`]
+    /// (the loop calls it once the command is out, so that copying the
+    /// diagnostics is not on the path from a state to its command; a sample
+    /// finished with [`Decider::finish_telemetry`] is complete either way).
+    /// Allocation-free.
+    pub fn decide_command(&mut self, state: &JointState, wake_ns: u64) -> Answer {
+        self.pending_telemetry = None;
         self.step_ns = None;
         let resumed = std::mem::replace(&mut self.peer_lost, false);
         self.counters.telemetry.cycles += 1;
@@ -313,8 +330,17 @@ impl Decider {
         }
         let mode = law_mode.unwrap_or(CommandMode::SafeHold);
         self.fill_command(state, mode, gravity_conflict, &tau);
-        self.fill_telemetry(state, mode, &tau, law_mode.is_some());
+        self.pending_telemetry = Some((state.header.seq, mode, law_mode.is_some()));
         Answer::Command(mode)
+    }
+
+    /// Fills the telemetry of the last command decided by
+    /// [`Decider::decide_command`] (nothing if it is filled already or the
+    /// last state was a duplicate). Allocation-free.
+    pub fn fill_telemetry(&mut self) {
+        if let Some((state_seq, mode, fresh)) = self.pending_telemetry.take() {
+            self.fill_telemetry_of(state_seq, mode, fresh);
+        }
     }
 
     /// Sets the command's stamp (the end of the computation) and returns it, to send.
@@ -332,6 +358,7 @@ impl Decider {
         timings: TelemetryTimings,
         now_ns: u64,
     ) -> &Telemetry {
+        self.fill_telemetry();
         self.counters.telemetry.send_failures += send_failures;
         let t = &mut *self.telemetry;
         t.counters = self.counters.telemetry;
@@ -515,24 +542,19 @@ impl Decider {
         c.tau[..n].copy_from_slice(&tau[..n]);
     }
 
-    /// The telemetry content of this decision; with `fresh` false (no law
-    /// output this cycle) the last valid cycle's diagnostics are kept.
-    fn fill_telemetry(
-        &mut self,
-        state: &JointState,
-        mode: CommandMode,
-        tau: &[f64; MAX_JOINTS],
-        fresh: bool,
-    ) {
+    /// The telemetry content of the decision answering state `state_seq`
+    /// (its command in `self.command`); with `fresh` false (no law output
+    /// this cycle) the last valid cycle's diagnostics are kept.
+    fn fill_telemetry_of(&mut self, state_seq: u64, mode: CommandMode, fresh: bool) {
         let n = self.n;
         self.telemetry_seq += 1;
         let t = &mut *self.telemetry;
         t.header.seq = self.telemetry_seq;
-        t.state_seq = state.header.seq;
+        t.state_seq = state_seq;
         t.command_seq = self.command_seq;
         t.mode = mode.code();
         t.flags = self.command.flags;
-        t.tau[..n].copy_from_slice(&tau[..n]);
+        t.tau[..n].copy_from_slice(&self.command.tau[..n]);
         t.counters = self.counters.telemetry;
         self.commander.fill(t);
         if !fresh {

@@ -285,3 +285,59 @@ fn the_cache_warm_up_changes_no_command() {
         warm.warm_up(&s);
     }
 }
+
+/// The loop decides the command first and fills the telemetry once the
+/// command is out (`decide_command`, then `fill_telemetry`): the command and
+/// the telemetry sample are byte for byte those of `decide`, through a NaN
+/// state and a duplicate, and a sample finished without the explicit fill is
+/// complete as well.
+#[test]
+fn the_telemetry_filled_after_the_command_is_the_same() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
+    let scenario = Scenario::load(&path).unwrap();
+    let n = scenario.model.nq();
+    let settings = CycleSettings::from_scenario(&scenario);
+    let make = || Decider::new(controller(&scenario), &settings).unwrap();
+    let (mut whole, mut split, mut lazy) = (make(), make(), make());
+    fn bytes<T>(x: &T) -> &[u8] {
+        // SAFETY: plain-old-data message types, read as bytes for comparison.
+        unsafe { std::slice::from_raw_parts((x as *const T).cast::<u8>(), size_of::<T>()) }
+    }
+    let timings = hcc_msgs::TelemetryTimings::default();
+    for k in 1..=300u64 {
+        let t = k as f64 * 1e-3;
+        let q: Vec<f64> = scenario
+            .q0
+            .iter()
+            .enumerate()
+            .map(|(j, q)| q + 0.3 * (t * (1.0 + j as f64)).sin())
+            .collect();
+        let qd: Vec<f64> = (0..n).map(|j| 0.3 * (t * (1.0 + j as f64)).cos()).collect();
+        let mut s = JointState::zeroed();
+        s.set_joints(&q, &qd, &vec![0.0; n]).unwrap();
+        // State 200 repeats 199's sequence number (a duplicate).
+        s.header.seq = if k == 200 { 199 } else { k };
+        if k == 150 {
+            s.q[2] = f64::NAN;
+        }
+        let a = whole.decide(&s, k * PERIOD);
+        let b = split.decide_command(&s, k * PERIOD);
+        let c = lazy.decide_command(&s, k * PERIOD);
+        assert_eq!((a, a), (b, c), "state {k}");
+        assert_eq!(bytes(whole.command()), bytes(split.command()), "state {k}");
+        split.fill_telemetry();
+        split.fill_telemetry(); // a second call changes nothing
+        assert_eq!(
+            bytes(whole.telemetry()),
+            bytes(split.telemetry()),
+            "state {k}"
+        );
+        let (x, y) = (
+            *whole.finish_telemetry(0, timings, k),
+            *lazy.finish_telemetry(0, timings, k),
+        );
+        assert_eq!(bytes(&x), bytes(&y), "state {k}");
+        split.finish_telemetry(0, timings, k);
+    }
+}
