@@ -514,6 +514,7 @@ fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f
 /// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`,
 /// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I;
 /// `SWEEP_GAIN_SCALE=s` every level s times faster, K_i × s², D_i × s;
+/// `SWEEP_SINGULAR_RATIO` the singular ratio ε of `[controller.singularity]`;
 /// `SWEEP_HORIZON=T` runs each goal for T s as well and prints, for the goals
 /// not settled in time, when they settle for good and how far their end
 /// configuration is from the start at the URDF velocity limits).
@@ -571,6 +572,11 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
                 let m = scenario.spec.levels[l].damping.nrows();
                 scenario.spec.levels[l].damping = DMatrix::identity(m, m) * x;
             }
+            overridden = true;
+        }
+        if let Ok(v) = std::env::var("SWEEP_SINGULAR_RATIO") {
+            // The singular ratio ε of `[controller.singularity]` (fade region ε … 100 ε).
+            scenario.spec.singular_ratio = v.parse().unwrap();
             overridden = true;
         }
         if let Ok(v) = std::env::var("SWEEP_GAIN_SCALE") {
