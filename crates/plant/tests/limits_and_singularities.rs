@@ -515,6 +515,7 @@ fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f
 /// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I;
 /// `SWEEP_GAIN_SCALE=s` every level s times faster, K_i × s², D_i × s;
 /// `SWEEP_SINGULAR_RATIO` the singular ratio ε of `[controller.singularity]`;
+/// `SWEEP_ONLY=g` runs goal g alone and prints its course every 0.5 s;
 /// `SWEEP_HORIZON=T` runs each goal for T s as well and prints, for the goals
 /// not settled in time, when they settle for good and how far their end
 /// configuration is from the start at the URDF velocity limits).
@@ -552,6 +553,11 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(0.0);
     let mut late = Vec::new();
+    // `SWEEP_ONLY=g`: run goal g alone (the others drawn, not run) and print its
+    // course once a second.
+    let only: Option<usize> = std::env::var("SWEEP_ONLY")
+        .ok()
+        .and_then(|s| s.parse().ok());
     for g in 0..goals {
         let radius = rng.range(0.3, 1.4);
         let (az, el) = (rng.range(-3.1, 3.1), rng.range(-0.8, 1.2));
@@ -564,6 +570,9 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
             .iter()
             .map(|j| rng.range(j.lower - 0.5, j.upper + 0.5))
             .collect();
+        if only.is_some_and(|o| o != g) {
+            continue;
+        }
         let mut scenario = panda(tcp, &posture);
         overridden = sweep_safety_overrides(&mut scenario);
         if let Ok(v) = std::env::var("SWEEP_DAMPING") {
@@ -598,6 +607,25 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         };
         let log = &full[..cut];
         assert!(full.iter().all(|s| s.finite), "goal {g}: a NaN");
+        if only.is_some() {
+            for smp in full.iter().step_by(500) {
+                println!(
+                    "goal {g} t {:5.1}: |q̇| {:.3?} E {:.3} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
+                    smp.t,
+                    smp.qd.iter().map(|x| x.abs()).collect::<Vec<_>>(),
+                    smp.energy,
+                    smp.errors,
+                    smp.conditioning
+                        .iter()
+                        .map(|c| format!("{c:.1e}"))
+                        .collect::<Vec<_>>(),
+                    smp.faded,
+                    smp.guard,
+                    smp.governor,
+                    smp.q
+                );
+            }
+        }
         let (beyond, speed) = limit_figures(&scenario, &full);
         worst_beyond = worst_beyond.max(beyond);
         worst_speed = worst_speed.max(speed);
@@ -704,6 +732,8 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         for l in &late {
             times.entry(l.1).or_insert_with(Vec::new).push(l.4);
         }
+        let never: Vec<_> = late.iter().filter(|l| !l.2).map(|l| (l.0, l.1)).collect();
+        println!("sweep: not settled by {horizon} s (goal, class at {seconds} s): {never:?}");
         for (class, t) in &mut times {
             t.sort_by(f64::total_cmp);
             println!("sweep: {class:?}: settled at {t:.1?} s (inf: not by {horizon} s)");
