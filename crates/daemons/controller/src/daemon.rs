@@ -242,6 +242,8 @@ pub fn run(args: Args) -> Result<()> {
             allocs,
         )?;
     }
+    // The loop's loaned sample goes back before its publisher and node go.
+    drop(cycle);
     drop(ipc);
     Ok(())
 }
