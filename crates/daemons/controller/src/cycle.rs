@@ -180,7 +180,7 @@ pub struct CycleTimings {
     pub stage_setpoints: LatencyHistogram,
     /// Stage: the decision (validation, sequence, law, output pipeline), ns.
     pub stage_decide: LatencyHistogram,
-    /// Stage: the command's publication (`send_copy`), ns.
+    /// Stage: the command's publication (write and delivery; the loan is taken while waiting), ns.
     pub stage_send: LatencyHistogram,
     /// Stage: the `command_ready` notification (0 for a polling driver), ns.
     pub stage_notify: LatencyHistogram,
