@@ -234,6 +234,27 @@ fn torque_limits_scale_the_law_and_are_counted() {
     assert!(Decider::new(controller(&scenario), &settings).is_err());
 }
 
+/// The Panda's k-th state of a smooth motion around q0, numbered `seq`; state 150
+/// has a NaN in q.
+fn panda_state(scenario: &Scenario, k: u64, seq: u64) -> JointState {
+    let n = scenario.model.nq();
+    let t = k as f64 * 1e-3;
+    let q: Vec<f64> = scenario
+        .q0
+        .iter()
+        .enumerate()
+        .map(|(j, q)| q + 0.3 * (t * (1.0 + j as f64)).sin())
+        .collect();
+    let qd: Vec<f64> = (0..n).map(|j| 0.3 * (t * (1.0 + j as f64)).cos()).collect();
+    let mut s = JointState::zeroed();
+    s.set_joints(&q, &qd, &vec![0.0; n]).unwrap();
+    s.header.seq = seq;
+    if k == 150 {
+        s.q[2] = f64::NAN;
+    }
+    s
+}
+
 /// The cache warm-up steps a copy of the law on the last valid state between
 /// decisions: the commands are bit for bit those of a decider without it (the
 /// copy shares no state with the law that answers), on the Panda with its
@@ -244,7 +265,6 @@ fn the_cache_warm_up_changes_no_command() {
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
     let scenario = Scenario::load(&path).unwrap();
-    let n = scenario.model.nq();
     let make = |warm_up: bool| {
         let mut settings = CycleSettings::from_scenario(&scenario);
         settings.warm_up = warm_up;
@@ -261,20 +281,7 @@ fn the_cache_warm_up_changes_no_command() {
     );
     assert!(!plain.warm_up(&JointState::zeroed()), "off");
     for k in 1..=300u64 {
-        let t = k as f64 * 1e-3;
-        let q: Vec<f64> = scenario
-            .q0
-            .iter()
-            .enumerate()
-            .map(|(j, q)| q + 0.3 * (t * (1.0 + j as f64)).sin())
-            .collect();
-        let qd: Vec<f64> = (0..n).map(|j| 0.3 * (t * (1.0 + j as f64)).cos()).collect();
-        let mut s = JointState::zeroed();
-        s.set_joints(&q, &qd, &vec![0.0; n]).unwrap();
-        s.header.seq = k;
-        if k == 150 {
-            s.q[2] = f64::NAN;
-        }
+        let s = panda_state(&scenario, k, k);
         let (a, b) = (warm.decide(&s, k * PERIOD), plain.decide(&s, k * PERIOD));
         assert_eq!(a, b, "state {k}");
         assert_eq!(warm.command().tau(), plain.command().tau(), "state {k}");
@@ -296,7 +303,6 @@ fn the_telemetry_filled_after_the_command_is_the_same() {
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
     let scenario = Scenario::load(&path).unwrap();
-    let n = scenario.model.nq();
     let settings = CycleSettings::from_scenario(&scenario);
     let make = || Decider::new(controller(&scenario), &settings).unwrap();
     let (mut whole, mut split, mut lazy) = (make(), make(), make());
@@ -306,21 +312,8 @@ fn the_telemetry_filled_after_the_command_is_the_same() {
     }
     let timings = hcc_msgs::TelemetryTimings::default();
     for k in 1..=300u64 {
-        let t = k as f64 * 1e-3;
-        let q: Vec<f64> = scenario
-            .q0
-            .iter()
-            .enumerate()
-            .map(|(j, q)| q + 0.3 * (t * (1.0 + j as f64)).sin())
-            .collect();
-        let qd: Vec<f64> = (0..n).map(|j| 0.3 * (t * (1.0 + j as f64)).cos()).collect();
-        let mut s = JointState::zeroed();
-        s.set_joints(&q, &qd, &vec![0.0; n]).unwrap();
         // State 200 repeats 199's sequence number (a duplicate).
-        s.header.seq = if k == 200 { 199 } else { k };
-        if k == 150 {
-            s.q[2] = f64::NAN;
-        }
+        let s = panda_state(&scenario, k, if k == 200 { 199 } else { k });
         let a = whole.decide(&s, k * PERIOD);
         let b = split.decide_command(&s, k * PERIOD);
         let c = lazy.decide_command(&s, k * PERIOD);
