@@ -115,6 +115,13 @@ fn jitter_reports_every_figure_and_consistent_counts() {
         settings["controller_warm_ups"].as_u64().unwrap() > 0,
         "{settings}"
     );
+    // The commands went out in samples loaned while the controller waited
+    // (at most one per answered state).
+    let preloaned = settings["controller_commands_in_preloaned_samples"]
+        .as_u64()
+        .unwrap();
+    let answered = count(&report, "controller_compute_time");
+    assert!(preloaned > 0 && preloaned <= answered, "{settings}");
     for name in FIGURES {
         let f = &report["figures"][name];
         for s in STATS {
