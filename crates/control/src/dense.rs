@@ -397,15 +397,8 @@ pub fn gemm_sym(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>) {
 
 /// `c = alpha * a * bᵀ + beta * c`.
 pub fn gemm_nt(c: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, k, n) = (a.nrows(), a.ncols(), b.nrows());
-    assert_eq!(b.ncols(), k);
-    assert_eq!(c.shape(), (m, n));
-    let b = Strided {
-        data: b.as_slice(),
-        ls: n,
-        js: 1,
-    };
-    gemm_cols(c.as_mut_slice(), alpha, a.as_slice(), (m, k, n), b, beta);
+    assert_eq!(b.ncols(), a.ncols());
+    gemm_nt_leading(c, alpha, a, b, beta);
 }
 
 /// `c = alpha * a * b[.., ..k]ᵀ + beta * c` with k = the columns of `a`: [`gemm_nt`]

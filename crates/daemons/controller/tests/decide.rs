@@ -15,9 +15,16 @@ use hcc_msgs::{
 /// One control period at 1 kHz, ns.
 const PERIOD: u64 = 1_000_000;
 
-fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
+/// A shipped scenario of `config/`.
+fn load(name: &str) -> Scenario {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../config")
+        .join(name);
     Scenario::load(&path).unwrap()
+}
+
+fn scenario() -> Scenario {
+    load("paper-sim1.toml")
 }
 
 fn controller(scenario: &Scenario) -> Controller {
@@ -262,9 +269,7 @@ fn panda_state(scenario: &Scenario, k: u64, seq: u64) -> JointState {
 /// any valid state (nothing to warm on).
 #[test]
 fn the_cache_warm_up_changes_no_command() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
-    let scenario = Scenario::load(&path).unwrap();
+    let scenario = load("panda-pose-posture.toml");
     let make = |warm_up: bool| {
         let mut settings = CycleSettings::from_scenario(&scenario);
         settings.warm_up = warm_up;
@@ -300,9 +305,7 @@ fn the_cache_warm_up_changes_no_command() {
 /// complete as well.
 #[test]
 fn the_telemetry_filled_after_the_command_is_the_same() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-pose-posture.toml");
-    let scenario = Scenario::load(&path).unwrap();
+    let scenario = load("panda-pose-posture.toml");
     let settings = CycleSettings::from_scenario(&scenario);
     let make = || Decider::new(controller(&scenario), &settings).unwrap();
     let (mut whole, mut split, mut lazy) = (make(), make(), make());
