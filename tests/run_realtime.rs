@@ -53,6 +53,27 @@ fn realtime_run_converges_and_reports_its_misses() {
         "{}",
         run.log()
     );
+    // The simulator's account of the misses, from its timing report: the
+    // misses after a late tick of its own are some of the misses, which
+    // agree with the recorded driver counter.
+    let sim = read_json(&out.join("sim-timings.json"));
+    let sim_count = |key: &str| {
+        sim["counters"][key]
+            .as_u64()
+            .unwrap_or_else(|| panic!("{key}: {sim}"))
+    };
+    assert!(
+        sim_count("short_window_misses") <= sim_count("missed_commands"),
+        "{sim}"
+    );
+    assert!(
+        run.stdout.contains(&format!(
+            "simulator: missed commands {},",
+            sim_count("missed_commands")
+        )),
+        "{}",
+        run.log()
+    );
     // Every state the recorder holds is either a row (answered, joined with
     // its telemetry) or counted as not answered by the controller. How many
     // the controller answered in time is the machine's (a debug build under

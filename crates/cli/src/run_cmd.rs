@@ -57,6 +57,29 @@ pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
 /// File name of the recording in a run directory.
 pub const RECORDING_FILE: &str = "run.mcap";
 
+/// The simulator's timing report of a real-time run (`hcc-sim --stats`), in
+/// the output directory.
+pub const SIM_TIMINGS_FILE: &str = "sim-timings.json";
+
+/// The simulator's account of a real-time run's missed commands, from its
+/// timing report: how many followed a late tick of its own — a state
+/// published with less than its command window before the next tick (its
+/// core stalled, then ticks back to back to catch up), which no controller
+/// could have answered in time — and its late ticks. `None` without a report
+/// (a lockstep run, a simulator that was killed).
+fn sim_report(out: &Path) -> Option<String> {
+    let t = hcc_timing::DaemonTimings::read_json(&out.join(SIM_TIMINGS_FILE)).ok()?;
+    let missed = t.counter("missed_commands");
+    Some(format!(
+        "  simulator: missed commands {missed}, {} of them after a late tick of its own (less than \
+         the command window left for the answer: the machine, not the controller); ticks late by \
+         more than 0.8 periods {} of {}",
+        t.counter("short_window_misses").min(missed),
+        t.counter("ticks_late"),
+        t.counter("periods"),
+    ))
+}
+
 /// Time to wait for the first joint state after the start of the children.
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 /// A running simulator that publishes nothing for this long is considered hung.
@@ -297,14 +320,23 @@ impl Launch {
             sim_args.extend(sim_rt);
             controller_args.extend(controller_rt);
         }
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| Path::new("out").join(&scenario.name));
+        if !lockstep {
+            // The simulator's timing report: which misses followed a late
+            // tick of its own ([`sim_report`]).
+            sim_args.extend([
+                "--stats".to_string(),
+                out.join(SIM_TIMINGS_FILE).display().to_string(),
+            ]);
+        }
         Ok(Launch {
             names: ServiceNames::for_namespace(namespace.clone()),
             namespace,
             file_prefix,
-            out: args
-                .out
-                .clone()
-                .unwrap_or_else(|| Path::new("out").join(&scenario.name)),
+            out,
             duration,
             mode: if lockstep { "lockstep" } else { "realtime" },
             sim_exe: daemon_path("hcc-sim")?,
@@ -589,6 +621,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         &run_info(&scenario, &launch, "hcc run", clock),
         clock,
     )?;
+    // A report left by an earlier run in this directory is not this run's.
+    let _ = std::fs::remove_file(launch.out.join(SIM_TIMINGS_FILE));
     let mut live = Live::new();
     install_signal_handlers()?;
     if !args.quiet {
@@ -649,6 +683,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .as_ref()
             .map(|report| report.json(&scenario.setpoints)),
     )?;
+    if written && let Some(line) = sim_report(&launch.out) {
+        println!("{line}");
+    }
     if let Some(report) = &schedule {
         println!("{}", report.line());
         if report.late > 0 {

@@ -7,7 +7,11 @@
 //! integrates [t_k, t_{k+1}] with the command that answered state k (or holds /
 //! falls back, see [`crate::driver`]), then publishes state k+1 and notifies
 //! `state_ready`. A tick more than 10 periods late re-anchors the clock
-//! (counted as an overrun) instead of bursting.
+//! (counted as an overrun) instead of bursting. A late tick is caught up with
+//! ticks back to back; a state published in one of them has less than its
+//! command window before the next, and its miss, if it is missed, is counted
+//! apart as well (`short_window_misses`): the simulator's lateness, not the
+//! controller's.
 //!
 //! **Lockstep mode.** After publishing state k the driver waits (on
 //! `command_ready`) for the command answering it, then integrates at once:
@@ -149,6 +153,11 @@ struct PeriodCounts {
     stopped: u64,
     /// Answers that arrived after the command window but before the tick.
     late: u64,
+    /// Missed commands of states that had less than their command window
+    /// before the tick: the simulator itself was late (a stall of its core,
+    /// then ticks back to back to catch up), so the controller had no chance
+    /// to answer in time. Counted in `missed_commands` too.
+    short_window_misses: u64,
 }
 
 /// The simulator's loop state: the driver, its ports, the newest command,
@@ -171,6 +180,9 @@ pub struct SimLoop<'a> {
     answer_stamp: LatencyHistogram,
     /// Publication time of the current state, ns.
     published_ns: u64,
+    /// The command window of a state, from its publication, ns
+    /// ([`COMMAND_WINDOW_FRACTION`] of the period).
+    window_ns: u64,
     /// The answer to the current state was received (and its latency recorded).
     answered: bool,
     /// When the last command was taken from the queue, ns.
@@ -192,7 +204,9 @@ impl<'a> SimLoop<'a> {
         shared: &'a Shared,
         wait: WaitStrategy,
     ) -> Self {
+        let period_ns = driver.period_s() * 1e9;
         SimLoop {
+            window_ns: (period_ns * COMMAND_WINDOW_FRACTION).round() as u64,
             poll_commands: false,
             driver,
             ports,
@@ -223,6 +237,13 @@ impl<'a> SimLoop<'a> {
     /// The driver.
     pub fn driver(&self) -> &SimDriver {
         &self.driver
+    }
+
+    /// Missed commands of states that had less than their command window
+    /// before the tick (the simulator's own tick was late; counted in the
+    /// driver's `missed_commands` too).
+    pub fn short_window_misses(&self) -> u64 {
+        self.counts.short_window_misses
     }
 
     /// Publishes state k (stamped now) and notifies `state_ready`.
@@ -352,11 +373,18 @@ impl<'a> SimLoop<'a> {
     /// holds / falls back) and publishes the next state. False once the
     /// final state has been reached (nothing published then).
     pub fn tick(&mut self) -> Result<bool> {
+        let tick_ns = monotonic_now_ns();
         let was_answered = self.answered;
         if self.take_answer() && !was_answered {
             self.counts.late += 1;
         }
+        let missed = self.driver.counters().missed_commands;
         self.advance()?;
+        if self.driver.counters().missed_commands > missed
+            && tick_ns < self.published_ns.saturating_add(self.window_ns)
+        {
+            self.counts.short_window_misses += 1;
+        }
         if self.driver.finished() {
             return Ok(false);
         }
@@ -366,7 +394,7 @@ impl<'a> SimLoop<'a> {
 
     fn run_realtime(&mut self) -> Result<()> {
         let period_ns = (self.driver.period_s() * 1e9).round() as u64;
-        let window_ns = (period_ns as f64 * COMMAND_WINDOW_FRACTION) as u64;
+        let window_ns = self.window_ns;
         self.publish();
         let mut next = monotonic_now_ns() + period_ns;
         loop {
@@ -618,11 +646,12 @@ impl SimLoop<'_> {
     fn log_summary(&self, mode: SimMode) {
         let c = self.driver.counters();
         tracing::info!(
-            "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed, {} fallback cycles, {} rejected, {} overruns",
+            "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed ({} of them after a late tick that left less than the command window), {} fallback cycles, {} rejected, {} overruns",
             self.driver.t(),
             self.driver.k(),
             c.applied_commands,
             c.missed_commands,
+            self.counts.short_window_misses,
             c.fallback_cycles,
             c.rejected_commands,
             self.overruns
@@ -684,6 +713,7 @@ impl SimLoop<'_> {
             ("fallback_cycles", c.fallback_cycles),
             ("rejected_commands", c.rejected_commands),
             ("late_commands", self.counts.late),
+            ("short_window_misses", self.counts.short_window_misses),
             (
                 "ticks_late",
                 self.lateness

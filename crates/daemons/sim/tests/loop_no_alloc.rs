@@ -10,6 +10,8 @@
 //! thread takes no page fault (memory locked, as the daemon does it, when
 //! permitted).
 
+mod common;
+
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -144,10 +146,5 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
         let e = controller.output().task_error[0].norm();
         assert!(e < 1e-6, "level-1 error {e:e} after {} s", lp.driver().t());
     }
-    let files = ipc::leftover_files(&prefix).unwrap();
-    for f in files.iter().filter(|f| f.global_mgmt) {
-        std::fs::remove_file(&f.path).unwrap();
-    }
-    let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
-    assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
+    common::assert_no_leftover_files(&prefix);
 }

@@ -10,6 +10,8 @@
 //! cleanly with exit code 0, and no shared-memory file of the test's prefix
 //! remains (except the per-prefix global management segment, removed here).
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -117,15 +119,6 @@ fn spawn_sim(ns: &str, prefix: &str, extra: &[&str]) -> ChildGuard {
     ChildGuard { child: Some(child) }
 }
 
-fn assert_no_leftovers(prefix: &str) {
-    let files = ipc::leftover_files(prefix).unwrap();
-    for f in files.iter().filter(|f| f.global_mgmt) {
-        std::fs::remove_file(&f.path).unwrap();
-    }
-    let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
-    assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
-}
-
 /// ‖x̃_1‖ of the scenario's first level at state (q, q̇), from the control law.
 fn level1_error(controller: &mut Controller, s: &JointState) -> f64 {
     let out = controller.step(s.q(), s.qd()).unwrap();
@@ -180,7 +173,7 @@ fn lockstep_sim_and_controller_converge_and_match_the_in_process_loop() {
             .expect("the controller stops on SIGTERM");
         assert!(ctl_status.success(), "controller: {ctl_status:?}");
     }
-    assert_no_leftovers(&prefix);
+    common::assert_no_leftover_files(&prefix);
 
     // Behaviour: the final state is t = duration, the TCP converged toward the goal.
     let mut scenario = Scenario::load(config_path()).unwrap();
@@ -284,7 +277,7 @@ fn realtime_sim_without_controller_holds_the_arm_and_stops_cleanly() {
             last = Some(*s);
         }
     }
-    assert_no_leftovers(&prefix);
+    common::assert_no_leftover_files(&prefix);
     let last = last.expect("states were published");
     assert_eq!(last.status, DriverStatus::Stopped.code(), "final state");
     assert_eq!(last.missed_commands, 0, "no miss before the first command");
