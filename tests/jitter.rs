@@ -207,4 +207,10 @@ fn jitter_reports_every_figure_and_consistent_counts() {
     for stage in STAGES {
         assert_eq!(count(&report, stage), answered, "{stage}");
     }
+    // The simulator timed the publication of every state it published.
+    assert!(
+        count(&report, "sim_state_publish") >= answered,
+        "{}",
+        report["figures"]
+    );
 }

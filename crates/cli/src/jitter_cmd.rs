@@ -691,6 +691,14 @@ fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> Ve
             "  after: telemetry",
             "stage_telemetry",
         ),
+        // The driver's part of the path: from the state's stamp until its
+        // send returned (the controller may take the sample before that).
+        Row {
+            key: "sim_state_publish",
+            label: "simulator: state stamp -> sent",
+            pair: pair.sim.figure("state_publish"),
+            floor: None,
+        },
     ]
 }
 

@@ -178,6 +178,9 @@ pub struct SimLoop<'a> {
     state_to_command: LatencyHistogram,
     /// Answer's stamp − state's stamp (the controller's view), ns.
     answer_stamp: LatencyHistogram,
+    /// A state's stamp → its send returned (filling and publishing it; the
+    /// driver's part of the state → command latency), ns.
+    state_publish: LatencyHistogram,
     /// Publication time of the current state, ns.
     published_ns: u64,
     /// The command window of a state, from its publication, ns
@@ -217,6 +220,7 @@ impl<'a> SimLoop<'a> {
             lateness: LatencyHistogram::new(),
             state_to_command: LatencyHistogram::new(),
             answer_stamp: LatencyHistogram::new(),
+            state_publish: LatencyHistogram::new(),
             published_ns: 0,
             answered: false,
             received_ns: 0,
@@ -255,6 +259,8 @@ impl<'a> SimLoop<'a> {
             self.state.flags |= STATE_FLAG_DRIVER_POLLS_COMMANDS;
         }
         let _ = self.state_loan.send(&self.ports.states, self.state);
+        self.state_publish
+            .record(monotonic_now_ns().saturating_sub(self.published_ns));
         let _ = self.ports.state_ready.notify();
     }
 
@@ -701,6 +707,7 @@ impl SimLoop<'_> {
             ("tick_lateness", &self.lateness),
             ("state_to_command", &self.state_to_command),
             ("answer_stamp_latency", &self.answer_stamp),
+            ("state_publish", &self.state_publish),
         ] {
             stats.figures.insert(name.into(), h.into());
         }
