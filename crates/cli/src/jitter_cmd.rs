@@ -2,8 +2,9 @@
 //! how late is each cycle, and how much of that is the machine and how much
 //! the software?
 //!
-//! 1. **Floor.** A bare periodic thread at the control rate on each of the
-//!    two cores (pinned, `SCHED_FIFO` when permitted, timer slack 1 ns, the
+//! 1. **Floor.** Half of it before the pair and half after it (one
+//!    measurement of the machine around the pair): a bare periodic thread at
+//!    the control rate on each of the two cores (pinned, `SCHED_FIFO` when permitted, timer slack 1 ns, the
 //!    same wait strategy as the daemons: `event` sleeps to each deadline with
 //!    `clock_nanosleep(TIMER_ABSTIME)`, `hybrid` sleeps until
 //!    [`rt::HYBRID_LEAD_NS`] before it and spins) — no IPC, no work. Its
@@ -75,7 +76,8 @@ pub struct JitterArgs {
     /// Duration of the measurement of the pair, s.
     #[arg(long, default_value_t = 60.0)]
     pub duration: f64,
-    /// Duration of the floor measurement, s (default: 10 s, at most --duration).
+    /// Duration of the floor measurement, s, half of it before the pair and
+    /// half after it (default: 10 s, at most --duration).
     #[arg(long)]
     pub floor_duration: Option<f64>,
     /// Output directory.
@@ -593,15 +595,21 @@ impl Environment {
     }
 }
 
-/// The floor measurement, with its warnings and (unless `quiet`) its result lines.
-fn floor_phase(args: &JitterArgs, plan: &Plan) -> anyhow::Result<(Vec<FloorCore>, Value)> {
+/// One half of the floor measurement (`when`: before or after the pair), with
+/// its warnings and (unless `quiet`) its result lines.
+fn floor_phase(
+    args: &JitterArgs,
+    plan: &Plan,
+    duration_s: f64,
+    when: &str,
+) -> anyhow::Result<(Vec<FloorCore>, Value)> {
     let before = cpu_times(&plan.cores);
     let floor = measure_floor(
         &plan.cores,
         plan.fifo,
         args.wait,
         plan.period_ns,
-        plan.floor_s,
+        duration_s,
     )?;
     let steal = steal_since(&plan.cores, &before);
     if interrupted() {
@@ -615,13 +623,39 @@ fn floor_phase(args: &JitterArgs, plan: &Plan) -> anyhow::Result<(Vec<FloorCore>
     if !args.quiet {
         for f in &floor {
             eprintln!(
-                "hcc jitter: floor core {}: {}",
+                "hcc jitter: floor core {} ({when}): {}",
                 f.core,
                 f.lateness.summary().line_us()
             );
         }
     }
     Ok((floor, steal))
+}
+
+/// The two halves of the floor as one measurement: per core, the lateness
+/// histograms merged and the late cycles summed; the steal fraction the mean
+/// of the halves' (equal durations).
+fn join_floors(
+    (mut floor, steal): (Vec<FloorCore>, Value),
+    (after, steal_after): (Vec<FloorCore>, Value),
+) -> (Vec<FloorCore>, Value) {
+    for f in &mut floor {
+        if let Some(a) = after.iter().find(|a| a.core == f.core) {
+            f.lateness.merge(&a.lateness);
+            f.late_cycles += a.late_cycles;
+        }
+    }
+    let mut mean = serde_json::Map::new();
+    if let (Some(b), Some(a)) = (steal.as_object(), steal_after.as_object()) {
+        for (core, x) in b {
+            let m = match (x.as_f64(), a.get(core).and_then(Value::as_f64)) {
+                (Some(x), Some(y)) => json!((x + y) / 2.0),
+                _ => Value::Null,
+            };
+            mean.insert(core.clone(), m);
+        }
+    }
+    (floor, Value::Object(mean))
 }
 
 /// The figures of the table, each with the floor of its core.
@@ -948,7 +982,7 @@ impl Measured<'_> {
         let (args, env, pair) = (self.args, self.env, self.pair);
         let machine = &env.machine;
         println!(
-            "hcc jitter: {} — {} wait, pair {} s (floor {} s), simulator core {} / controller core {}, load {}, command_ready {}, telemetry every {} cycle(s), cache warm-up {}",
+            "hcc jitter: {} — {} wait, pair {} s (floor {} s, half before and half after it), simulator core {} / controller core {}, load {}, command_ready {}, telemetry every {} cycle(s), cache warm-up {}",
             self.scenario.name,
             args.wait.name(),
             args.duration,
@@ -1062,11 +1096,12 @@ impl Measured<'_> {
 /// The line that says what is about to be measured.
 fn announce(args: &JitterArgs, scenario: &Scenario, plan: &Plan, env: &Environment) {
     eprintln!(
-        "hcc jitter: {} — {} wait, floor {} s then pair {} s, simulator on core {}, controller on core {}, {}, /dev/cpu_dma_latency {}, load {}",
+        "hcc jitter: {} — {} wait, floor {} s, pair {} s, floor {} s, simulator on core {}, controller on core {}, {}, /dev/cpu_dma_latency {}, load {}",
         scenario.name,
         args.wait.name(),
-        plan.floor_s,
+        plan.floor_s / 2.0,
         args.duration,
+        plan.floor_s / 2.0,
         args.sim_core,
         args.controller_core,
         match plan.fifo {
@@ -1094,8 +1129,9 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
         None
     };
 
-    // 1. The floor.
-    let (floor, floor_steal) = floor_phase(&args, &plan)?;
+    // 1. The floor's first half.
+    let half_s = plan.floor_s / 2.0;
+    let floor_before = floor_phase(&args, &plan, half_s, "before the pair")?;
 
     // 2. The pair.
     let sim_stats = args.out.join("sim-timings.json");
@@ -1103,6 +1139,11 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
     let before = cpu_times(&plan.cores);
     let pair = run_pair(&args, plan.fifo, &sim_stats, &controller_stats)?;
     let pair_steal = steal_since(&plan.cores, &before);
+
+    // 3. The floor's second half: the machine around the pair, not only
+    // before it (its stalls come and go from minute to minute).
+    let floor_after = floor_phase(&args, &plan, half_s, "after the pair")?;
+    let (floor, floor_steal) = join_floors(floor_before, floor_after);
     drop(load);
     drop(env.dma.take());
 
