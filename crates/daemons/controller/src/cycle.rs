@@ -40,6 +40,18 @@ use hcc_timing::LatencyHistogram;
 /// Longest single blocking wait, so that a stop request is seen promptly.
 const MAX_WAIT_NS: u64 = 20_000_000;
 
+/// How long before the expected state the cache warm-up starts, for a law
+/// whose last step took `step_ns`: three steps, at least 25 µs (the Panda's
+/// step is 3–4 µs). At the start of the 150 µs spin (as before) the law in
+/// the loop still took 5.2–5.6 µs at the median against 3.5–3.7 µs when
+/// warmed 15–30 µs before the state (README, timing section).
+pub fn warm_up_lead_ns(step_ns: u64) -> u64 {
+    (3 * step_ns).max(WARM_UP_MIN_LEAD_NS)
+}
+
+/// The shortest lead of the cache warm-up before the expected state, ns.
+pub const WARM_UP_MIN_LEAD_NS: u64 = 25_000;
+
 /// The ports the loop uses.
 pub struct Ports {
     /// Joint states (buffer [`LATEST_BUFFER`]: the newest wins).
@@ -116,9 +128,10 @@ pub struct CycleSettings {
     /// Publish telemetry for every this many answered states (1: every
     /// cycle; a peer-lost sample is always published).
     pub telemetry_every: u32,
-    /// Hybrid wait: step a copy of the law on the last state once per cycle
-    /// when the spin before the next state starts, if the last step took at
-    /// most a third of `hybrid_lead_ns` (cache warm-up; [`Decider::warm_up`]).
+    /// Hybrid wait: step a copy of the law on the last state once per cycle,
+    /// [`warm_up_lead_ns`] before the next state is expected, if the last
+    /// step took at most a third of `hybrid_lead_ns` (cache warm-up;
+    /// [`Decider::warm_up`]).
     pub warm_up: bool,
 }
 
@@ -401,26 +414,41 @@ impl Cycle {
                     rt::sleep_until_ns(wake_at.min(self.stale_deadline_ns));
                     false
                 } else if now < expected.saturating_add(self.settings.hybrid_spin_ns) {
-                    if !self.warmed {
-                        // Once per wait, at the start of the spin, and only
-                        // while the law takes at most a third of the spin's
-                        // lead (a large robot's step would still run when its
-                        // state comes).
-                        self.warmed = true;
-                        let lead = self.settings.hybrid_lead_ns;
-                        if self.settings.warm_up
-                            && self.decider.step_ns().is_some_and(|s| 3 * s <= lead)
-                            && self.decider.warm_up(&self.state)
-                        {
-                            self.warm_ups += 1;
-                        }
-                    }
+                    self.warm_up_before(now, expected);
                     std::hint::spin_loop();
                     false
                 } else {
                     self.event_wait(ports, now)
                 }
             }
+        }
+    }
+
+    /// The cache warm-up ([`CycleSettings::warm_up`]) in the hybrid spin
+    /// before the state expected at `expected` (ns): once per wait, when `now`
+    /// is [`warm_up_lead_ns`] before it — late enough that nothing cools the
+    /// caches again before the state, early enough that the step is over
+    /// when it comes. Skipped when the spin starts after that point has
+    /// passed the expected time, and for a law whose step takes more than a
+    /// third of the spin's lead (a large robot's step would still run when
+    /// its state comes).
+    fn warm_up_before(&mut self, now: u64, expected: u64) {
+        if self.warmed || !self.settings.warm_up {
+            return;
+        }
+        let Some(step) = self.decider.step_ns() else {
+            return;
+        };
+        if 3 * step > self.settings.hybrid_lead_ns {
+            self.warmed = true;
+            return;
+        }
+        if now < expected.saturating_sub(warm_up_lead_ns(step)) {
+            return;
+        }
+        self.warmed = true;
+        if now < expected && self.decider.warm_up(&self.state) {
+            self.warm_ups += 1;
         }
     }
 
