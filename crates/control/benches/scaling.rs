@@ -146,9 +146,9 @@ fn main() {
         let spec = chain_spec(&model, &q0);
         let r = spec.levels.len();
         // About 3 s per size, between 10 000 and 50 000 samples.
-        let probe = support::time_steps(&model, spec.clone(), &q0, 200, 1_000);
+        let probe = support::time_steps(&model, spec.clone(), &q0, 200, 1_000, None);
         let samples = ((3e6 / probe.median) as usize).clamp(10_000, 50_000);
-        let s = support::time_steps(&model, spec, &q0, 2_000, samples);
+        let s = support::time_steps(&model, spec, &q0, 2_000, samples, None);
         println!(
             "{n:>3} {r:>7} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>10.2}",
             s.samples, s.median, s.p99, s.p999, s.max

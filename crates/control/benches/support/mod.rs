@@ -7,7 +7,7 @@ pub mod chain;
 use hcc_control::{Controller, ControllerSpec};
 use hcc_model::Model;
 use nalgebra::DVector;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Order statistics of the step time, µs.
 #[derive(Clone, Copy, Debug)]
@@ -21,21 +21,41 @@ pub struct Stats {
 
 /// Times `samples` steps (after `warmup` untimed ones) along q(t) = q0 + t q̇ with a
 /// fixed q̇ (the null-space basis is continued from cycle to cycle, as in a loop).
+/// `pace`: one step per period on an absolute clock, the core idle in between
+/// (slept until 150 µs before each tick, then spun), as in the controller's loop;
+/// `None`: back to back.
 pub fn time_steps(
     model: &Model,
     spec: ControllerSpec,
     q0: &[f64],
     warmup: usize,
     samples: usize,
+    pace: Option<Duration>,
 ) -> Stats {
     let n = model.nq();
     let mut c = Controller::new(model, spec, &DVector::from_column_slice(q0)).expect("controller");
     let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
     let mut q = q0.to_vec();
     let mut t = Vec::with_capacity(samples);
+    let start = Instant::now();
     for k in 0..warmup + samples {
         for (qi, vi) in q.iter_mut().zip(&qd) {
             *qi += 1e-5 * vi;
+        }
+        if let Some(period) = pace {
+            // As in the controller's loop with the hybrid wait: the core idles
+            // until 150 µs before the step's tick, then spins up to it.
+            let due = start + period * k as u32;
+            let lead = Duration::from_micros(150);
+            if let Some(idle) = due
+                .checked_sub(lead)
+                .and_then(|w| w.checked_duration_since(Instant::now()))
+            {
+                std::thread::sleep(idle);
+            }
+            while Instant::now() < due {
+                std::hint::spin_loop();
+            }
         }
         let t0 = Instant::now();
         let out = c.step(&q, &qd).expect("step");
