@@ -1,6 +1,7 @@
 //! Controller step time (median, p99, p99.9, max) for the paper's planar arm and the
-//! Panda's three-level hierarchy, back to back and paced at 1 kHz (the core idle
-//! between steps, as in the controller's loop). `cargo bench -p hcc-control --bench step`.
+//! Panda's three-level hierarchy: back to back; paced at 1 kHz (the core idle between
+//! steps, as in the controller's loop); and paced with the loop's cache warm-up, with
+//! what sets its slower cycles apart. `cargo bench -p hcc-control --bench step`.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -29,10 +30,28 @@ fn main() {
         print_stats(name, model.nq(), "back to back", &s);
         // The same steps once per millisecond, the core idle in between as in the
         // controller's loop: what the machine's idle costs the next step.
-        let s = support::time_steps(model, spec, &q0, 500, 5_000, Some(PERIOD));
+        let s = support::time_steps(model, spec.clone(), &q0, 500, 5_000, Some(PERIOD));
         print_stats(name, model.nq(), "paced 1 kHz", &s);
+        // Paced with the loop's cache warm-up (a twin's step 25 µs before the
+        // tick), and what sets its slower cycles apart.
+        let w = support::time_paced_warmed(model, spec, &q0, 500, 5_000, PERIOD, LEAD);
+        print_stats(name, model.nq(), "paced+warmed", &w.step);
+        println!(
+            "{:<28} {:<17} warm-up step median {:>6.2} µs; slower / faster half of the cycles: \
+             step x{:.2}, its warm-up x{:.2}, register-only kernel x{:.2}",
+            "",
+            "",
+            w.warm_up.median,
+            w.slow_over_fast_step,
+            w.slow_over_fast_warm_up,
+            w.slow_over_fast_kernel
+        );
     }
 }
+
+/// How long before the tick the paced+warmed run's warm-up step starts (the
+/// controller loop's shortest lead, `warm_up_lead_ns`).
+const LEAD: std::time::Duration = std::time::Duration::from_micros(25);
 
 /// The paced run's period (the control period of the shipped scenarios).
 const PERIOD: std::time::Duration = std::time::Duration::from_millis(1);

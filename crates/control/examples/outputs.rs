@@ -8,7 +8,11 @@
 //! case and quantity, the largest absolute deviation and the largest one relative to
 //! the norm of the vector it belongs to (τ_μ and P_μ, zero in theory: to ‖τ‖ and
 //! ‖τ‖ ‖q̇‖), 0 when the bits are the same. `-- steps CASE
-//! [N]` runs N steps of one case (planar, panda, chain32, …) for an instruction count.
+//! [N]` runs N steps of one case (planar, panda, chain32, …) for an instruction count;
+//! run under valgrind's lackey (`--tool=lackey --trace-mem=yes --log-file=TRACE`) it
+//! prints where `Controller::step` sits, and `-- footprint TRACE ADDRESS` then counts
+//! the code and data one step touches (64-byte lines and 4 KiB pages of the fourth
+//! step in the trace: the caches' and TLBs' working set of the law).
 
 #[path = "../benches/support/chain.rs"]
 mod chain;
@@ -19,7 +23,7 @@ use common::*;
 use hcc_control::{Controller, ControllerSpec, Form};
 use hcc_model::Model;
 use nalgebra::DVector;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 
 const STEPS: usize = 400;
 /// The quantities compared (one vector per step each).
@@ -187,12 +191,71 @@ fn steps(case: &str, count: usize) {
         Controller::new(&model, spec, &DVector::from_column_slice(&q0)).expect("controller");
     let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
     let mut q = q0.clone();
+    // Where the step's code starts, for `footprint` (valgrind runs the code at
+    // the addresses it prints).
+    eprintln!(
+        "Controller::step at {:#x}",
+        Controller::step as *const () as usize
+    );
     for _ in 0..count {
         for (qi, vi) in q.iter_mut().zip(&qd) {
             *qi += 1e-5 * vi;
         }
         std::hint::black_box(c.step(&q, &qd).expect("step").tau[0]);
     }
+}
+
+/// The working set of one `Controller::step` in a lackey trace (`I`, `L`, `S`, `M`
+/// records of `ADDR,SIZE`): the records from the fourth entry at `entry` to the
+/// fifth, counted as distinct 64-byte lines and 4 KiB pages of code and of data.
+fn footprint(trace: &str, entry: &str) {
+    let entry = u64::from_str_radix(entry.trim_start_matches("0x"), 16).expect("hex address");
+    let text = std::fs::read_to_string(trace).expect("trace");
+    let (mut code, mut data) = (HashSet::new(), HashSet::new());
+    let (mut entries, mut instructions, mut accesses) = (0, 0usize, 0usize);
+    for line in text.lines() {
+        let mut f = line.split_whitespace();
+        let (Some(kind), Some(rest)) = (f.next(), f.next()) else {
+            continue;
+        };
+        let Some(addr) = rest
+            .split(',')
+            .next()
+            .and_then(|a| u64::from_str_radix(a, 16).ok())
+        else {
+            continue;
+        };
+        if kind == "I" && addr == entry {
+            entries += 1;
+        }
+        if entries != 4 {
+            continue;
+        }
+        if kind == "I" {
+            instructions += 1;
+            code.insert(addr >> 6);
+        } else if matches!(kind, "L" | "S" | "M") {
+            accesses += 1;
+            data.insert(addr >> 6);
+        }
+    }
+    if entries < 5 {
+        eprintln!(
+            "footprint: the trace holds {entries} entries at {entry:#x}, needs 5 (steps CASE 6)"
+        );
+        return;
+    }
+    let pages = |lines: &HashSet<u64>| lines.iter().map(|l| l >> 6).collect::<HashSet<_>>().len();
+    println!(
+        "one step: {instructions} instructions over {} lines ({:.1} KiB) in {} pages of code; \
+         {accesses} data accesses over {} lines ({:.1} KiB) in {} pages",
+        code.len(),
+        code.len() as f64 / 16.0,
+        pages(&code),
+        data.len(),
+        data.len() as f64 / 16.0,
+        pages(&data)
+    );
 }
 
 fn main() {
@@ -203,6 +266,13 @@ fn main() {
         (Some("steps"), Some(case)) => {
             steps(case, args.get(3).map_or(1000, |s| s.parse().unwrap()))
         }
-        _ => eprintln!("usage: outputs write FILE | outputs compare FILE | outputs steps CASE [N]"),
+        (Some("footprint"), Some(trace)) => match args.get(3) {
+            Some(entry) => footprint(trace, entry),
+            None => eprintln!("usage: outputs footprint TRACE ADDRESS"),
+        },
+        _ => eprintln!(
+            "usage: outputs write FILE | outputs compare FILE | outputs steps CASE [N] | \
+             outputs footprint TRACE ADDRESS"
+        ),
     }
 }

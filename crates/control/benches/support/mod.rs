@@ -68,6 +68,107 @@ pub fn time_steps(
     stats(t)
 }
 
+/// [`time_paced_warmed`]'s figures: the step's, its warm-up's, and how the
+/// slower half of the cycles differs from the faster half.
+#[derive(Clone, Copy, Debug)]
+pub struct WarmedStats {
+    /// The timed step (after the warm-up), µs.
+    pub step: Stats,
+    /// The warm-up step of the same cycles, µs.
+    pub warm_up: Stats,
+    /// Medians over the cycles whose step took longer than the step's median,
+    /// divided by those over the rest: the step, its warm-up, and a
+    /// register-only arithmetic kernel timed in the same spin.
+    pub slow_over_fast_step: f64,
+    pub slow_over_fast_warm_up: f64,
+    pub slow_over_fast_kernel: f64,
+}
+
+/// As the paced mode of [`time_steps`] with the controller loop's cache
+/// warm-up: `lead` before each tick a second controller (the same spec and
+/// inputs) takes one step, and shortly before that a register-only chain of
+/// multiply-adds is timed (what the core's own speed did in that cycle). The
+/// split of the cycles by the step's median tells a cycle of a slower core
+/// (every ratio above 1) from one whose memory was slower (the steps' ratios
+/// above 1, the kernel's at 1).
+pub fn time_paced_warmed(
+    model: &Model,
+    spec: ControllerSpec,
+    q0: &[f64],
+    warmup: usize,
+    samples: usize,
+    period: Duration,
+    lead: Duration,
+) -> WarmedStats {
+    let n = model.nq();
+    let q0v = DVector::from_column_slice(q0);
+    let mut c = Controller::new(model, spec.clone(), &q0v).expect("controller");
+    let mut twin = Controller::new(model, spec, &q0v).expect("controller");
+    let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
+    let mut q = q0.to_vec();
+    // (step, warm-up, kernel) per cycle, ns.
+    let mut t: Vec<[f64; 3]> = Vec::with_capacity(samples);
+    let spin_until = |at: Instant| {
+        while Instant::now() < at {
+            std::hint::spin_loop();
+        }
+    };
+    let start = Instant::now();
+    for k in 0..warmup + samples {
+        for (qi, vi) in q.iter_mut().zip(&qd) {
+            *qi += 1e-5 * vi;
+        }
+        let due = start + period * k as u32;
+        if let Some(idle) = due
+            .checked_sub(Duration::from_micros(150))
+            .and_then(|w| w.checked_duration_since(Instant::now()))
+        {
+            std::thread::sleep(idle);
+        }
+        spin_until(due - lead - Duration::from_micros(5));
+        let t0 = Instant::now();
+        let mut x = std::hint::black_box(1.0 + 1e-7);
+        for _ in 0..KERNEL_ROUNDS {
+            x = x * (1.0 + 1e-7) + 1e-9;
+        }
+        std::hint::black_box(x);
+        let kernel = t0.elapsed().as_nanos() as f64;
+        spin_until(due - lead);
+        let t0 = Instant::now();
+        std::hint::black_box(twin.step(&q, &qd).map(|o| o.tau[0]).ok());
+        let warm = t0.elapsed().as_nanos() as f64;
+        spin_until(due);
+        let t0 = Instant::now();
+        let out = c.step(&q, &qd).expect("step");
+        std::hint::black_box(out.tau[0]);
+        let step = t0.elapsed().as_nanos() as f64;
+        if k >= warmup {
+            t.push([step, warm, kernel]);
+        }
+    }
+    let median_step = stats(t.iter().map(|r| r[0]).collect()).median * 1000.0;
+    let (slow, fast): (Vec<[f64; 3]>, Vec<[f64; 3]>) = t.iter().partition(|r| r[0] > median_step);
+    let ratio = |i: usize| {
+        let m = |v: &[[f64; 3]]| stats(v.iter().map(|r| r[i]).collect()).median;
+        if slow.is_empty() || fast.is_empty() {
+            1.0
+        } else {
+            m(&slow) / m(&fast)
+        }
+    };
+    WarmedStats {
+        step: stats(t.iter().map(|r| r[0]).collect()),
+        warm_up: stats(t.iter().map(|r| r[1]).collect()),
+        slow_over_fast_step: ratio(0),
+        slow_over_fast_warm_up: ratio(1),
+        slow_over_fast_kernel: ratio(2),
+    }
+}
+
+/// Rounds of [`time_paced_warmed`]'s register-only kernel (a dependent chain of
+/// multiply-adds, about 0.7 µs).
+const KERNEL_ROUNDS: usize = 400;
+
 /// Median, p99, p99.9 and max of samples in ns, reported in µs.
 pub fn stats(mut samples: Vec<f64>) -> Stats {
     samples.sort_by(|a, b| a.partial_cmp(b).unwrap());
