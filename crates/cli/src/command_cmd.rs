@@ -25,6 +25,9 @@ pub struct Target {
     pub timeout: f64,
 }
 
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 /// `hcc goal`.
 #[derive(clap::Args, Debug)]
 pub struct GoalArgs {

@@ -391,8 +391,8 @@ pub fn scenario_of(path: &Path, config: Option<&Path>) -> anyhow::Result<Scenari
 }
 
 /// The writer of the results of `scenario`'s recordings into `out` (the
-/// columns of [`derive`]'s rows; with the plots unless `no_plots`): give it to
-/// [`derive`], then finish it with the derived description.
+/// columns of [`derive()`]'s rows; with the plots unless `no_plots`): give it to
+/// [`derive()`], then finish it with the derived description.
 pub fn results_writer(
     scenario: &Scenario,
     out: &Path,

@@ -21,6 +21,9 @@ use std::time::{Duration, Instant};
 use crate::capture::{self, Received, Receiver, StreamRecorder};
 use crate::daemons::{install_signal_handlers, interrupted};
 
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 #[derive(clap::Args, Debug)]
 pub struct RecordArgs {
     /// Namespace of the running controller and driver.

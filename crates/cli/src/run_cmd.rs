@@ -95,6 +95,9 @@ const LOCKSTEP_TIMEOUT_MS: f64 = 5000.0;
 /// Time the controller gets to answer the simulator's last state.
 const FINAL_ANSWER_GRACE: Duration = Duration::from_millis(500);
 
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
     /// Scenario TOML file.

@@ -26,6 +26,9 @@ use nalgebra::DVector;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 #[derive(clap::Args, Debug)]
 pub struct SimulateArgs {
     /// Scenario TOML file (e.g. config/paper-sim1.toml).

@@ -1113,7 +1113,7 @@ fn undamped_conditioning(
 /// `1/floor` when `a` vanishes altogether).
 ///
 /// Fast path: a Cholesky inverse, kept whenever no damping is due (see
-/// [`undamped_conditioning`]: a guaranteed lower bound of the eigenvalue ratio first,
+/// `undamped_conditioning`: a guaranteed lower bound of the eigenvalue ratio first,
 /// the eigenvalues alone where it cannot decide). Otherwise the eigen-decomposition
 /// decides. The reported ratio is exact (and so continuous in the state) wherever it
 /// is below `EXACT_RATIO_FACTOR × ε`, else a lower bound of it.

@@ -104,7 +104,7 @@
 //! −s(x_k) · `velocity_damping` · m_k q̇_k (default 100 1/s, 0 switches it off):
 //! dissipative and C¹ at the onset.
 //!
-//! Allocation-free after [`Safety::new`].
+//! Allocation-free after `Safety::new`.
 
 use crate::ControlError;
 use crate::dense::{SpdWork, damped_spd_inverse_only};

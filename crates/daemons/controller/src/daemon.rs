@@ -55,6 +55,9 @@ const NOT_LOGGED: [&str; 2] = ["cycles", "stale_events"];
     version,
     about = "Hierarchical compliance controller daemon: answers every joint state with a torque command over iceoryx2."
 )]
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 pub struct Args {
     /// Scenario TOML (robot, hierarchy, gains, goals, [ipc], [controller_daemon]).
     pub config: PathBuf,

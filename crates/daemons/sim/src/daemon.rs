@@ -70,6 +70,9 @@ const HYBRID_POLL_NS: u64 = 100_000;
     version,
     about = "Plant-simulator daemon: publishes joint states of the simulated robot and applies the controller's torque commands over iceoryx2."
 )]
+// The help texts name the scenario's TOML tables as [table] and placeholders as
+// <name>: neither an intra-doc link nor HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 pub struct Args {
     /// Scenario TOML (robot, initial state, [simulation], [ipc], [sim_daemon]).
     pub config: PathBuf,
