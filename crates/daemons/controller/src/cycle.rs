@@ -52,6 +52,34 @@ pub fn warm_up_lead_ns(step_ns: u64) -> u64 {
 /// The shortest lead of the cache warm-up before the expected state, ns.
 pub const WARM_UP_MIN_LEAD_NS: u64 = 25_000;
 
+/// What the hybrid spin does about the cache warm-up at one of its turns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WarmUpTurn {
+    /// Too early: look again at the next turn of the spin.
+    NotYet,
+    /// Warm up now (once in this wait).
+    Run,
+    /// No warm-up in this wait: the state is due or overdue (a step now would
+    /// delay its answer), or the law's step is too long for the spin.
+    Skip,
+}
+
+/// The cache warm-up's timing in a hybrid wait ([`CycleSettings::warm_up`]):
+/// at `now` (ns), with the next state expected at `expected`, for a law whose
+/// last step took `step_ns` and a spin of `hybrid_lead_ns` before the state.
+/// It runs [`warm_up_lead_ns`] before the state, not earlier (what is warmed
+/// at the spin's start has cooled when the state comes) and not once the state
+/// is due; never when three steps do not fit in the spin.
+pub fn warm_up_turn(now: u64, expected: u64, step_ns: u64, hybrid_lead_ns: u64) -> WarmUpTurn {
+    if 3 * step_ns > hybrid_lead_ns || now >= expected {
+        WarmUpTurn::Skip
+    } else if now < expected.saturating_sub(warm_up_lead_ns(step_ns)) {
+        WarmUpTurn::NotYet
+    } else {
+        WarmUpTurn::Run
+    }
+}
+
 /// The ports the loop uses.
 pub struct Ports {
     /// Joint states (buffer [`LATEST_BUFFER`]: the newest wins).
@@ -439,16 +467,15 @@ impl Cycle {
         let Some(step) = self.decider.step_ns() else {
             return;
         };
-        if 3 * step > self.settings.hybrid_lead_ns {
-            self.warmed = true;
-            return;
-        }
-        if now < expected.saturating_sub(warm_up_lead_ns(step)) {
-            return;
-        }
-        self.warmed = true;
-        if now < expected && self.decider.warm_up(&self.state) {
-            self.warm_ups += 1;
+        match warm_up_turn(now, expected, step, self.settings.hybrid_lead_ns) {
+            WarmUpTurn::NotYet => {}
+            WarmUpTurn::Skip => self.warmed = true,
+            WarmUpTurn::Run => {
+                self.warmed = true;
+                if self.decider.warm_up(&self.state) {
+                    self.warm_ups += 1;
+                }
+            }
         }
     }
 
@@ -567,5 +594,87 @@ impl Cycle {
             .max_compute_ns
             .store(self.max_compute_ns, Ordering::Relaxed);
         Outcome::Answered(mode)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LEAD: u64 = 150_000;
+
+    #[test]
+    fn warm_up_lead_is_three_steps_and_at_least_25_us() {
+        assert_eq!(warm_up_lead_ns(3_500), WARM_UP_MIN_LEAD_NS);
+        assert_eq!(warm_up_lead_ns(8_333), WARM_UP_MIN_LEAD_NS);
+        assert_eq!(warm_up_lead_ns(10_000), 30_000);
+        assert_eq!(warm_up_lead_ns(50_000), 150_000);
+    }
+
+    #[test]
+    fn warm_up_runs_in_the_last_lead_before_the_state_only() {
+        let expected = 10_000_000;
+        let step = 3_500;
+        // The spin starts 150 µs before the state: too early to warm.
+        assert_eq!(
+            warm_up_turn(expected - LEAD, expected, step, LEAD),
+            WarmUpTurn::NotYet
+        );
+        assert_eq!(
+            warm_up_turn(expected - 25_001, expected, step, LEAD),
+            WarmUpTurn::NotYet
+        );
+        // From 25 µs before the state until it is due.
+        assert_eq!(
+            warm_up_turn(expected - 25_000, expected, step, LEAD),
+            WarmUpTurn::Run
+        );
+        assert_eq!(
+            warm_up_turn(expected - 1, expected, step, LEAD),
+            WarmUpTurn::Run
+        );
+        // Due or overdue: a step now would delay the answer.
+        assert_eq!(
+            warm_up_turn(expected, expected, step, LEAD),
+            WarmUpTurn::Skip
+        );
+        assert_eq!(
+            warm_up_turn(expected + 40_000, expected, step, LEAD),
+            WarmUpTurn::Skip
+        );
+    }
+
+    #[test]
+    fn warm_up_of_a_long_step_starts_three_steps_before_or_not_at_all() {
+        let expected = 10_000_000;
+        // 20 µs steps: 60 µs before the state.
+        assert_eq!(
+            warm_up_turn(expected - 60_001, expected, 20_000, LEAD),
+            WarmUpTurn::NotYet
+        );
+        assert_eq!(
+            warm_up_turn(expected - 60_000, expected, 20_000, LEAD),
+            WarmUpTurn::Run
+        );
+        // Three steps fill the spin exactly: still warmed, from its start.
+        assert_eq!(
+            warm_up_turn(expected - LEAD, expected, 50_000, LEAD),
+            WarmUpTurn::Run
+        );
+        // Longer: never (the step would still run when the state comes).
+        assert_eq!(
+            warm_up_turn(expected - LEAD, expected, 50_001, LEAD),
+            WarmUpTurn::Skip
+        );
+        assert_eq!(
+            warm_up_turn(expected - 1_000, expected, 50_001, LEAD),
+            WarmUpTurn::Skip
+        );
+    }
+
+    #[test]
+    fn warm_up_near_the_clock_origin_does_not_underflow() {
+        assert_eq!(warm_up_turn(0, 10_000, 3_500, LEAD), WarmUpTurn::Run);
+        assert_eq!(warm_up_turn(10_000, 10_000, 3_500, LEAD), WarmUpTurn::Skip);
     }
 }
