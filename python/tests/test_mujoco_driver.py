@@ -115,3 +115,22 @@ def test_command_line_errors_exit_2(tmp_path: pathlib.Path) -> None:
         assert done.returncode == 2, (args, done.stderr)
         assert "hcc.mujoco: error:" in done.stderr and text in done.stderr, done.stderr
         assert "Traceback" not in done.stderr
+
+
+def test_short_window_misses_are_told_apart() -> None:
+    """A miss counts as the driver's own when its tick came before the state's window ended.
+
+    The real-time loop catches a late tick up with ticks back to back; the state
+    published in the late tick then has less than its window (0.8 ms at 1 kHz).
+    """
+    from hcc.mujoco.daemon import is_short_window_miss
+
+    window = 800_000
+    published = 10_000_000
+    # A tick a period after the state (the window elapsed): the controller's miss.
+    assert not is_short_window_miss(3, 4, published + 1_000_000, published, window)
+    # A caught-up tick 0.1 ms after the state: the driver's lateness.
+    assert is_short_window_miss(3, 4, published + 100_000, published, window)
+    assert not is_short_window_miss(3, 4, published + window, published, window)
+    # No miss in this tick: nothing to tell apart.
+    assert not is_short_window_miss(4, 4, published + 100_000, published, window)

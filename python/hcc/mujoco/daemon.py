@@ -56,6 +56,9 @@ class RunStats:
     waiting: int = 0
     stopped_periods: int = 0
     late_commands: int = 0
+    #: Misses of states whose command window was cut short by a late tick
+    #: (caught up back to back): the driver's lateness, not the controller's.
+    short_window_misses: int = 0
     overruns: int = 0
     connection_updates: int = 0
     connection_update_failures: int = 0
@@ -92,6 +95,7 @@ class RunStats:
             "fallback_cycles": c.fallback_cycles,
             "rejected_commands": c.rejected_commands,
             "late_commands": self.late_commands,
+            "short_window_misses": self.short_window_misses,
             "ticks_late": late_ticks,
             "overruns": self.overruns,
             "connection_updates": self.connection_updates,
@@ -99,6 +103,19 @@ class RunStats:
             "tick_lateness": pct(self.lateness_ns),
             "state_to_command": pct(self.state_to_command_ns),
         }
+
+
+def is_short_window_miss(
+    missed_before: int, missed_after: int, tick_ns: int, published_ns: int, window_ns: int
+) -> bool:
+    """Whether the tick at ``tick_ns`` counted a miss of a state published at
+    ``published_ns`` that had less than its command window ``window_ns``.
+
+    A late tick is caught up with ticks back to back, so the state published
+    in it has less than its window before the next tick; its miss is the
+    driver's lateness, not the controller's (as ``hcc-sim`` counts it).
+    """
+    return missed_after > missed_before and tick_ns < published_ns + window_ns
 
 
 class _Stop:
@@ -257,7 +274,12 @@ class Loop:
             was_answered = self.answered
             if self._take_answer() and not was_answered:
                 self.stats.late_commands += 1
+            missed = self.driver.counters.missed_commands
             self._advance()
+            if is_short_window_miss(
+                missed, self.driver.counters.missed_commands, now, self.published_ns, window
+            ):
+                self.stats.short_window_misses += 1
             if self.driver.finished():
                 break
             self.publish()
@@ -351,7 +373,8 @@ def run(
             print(
                 f"hcc.mujoco: tick lateness: p50 {t['p50_us']:.1f} µs, p99 {t['p99_us']:.1f} µs, "
                 f"max {t['max_us']:.1f} µs ({t['count']} ticks, {stats['ticks_late']} later than "
-                f"{COMMAND_WINDOW_FRACTION:.0%} of a period, {stats['late_commands']} late commands)",
+                f"{COMMAND_WINDOW_FRACTION:.0%} of a period, {stats['late_commands']} late commands, "
+                f"{stats['short_window_misses']} of the misses after a late tick)",
                 file=log,
             )
     if stats_path is not None:
