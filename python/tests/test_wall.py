@@ -6,22 +6,21 @@ presses with the force its level-1 stiffness implies, F = K1 (x_d − x)
 along the wall's normal, stays stable, and the lower levels (orientation,
 posture) keep converging in the remaining redundancy.
 
-The release is a second run: it starts from the pressed state with the
-goal in front of the wall, and the arm comes back to it (this also checks a
-start from a pressed state; Client.set_goal could move the goal in one run).
+The release in the same run: a client (hcc.Client) sets level 1's goal 5 cm
+in front of the wall, to apply at the state of t = 3 s, and the arm leaves the
+wall and comes to it.
 """
 
 from __future__ import annotations
 
 import math
 import pathlib
-import re
 import subprocess
 import tomllib
 
 import numpy as np
 
-from hcc import Client, Telemetry
+from hcc import Client, SetpointAnswer, Telemetry
 
 from conftest import ROOT
 from procs import read_csv, run_pair
@@ -30,16 +29,34 @@ SCENARIO = ROOT / "config" / "panda-wall.toml"
 SCENE = ROOT / "config" / "panda-wall.mujoco.toml"
 
 
-def collect_telemetry(out: list[Telemetry]):
-    """An on_started callback: a Client gathers telemetry until the driver ends."""
+#: The state at which the client's release applies (t = 3 s at 1 kHz).
+RELEASE_SEQ = 3000
+
+
+def release_and_collect(goal: list[float], out: list[Telemetry], answers: list[SetpointAnswer]):
+    """An on_started callback: a Client sends level 1's goal ``goal`` to apply at
+    :data:`RELEASE_SEQ` and gathers telemetry until the driver ends; the
+    controller's last answer to that setpoint goes to ``answers``."""
 
     def attach(namespace: str, prefix: str, driver: subprocess.Popen) -> None:
         with Client(namespace, file_prefix=prefix) as client:
+            # The controller's setpoint subscriber exists once it answers states
+            # (a setpoint sent before that reaches nobody).
+            first = client.latest_telemetry(timeout=30.0)
+            assert first is not None, "no telemetry within 30 s"
+            out.append(first)
+            sp = client.setpoint(0, 3).with_goal(goal).with_duration(0.0)
+            seq = client.send(sp.with_apply_at(RELEASE_SEQ))
             while driver.poll() is None:
                 for sample in client.telemetry(timeout=0.05):
                     out.append(sample)
                     if driver.poll() is not None:
                         break
+            for sample in reversed(out):
+                answer = sample.answer_for(client.client_id)
+                if answer is not None and answer.seq >= seq:
+                    answers.append(SetpointAnswer.from_buffer_copy(answer))
+                    break
 
     return attach
 
@@ -53,69 +70,66 @@ def test_wall_force_is_stiffness_times_penetration_and_the_arm_comes_back(
     goal = np.array(doc["level"][0]["goal"])
     normal = np.array(scene["normal"])
     wall_point = np.array(scene["point"])
+    free_goal = wall_point + 0.05 * normal
+    free_goal[2] = goal[2]
     telemetry: list[Telemetry] = []
-    press = tmp_path / "press"
-    press.mkdir()
+    answers: list[SetpointAnswer] = []
     paths = run_pair(
-        SCENARIO, press, lockstep=True, duration=3.0,
-        extra=["--scene", str(SCENE)], on_started=collect_telemetry(telemetry),
+        SCENARIO, tmp_path, lockstep=True, duration=6.0,
+        extra=["--scene", str(SCENE)],
+        on_started=release_and_collect(list(map(float, free_goal)), telemetry, answers),
+    )
+    assert answers and answers[0].accepted(), "the release was not accepted"
+    assert answers[0].late == 0, (
+        f"the release arrived after the state {RELEASE_SEQ} it was meant for (the client "
+        "attached too slowly)"
     )
     _, rows = read_csv(paths["contact"])
     c = np.array(rows)
     assert np.all(np.isfinite(c)), "NaN in the contact record"
     t, f_normal, tip = c[:, 0], c[:, 4], c[:, 5:8]
-    # K·Δx along the normal: Δx = (x_d − x)·(−n) is how far the goal lies behind the TCP.
+    t_release = RELEASE_SEQ * 1e-3
+
+    # Pressing (t < 3 s): K·Δx along the normal, Δx = (x_d − x)·(−n) being how far
+    # the goal lies behind the TCP.
     expected = k1 * ((goal - tip) @ -normal)
-    settled = t >= 2.0
+    settled = (t >= t_release - 1.0) & (t < t_release - 0.01)
     rel = np.abs(f_normal[settled] - expected[settled]) / expected[settled]
+    last_pressed = np.flatnonzero(settled)[-1]
     print(
-        f"wall: contact force {f_normal[-1]:.3f} N, K1·Δx {expected[-1]:.3f} N "
-        f"(largest relative difference over the last second {rel.max():.2e}); "
-        f"TCP {1e3 * ((tip[-1] - wall_point) @ normal):.2f} mm in front of the wall surface"
+        f"wall: contact force {f_normal[last_pressed]:.3f} N, K1·Δx {expected[last_pressed]:.3f} N "
+        f"(largest relative difference over the last second {rel.max():.2e}); TCP "
+        f"{1e3 * ((tip[last_pressed] - wall_point) @ normal):.2f} mm in front of the wall surface"
     )
-    assert f_normal[-1] > 10.0, "the TCP does not press against the wall"
+    assert f_normal[last_pressed] > 10.0, "the TCP does not press against the wall"
     assert rel.max() < 0.10
-    # Stable: the TCP rests (no oscillation) in the last second.
+    # Stable: the TCP rests (no oscillation) in the last second before the release.
     assert np.ptp(tip[settled], axis=0).max() < 1e-4
 
     # The hierarchy below keeps converging; telemetry came through the Client.
-    assert telemetry, "no telemetry received"
+    pressed = [x for x in telemetry if x.state_seq < RELEASE_SEQ]
+    assert pressed, "no telemetry received before the release"
     assert all(math.isfinite(x.error_norm(lvl)) for x in telemetry for lvl in range(3))
-    orientation = [x.error_norm(1) for x in telemetry]
-    posture = [x.error_norm(2) for x in telemetry]
+    orientation = [x.error_norm(1) for x in pressed]
     print(
-        f"wall: orientation error {orientation[0]:.3e} → {orientation[-1]:.3e} rad, "
-        f"posture error {posture[0]:.3e} → {posture[-1]:.3e} rad ({len(telemetry)} samples)"
+        f"wall: orientation error {orientation[0]:.3e} → {orientation[-1]:.3e} rad "
+        f"({len(pressed)} samples before the release, {len(telemetry)} in all)"
     )
     assert orientation[-1] < 1e-3
     # The posture (7 joints) cannot be met under the levels above; it settles at its best.
-    last = [x.error_norm(2) for x in telemetry if x.header.stamp_ns >= telemetry[-1].header.stamp_ns - 5e8]
-    assert np.ptp(last) < 1e-3
+    last = [x.error_norm(2) for x in pressed if x.state_seq >= RELEASE_SEQ - 500]
+    assert last and np.ptp(last) < 1e-3
 
-    # The release: from the pressed state, the goal 5 cm in front of the wall.
-    states = read_csv(paths["record"])[1]
-    n = 7
-    q, qd = states[-1][1 : 1 + n], states[-1][1 + n : 1 + 2 * n]
-    free_goal = wall_point + 0.05 * normal
-    free_goal[2] = goal[2]
-    text = SCENARIO.read_text()
-    text = text.replace('urdf = "', f'urdf = "{(ROOT / "config").as_posix()}/', 1)
-    text = re.sub(r"goal = \[0\.60, 0\.0, 0\.413\]", f"goal = {list(map(float, free_goal))}", text)
-    text = re.sub(r"(\[initial\]\n)q0 = \[[^\]]*\]", lambda m: f"{m.group(1)}q0 = {q}\nqd0 = {qd}", text)
-    release = tmp_path / "panda-wall-release.toml"
-    release.write_text(text)
-    back = tmp_path / "release"
-    back.mkdir()
-    paths = run_pair(release, back, lockstep=True, duration=3.0, extra=["--scene", str(SCENE)])
-    c = np.array(read_csv(paths["contact"])[1])
-    assert np.all(np.isfinite(c))
-    gap0 = (c[0, 5:8] - wall_point) @ normal
-    assert gap0 < scene["tool_radius"] + 1e-3, "the release run does not start at the wall"
-    tip_end = c[-1, 5:8]
+    # The release: the goal moves at the state of t = 3 s (telemetry shows the
+    # level's goal leaving the pressed one there), the TCP leaves the wall and
+    # comes to the new goal.
+    moved = [x.state_seq for x in telemetry if np.linalg.norm(np.array(x.goal[0][:3]) - goal) > 1e-9]
+    assert moved and min(moved) >= RELEASE_SEQ, "the goal moved before its state"
+    tip_end = tip[-1]
     print(
-        f"release: TCP {1e3 * gap0:.2f} mm from the wall after the first period, contact force "
-        f"{c[-1, 4]:.2e} N at the end, TCP "
-        f"{1e3 * np.linalg.norm(tip_end - free_goal):.3f} mm from the goal in front of the wall"
+        f"release: goal moving from state {min(moved)}, contact force {f_normal[-1]:.2e} N at "
+        f"t = {t[-1]:.2f} s, TCP {1e3 * np.linalg.norm(tip_end - free_goal):.3f} mm from the goal "
+        "in front of the wall"
     )
-    assert c[-1, 4] == 0.0
+    assert f_normal[-1] == 0.0
     assert np.linalg.norm(tip_end - free_goal) < 1e-3
