@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import pathlib
+import re
 import subprocess
 import tomllib
 
@@ -133,3 +134,10 @@ def test_wall_force_is_stiffness_times_penetration_and_the_arm_comes_back(
     )
     assert f_normal[-1] == 0.0
     assert np.linalg.norm(tip_end - free_goal) < 1e-3
+
+    # A client's setpoint, a driver in another language that stops and leaves:
+    # the controller's torque path made no system allocation after warm-up.
+    log = paths["controller_log"].read_text()
+    m = re.search(r"rt system allocations on the torque path after warm-up (\d+)", log)
+    assert m is not None, log[-2000:]
+    assert m.group(1) == "0", log[-2000:]

@@ -14,9 +14,12 @@ use core::sync::atomic::{AtomicU64, Ordering};
 
 /// Size in bytes of one pool block: the largest allocation the pool serves.
 ///
-/// 128 bytes covers iceoryx2's per-loan shared state (48 bytes) and other small
-/// reference-counted or boxed values with ample margin.
-pub const BLOCK_SIZE: usize = 128;
+/// 512 bytes covers iceoryx2's per-loan shared state (48 bytes) and the
+/// vector a notifier builds when it finds its service's listener set changed
+/// (4 listeners × 120 bytes: a driver that stops between its last state and
+/// the notification of the answer; 128-byte blocks sent that one to the
+/// system allocator), with the other small reference-counted or boxed values.
+pub const BLOCK_SIZE: usize = 512;
 
 /// Alignment in bytes of every pool block: the largest alignment the pool serves.
 ///
@@ -26,7 +29,7 @@ pub const BLOCK_ALIGN: usize = 64;
 
 /// Number of blocks in the pool (a multiple of 64, one bitmap word per 64 blocks).
 ///
-/// 256 blocks × 128 bytes = 32 KiB. A 1 kHz control loop that loans one
+/// 256 blocks × 512 bytes = 128 KiB. A 1 kHz control loop that loans one
 /// iceoryx2 sample per cycle holds one block at a time; the rest is headroom
 /// for several real-time threads and for samples held across cycles.
 pub const BLOCK_COUNT: usize = 256;
