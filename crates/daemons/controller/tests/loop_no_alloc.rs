@@ -366,23 +366,23 @@ impl TestDriver {
     }
 }
 
-/// A recorder (or monitor, or client) that subscribes while the loop runs:
-/// left to iceoryx2, the next command's send connects it — allocations and
-/// the mapping of its queue on the real-time thread between a state and its
-/// answer. The loop's connection
-/// upkeep, which runs while the loop waits, connects it instead (and
-/// disconnects it when it leaves): the cycles after it allocate nothing from
-/// the system, and the recorder receives every command.
-#[test]
-fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    assert!(hcc_rtalloc::pool_active());
-    let prefix = format!("hcctu{}_", std::process::id());
-    {
+/// A loop against the in-test driver on its own services (namespace `tag`,
+/// the caller's file prefix), with the event wait.
+struct Rig {
+    services: Services,
+    ports: Ports,
+    driver: TestDriver,
+    cycle: Cycle,
+    k: u64,
+    failures: u64,
+    _node: ipc::IpcNode,
+}
+
+impl Rig {
+    fn new(tag: &str, prefix: &str) -> Rig {
         let scenario = scenario();
-        let names = ServiceNames::for_namespace(Namespace::unique("ctl_upkeep").unwrap());
-        let node =
-            ipc::create_node("upkeep-test", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
+        let names = ServiceNames::for_namespace(Namespace::unique(tag).unwrap());
+        let node = ipc::create_node(tag, SignalHandlingMode::Disabled, Some(prefix)).unwrap();
         let services = Services::open(&node, &names).unwrap();
         let ports = Ports::open(&services).unwrap();
         let driver = TestDriver {
@@ -396,37 +396,81 @@ fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
         let mut settings = CycleSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let cycle = Cycle::new(controller, settings).unwrap();
+        Rig {
+            services,
+            ports,
+            driver,
+            cycle,
+            k: 0,
+            failures: 0,
+            _node: node,
+        }
+    }
+
+    /// `count` round trips (each state already there: no wait, no upkeep);
+    /// what the calling thread allocated meanwhile.
+    fn cycles(&mut self, count: u64) -> hcc_rtalloc::ThreadStats {
+        let before = thread_stats();
+        for _ in 0..count {
+            let ok = self.driver.round_trip(&mut self.cycle, &self.ports, self.k);
+            self.failures += u64::from(!ok);
+            self.k += 1;
+        }
+        thread_stats().since(before)
+    }
+
+    /// The loop's connection upkeep, as a wait runs it.
+    fn upkeep(&mut self) {
+        self.cycle.upkeep_connections(&self.ports);
+    }
+}
+
+/// Removes what the test's node left under `prefix` (the global management
+/// files only: anything else is a leak).
+fn clean_up(prefix: &str) {
+    let files = ipc::leftover_files(prefix).unwrap();
+    for f in files.iter().filter(|f| f.global_mgmt) {
+        std::fs::remove_file(&f.path).unwrap();
+    }
+    assert!(files.iter().all(|f| f.global_mgmt), "{files:?}");
+}
+
+/// A recorder (or monitor, or client) that subscribes while the loop runs:
+/// left to iceoryx2, the next command's send connects it — allocations and
+/// the mapping of its queue on the real-time thread between a state and its
+/// answer. The loop's connection
+/// upkeep, which runs while the loop waits, connects it instead (and
+/// disconnects it when it leaves): the cycles after it allocate nothing from
+/// the system, and the recorder receives every command.
+#[test]
+fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    assert!(hcc_rtalloc::pool_active());
+    let prefix = format!("hcctu{}_", std::process::id());
+    {
+        let mut rig = Rig::new("ctl_upkeep", &prefix);
         let rt = RtSection::enter();
-        let mut failures = 0u64;
-        let mut k = 0u64;
-        let mut cycles = |cycle: &mut Cycle, count: u64| {
-            let before = thread_stats();
-            for _ in 0..count {
-                failures += u64::from(!driver.round_trip(cycle, &ports, k));
-                k += 1;
-            }
-            thread_stats().since(before)
-        };
-        cycles(&mut cycle, 500);
+        rig.cycles(500);
         // What the upkeep costs a spin pass when nothing changed (printed:
         // the machine is shared; the loop's stage figures are `hcc jitter`'s).
         let t0 = std::time::Instant::now();
         for _ in 0..10_000 {
-            cycle.upkeep_connections(&ports);
+            rig.upkeep();
         }
         println!(
             "upkeep without a change: {:.0} ns per call",
             t0.elapsed().as_nanos() as f64 / 10_000.0
         );
-        assert_eq!(cycle.upkeep().updates, 0);
+        assert_eq!(rig.cycle.upkeep().updates, 0);
 
         // Without upkeep (the state is already there: no wait), the send of
         // the next command makes the new connections.
-        let recorder = services
+        let recorder = rig
+            .services
             .torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)
             .unwrap();
-        let during = cycles(&mut cycle, 1);
+        let during = rig.cycles(1);
         println!("the cycle whose send connected a recorder: {during:?}");
         // (The real-time pool's 512-byte blocks serve these allocations; with
         // 128-byte blocks some went to the system allocator. The segment's
@@ -437,25 +481,27 @@ fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
         );
         assert!(matches!(recorder.receive(), Ok(Some(_))));
         drop(recorder);
-        cycles(&mut cycle, 10);
+        rig.cycles(10);
 
         // With the upkeep of a wait between the attach and the next state.
-        let updates_before = cycle.upkeep().updates;
-        let recorder = services
+        let updates_before = rig.cycle.upkeep().updates;
+        let recorder = rig
+            .services
             .torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)
             .unwrap();
-        let monitor = services
+        let monitor = rig
+            .services
             .telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)
             .unwrap();
         let upkeep_stats = thread_stats();
-        cycle.upkeep_connections(&ports);
+        rig.upkeep();
         let upkeep_stats = thread_stats().since(upkeep_stats);
-        let u = cycle.upkeep();
+        let u = rig.cycle.upkeep();
         println!("upkeep: {u:?}, allocator {upkeep_stats:?}");
         assert_eq!(u.updates, updates_before + 1, "{u:?}");
         assert!(u.allocs > 0 && u.failures == 0, "{u:?}");
         // (Fewer cycles than the recorder's queue holds: it reads them after.)
-        let during = cycles(&mut cycle, 100);
+        let during = rig.cycles(100);
         println!("100 cycles after the upkeep connected a recorder: {during:?}");
         assert_eq!(during.system_allocs, 0, "{during:?}");
         assert_eq!(during.fallbacks, 0, "{during:?}");
@@ -472,22 +518,18 @@ fn a_subscriber_attached_mid_run_is_connected_while_the_loop_waits() {
         // Leaving: the cycles stay clean.
         drop(recorder);
         drop(monitor);
-        cycle.upkeep_connections(&ports);
-        let during = cycles(&mut cycle, 200);
+        rig.upkeep();
+        let during = rig.cycles(200);
         println!(
             "after the recorder left: upkeep {:?}, cycles {during:?}",
-            cycle.upkeep()
+            rig.cycle.upkeep()
         );
         assert_eq!(during.system_allocs, 0, "{during:?}");
         assert_eq!(during.system_frees, 0, "{during:?}");
+        assert_eq!(rig.failures, 0, "cycles that did not round-trip");
         drop(rt);
-        assert_eq!(failures, 0, "cycles that did not round-trip");
     }
-    let files = ipc::leftover_files(&prefix).unwrap();
-    for f in files.iter().filter(|f| f.global_mgmt) {
-        std::fs::remove_file(&f.path).unwrap();
-    }
-    assert!(files.iter().all(|f| f.global_mgmt), "{files:?}");
+    clean_up(&prefix);
 }
 
 /// A driver that stops leaves between its last state and the command that
@@ -503,48 +545,20 @@ fn a_listener_that_leaves_before_the_answer_costs_no_system_allocation() {
     assert!(hcc_rtalloc::pool_active());
     let prefix = format!("hcctl{}_", std::process::id());
     {
-        let scenario = scenario();
-        let names = ServiceNames::for_namespace(Namespace::unique("ctl_leave").unwrap());
-        let node =
-            ipc::create_node("leave-test", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
-        let services = Services::open(&node, &names).unwrap();
-        let ports = Ports::open(&services).unwrap();
-        let driver = TestDriver {
-            state_pub: services.joint_state_publisher().unwrap(),
-            state_ready: services.state_ready_notifier().unwrap(),
-            command_sub: services.torque_command_subscriber(2).unwrap(),
-            command_ready: services.command_ready_listener().unwrap(),
-            q: scenario.q0.iter().copied().collect(),
-        };
-        let controller =
-            Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
-        settings.wait = WaitStrategy::Event;
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let mut rig = Rig::new("ctl_leave", &prefix);
         let rt = RtSection::enter();
-        let mut failures = 0u64;
-        let mut k = 0u64;
-        let mut cycles = |cycle: &mut Cycle, count: u64| {
-            let before = thread_stats();
-            for _ in 0..count {
-                failures += u64::from(!driver.round_trip(cycle, &ports, k));
-                k += 1;
-            }
-            thread_stats().since(before)
-        };
-        cycles(&mut cycle, 500);
-
+        rig.cycles(500);
         // A second listener (a driver's, about to stop), connected by the
         // upkeep of a wait; then it leaves, and the next state is already there.
-        let leaving = services.command_ready_listener().unwrap();
-        cycle.upkeep_connections(&ports);
-        cycles(&mut cycle, 10);
-        let updates_before = cycle.upkeep().updates;
+        let leaving = rig.services.command_ready_listener().unwrap();
+        rig.upkeep();
+        rig.cycles(10);
+        let updates_before = rig.cycle.upkeep().updates;
         drop(leaving);
-        let during = cycles(&mut cycle, 1);
+        let during = rig.cycles(1);
         println!("the cycle whose notification found a listener gone: {during:?}");
         assert_eq!(
-            cycle.upkeep().updates,
+            rig.cycle.upkeep().updates,
             updates_before,
             "no upkeep ran in between"
         );
@@ -554,15 +568,11 @@ fn a_listener_that_leaves_before_the_answer_costs_no_system_allocation() {
         );
         assert_eq!(during.system_allocs, 0, "{during:?}");
         assert_eq!(during.fallbacks, 0, "{during:?}");
-        let during = cycles(&mut cycle, 100);
+        let during = rig.cycles(100);
         assert_eq!(during.allocs, during.frees, "{during:?}");
         assert_eq!(during.system_allocs, 0, "{during:?}");
+        assert_eq!(rig.failures, 0, "cycles that did not round-trip");
         drop(rt);
-        assert_eq!(failures, 0, "cycles that did not round-trip");
     }
-    let files = ipc::leftover_files(&prefix).unwrap();
-    for f in files.iter().filter(|f| f.global_mgmt) {
-        std::fs::remove_file(&f.path).unwrap();
-    }
-    assert!(files.iter().all(|f| f.global_mgmt), "{files:?}");
+    clean_up(&prefix);
 }
