@@ -22,7 +22,11 @@
 //! iceoryx2 loan is served by the real-time pool of hcc-rtalloc), wakes at
 //! absolute times ([`hcc_rt::sleep_until_ns`]) and waits for the command on
 //! the `command_ready` event with a bounded window inside the period
-//! ([`hcc_rt::wait_for_event_until`]). It logs nothing: hardware faults are
+//! ([`hcc_rt::wait_for_event_until`]), counted from the state's stamp: a
+//! late period is not caught up but re-anchored (an overrun), so every state
+//! has its whole window and no miss is the driver's own lateness (`hcc-sim`,
+//! which catches late ticks up, counts those apart as `short_window_misses`).
+//! It logs nothing: hardware faults are
 //! kept and logged (`tracing`, `RUST_LOG`) after the loop has stopped; the
 //! summary of the run goes to stdout.
 
