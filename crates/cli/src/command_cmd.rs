@@ -25,10 +25,10 @@ pub struct Target {
     pub timeout: f64,
 }
 
+/// `hcc goal`.
 // The help texts name the scenario's TOML tables as [table] and placeholders as
 // <name>: neither an intra-doc link nor HTML.
 #[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
-/// `hcc goal`.
 #[derive(clap::Args, Debug)]
 pub struct GoalArgs {
     #[command(flatten)]

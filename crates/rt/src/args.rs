@@ -5,10 +5,10 @@
 use std::ffi::OsString;
 use std::process::ExitCode;
 
+/// The IPC namespace and the iceoryx2 file prefix of a process.
 // The help texts name the scenario's TOML tables as [table] and placeholders as
 // <name>: neither an intra-doc link nor HTML.
 #[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
-/// The IPC namespace and the iceoryx2 file prefix of a process.
 #[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
 pub struct IpcArgs {
     /// IPC namespace (overrides [ipc].namespace of the scenario).

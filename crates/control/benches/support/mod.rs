@@ -43,19 +43,9 @@ pub fn time_steps(
             *qi += 1e-5 * vi;
         }
         if let Some(period) = pace {
-            // As in the controller's loop with the hybrid wait: the core idles
-            // until 150 µs before the step's tick, then spins up to it.
             let due = start + period * k as u32;
-            let lead = Duration::from_micros(150);
-            if let Some(idle) = due
-                .checked_sub(lead)
-                .and_then(|w| w.checked_duration_since(Instant::now()))
-            {
-                std::thread::sleep(idle);
-            }
-            while Instant::now() < due {
-                std::hint::spin_loop();
-            }
+            idle_until_lead(due);
+            spin_until(due);
         }
         let t0 = Instant::now();
         let out = c.step(&q, &qd).expect("step");
@@ -108,23 +98,13 @@ pub fn time_paced_warmed(
     let mut q = q0.to_vec();
     // (step, warm-up, kernel) per cycle, ns.
     let mut t: Vec<[f64; 3]> = Vec::with_capacity(samples);
-    let spin_until = |at: Instant| {
-        while Instant::now() < at {
-            std::hint::spin_loop();
-        }
-    };
     let start = Instant::now();
     for k in 0..warmup + samples {
         for (qi, vi) in q.iter_mut().zip(&qd) {
             *qi += 1e-5 * vi;
         }
         let due = start + period * k as u32;
-        if let Some(idle) = due
-            .checked_sub(Duration::from_micros(150))
-            .and_then(|w| w.checked_duration_since(Instant::now()))
-        {
-            std::thread::sleep(idle);
-        }
+        idle_until_lead(due);
         spin_until(due - lead - Duration::from_micros(5));
         let t0 = Instant::now();
         let mut x = std::hint::black_box(1.0 + 1e-7);
@@ -162,6 +142,24 @@ pub fn time_paced_warmed(
         slow_over_fast_step: ratio(0),
         slow_over_fast_warm_up: ratio(1),
         slow_over_fast_kernel: ratio(2),
+    }
+}
+
+/// As the controller's loop with the hybrid wait: the core idles (sleeps)
+/// until 150 µs before the tick at `due`; the caller spins from there.
+fn idle_until_lead(due: Instant) {
+    if let Some(idle) = due
+        .checked_sub(Duration::from_micros(150))
+        .and_then(|w| w.checked_duration_since(Instant::now()))
+    {
+        std::thread::sleep(idle);
+    }
+}
+
+/// Spins (with the `pause` hint) until `at`.
+fn spin_until(at: Instant) {
+    while Instant::now() < at {
+        std::hint::spin_loop();
     }
 }
 
