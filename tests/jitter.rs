@@ -111,8 +111,21 @@ fn jitter_reports_every_figure_and_consistent_counts() {
     // default), and says so.
     let settings = &report["settings"];
     assert_eq!(settings["controller_warm_up"], true, "{settings}");
-    assert!(
-        settings["controller_warm_ups"].as_u64().unwrap() > 0,
+    let warm_ups = settings["controller_warm_ups"].as_u64().unwrap();
+    assert!(warm_ups > 0, "{settings}");
+    // Each warm-up was timed, and those still running when their state came
+    // are some of them (how many depends on the machine: not asserted).
+    assert_eq!(count(&report, "controller_warm_up"), warm_ups);
+    let overlaps = settings["controller_warm_up_overlaps"].as_u64().unwrap();
+    assert!(overlaps <= warm_ups, "{settings}");
+    let longest = settings["controller_warm_up_overlap_max_ns"]
+        .as_u64()
+        .unwrap();
+    assert_eq!(overlaps == 0, longest == 0, "{settings}");
+    // The hybrid wait, its warm-ups and the answers made no system
+    // allocation on the real-time thread once warm.
+    assert_eq!(
+        settings["controller_torque_path_system_allocs"], 0,
         "{settings}"
     );
     // The commands went out in samples loaned while the controller waited

@@ -725,6 +725,12 @@ fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> Ve
             "  after: telemetry",
             "stage_telemetry",
         ),
+        // Before the state: the law's twin stepped while waiting.
+        stage(
+            "controller_warm_up",
+            "  before: cache warm-up step",
+            "warm_up",
+        ),
         // The driver's part of the path: from the state's stamp until its
         // send returned (the controller may take the sample before that).
         Row {
@@ -888,6 +894,9 @@ impl Measured<'_> {
                 "telemetry_every": args.telemetry_every,
                 "controller_warm_up": self.warm_up(),
                 "controller_warm_ups": pair.controller.counter("warm_ups"),
+                "controller_warm_up_overlaps": pair.controller.counter("warm_up_overlaps"),
+                "controller_warm_up_overlap_max_ns": pair.controller.counter("warm_up_overlap_max_ns"),
+                "controller_warm_up_last_lead_ns": pair.controller.counter("warm_up_last_lead_ns"),
                 "notifications_skipped": pair.controller.counter("notifications_skipped"),
                 "controller_commands_in_preloaned_samples": pair.controller.counter("commands_in_preloaned_samples"),
                 "controller_torque_path_system_allocs": pair.controller.counter("torque_path_system_allocs_after_warm_up"),
@@ -1083,6 +1092,15 @@ impl Measured<'_> {
             ctl.counter("connection_update_system_allocs"),
             ctl.counter("connection_update_max_ns") as f64 / 1e3,
         );
+        if self.warm_up() {
+            println!(
+                "  controller: cache warm-ups {}, of which still running when their state came {} (longest wait {:.1} µs); the last one's lead {:.1} µs",
+                ctl.counter("warm_ups"),
+                ctl.counter("warm_up_overlaps"),
+                ctl.counter("warm_up_overlap_max_ns") as f64 / 1e3,
+                ctl.counter("warm_up_last_lead_ns") as f64 / 1e3,
+            );
+        }
         for (what, value, limit) in &self.targets {
             println!(
                 "  target {what}: {value:.2} vs {limit:.2} — {}",

@@ -50,7 +50,7 @@ fn main() {
 }
 
 /// How long before the tick the paced+warmed run's warm-up step starts (the
-/// controller loop's shortest lead, `warm_up_lead_ns`).
+/// controller loop's shortest lead, `WARM_UP_MIN_LEAD_NS`).
 const LEAD: std::time::Duration = std::time::Duration::from_micros(25);
 
 /// The paced run's period (the control period of the shipped scenarios).

@@ -40,13 +40,54 @@ use hcc_timing::LatencyHistogram;
 /// Longest single blocking wait, so that a stop request is seen promptly.
 const MAX_WAIT_NS: u64 = 20_000_000;
 
-/// How long before the expected state the cache warm-up starts, for a law
-/// whose last step took `step_ns`: three steps, at least 25 µs (the Panda's
-/// step is 3–4 µs). At the start of the 150 µs spin (as before) the law in
-/// the loop still took 5.2–5.6 µs at the median against 3.5–3.7 µs when
-/// warmed 15–30 µs before the state (README, timing section).
-pub fn warm_up_lead_ns(step_ns: u64) -> u64 {
-    (3 * step_ns).max(WARM_UP_MIN_LEAD_NS)
+/// What the cache warm-up's lead before the expected state is made of.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WarmUpLead {
+    /// The law's last step, ns.
+    pub step_ns: u64,
+    /// The warm-ups' recent peak duration ([`DecayingPeak`]; 0 before the first), ns.
+    pub warm_up_ns: u64,
+    /// How much earlier than expected states came lately ([`DecayingPeak`]), ns.
+    pub early_ns: u64,
+}
+
+impl WarmUpLead {
+    /// How long before the expected state the warm-up starts: 1.5 times its
+    /// recent peak duration (a warm-up's step is slower than the answering
+    /// one, its caches being the cold ones: 1.5–1.8 times here) but at least
+    /// three steps (before the first warm-up) and at least 25 µs (the
+    /// Panda's step is 3–4 µs), plus how much earlier than expected states
+    /// came lately (a driver's stamps move with what it computes before
+    /// them) — so that the warm-up is over when the state comes. Not earlier
+    /// than needed: at the start of the 150 µs spin the law in the loop
+    /// still took 5.2–5.6 µs at the median against 3.5–3.7 µs when warmed
+    /// 15–30 µs before the state (README, timing section).
+    pub fn ns(&self) -> u64 {
+        let own = self.warm_up_ns + self.warm_up_ns / 2;
+        (3 * self.step_ns)
+            .max(WARM_UP_MIN_LEAD_NS)
+            .max(own)
+            .saturating_add(self.early_ns)
+    }
+}
+
+/// A recent peak: follows a larger value at once and decays by 1/64 per
+/// value noted (to half in about 44), so that it sits near the top of what
+/// the last few hundred values were.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DecayingPeak(u64);
+
+impl DecayingPeak {
+    /// Notes `value`, counted as at most `cap` (one value far out, such as
+    /// a step stalled by the host, must not hold the peak up for long).
+    pub fn note(&mut self, value: u64, cap: u64) {
+        self.0 = value.min(cap).max(self.0 - self.0 / 64);
+    }
+
+    /// The peak (0 before the first value).
+    pub fn get(self) -> u64 {
+        self.0
+    }
 }
 
 /// The shortest lead of the cache warm-up before the expected state, ns.
@@ -65,18 +106,41 @@ pub enum WarmUpTurn {
 }
 
 /// The cache warm-up's timing in a hybrid wait ([`CycleSettings::warm_up`]):
-/// at `now` (ns), with the next state expected at `expected`, for a law whose
-/// last step took `step_ns` and a spin of `hybrid_lead_ns` before the state.
-/// It runs [`warm_up_lead_ns`] before the state, not earlier (what is warmed
-/// at the spin's start has cooled when the state comes) and not once the state
-/// is due; never when three steps do not fit in the spin.
-pub fn warm_up_turn(now: u64, expected: u64, step_ns: u64, hybrid_lead_ns: u64) -> WarmUpTurn {
-    if 3 * step_ns > hybrid_lead_ns || now >= expected {
+/// at `now` (ns), with the next state expected at `expected` and a spin of
+/// `hybrid_lead_ns` before it. It runs [`WarmUpLead::ns`] before the state
+/// (from the spin's start when that is longer than the spin), not earlier
+/// (what is warmed at the spin's start has cooled when the state comes) and
+/// not once the state is due; never when three of the law's steps do not
+/// fit in the spin.
+pub fn warm_up_turn(now: u64, expected: u64, lead: WarmUpLead, hybrid_lead_ns: u64) -> WarmUpTurn {
+    if 3 * lead.step_ns > hybrid_lead_ns || now >= expected {
         WarmUpTurn::Skip
-    } else if now < expected.saturating_sub(warm_up_lead_ns(step_ns)) {
+    } else if now < expected.saturating_sub(lead.ns()) {
         WarmUpTurn::NotYet
     } else {
         WarmUpTurn::Run
+    }
+}
+
+/// The cache warm-ups that were still running when the state they prepared
+/// for was published: that state waited for them (its wake-up latency holds
+/// the wait).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WarmUpOverlaps {
+    /// How many.
+    pub count: u64,
+    /// The longest wait they caused, ns.
+    pub max_ns: u64,
+}
+
+impl WarmUpOverlaps {
+    /// Notes a warm-up that ended at `end_ns` before a state stamped `stamp_ns`
+    /// (the same clock); an overlap when the state came first.
+    pub fn note(&mut self, end_ns: u64, stamp_ns: u64) {
+        if stamp_ns != 0 && stamp_ns < end_ns {
+            self.count += 1;
+            self.max_ns = self.max_ns.max(end_ns - stamp_ns);
+        }
     }
 }
 
@@ -157,7 +221,7 @@ pub struct CycleSettings {
     /// cycle; a peer-lost sample is always published).
     pub telemetry_every: u32,
     /// Hybrid wait: step a copy of the law on the last state once per cycle,
-    /// [`warm_up_lead_ns`] before the next state is expected, if the last
+    /// [`WarmUpLead::ns`] before the next state is expected, if the last
     /// step took at most a third of `hybrid_lead_ns` (cache warm-up;
     /// [`Decider::warm_up`]).
     pub warm_up: bool,
@@ -227,11 +291,13 @@ pub struct CycleTimings {
     pub stage_notify: LatencyHistogram,
     /// Stage: the telemetry (filled and published; after the command), ns.
     pub stage_telemetry: LatencyHistogram,
+    /// The cache warm-up's step (the law's twin, while waiting), ns.
+    pub warm_up: LatencyHistogram,
 }
 
 impl CycleTimings {
     /// Every histogram with its name in the `--stats` report.
-    pub fn named(&self) -> [(&'static str, &LatencyHistogram); 8] {
+    pub fn named(&self) -> [(&'static str, &LatencyHistogram); 9] {
         [
             ("wakeup_latency", &self.wakeup),
             ("compute_time", &self.compute),
@@ -241,6 +307,7 @@ impl CycleTimings {
             ("stage_send", &self.stage_send),
             ("stage_notify", &self.stage_notify),
             ("stage_telemetry", &self.stage_telemetry),
+            ("warm_up", &self.warm_up),
         ]
     }
 }
@@ -270,6 +337,18 @@ pub struct Cycle {
     warmed: bool,
     /// Cache warm-ups run since start-up.
     warm_ups: u64,
+    /// The warm-ups' recent peak duration (their lead follows it), ns.
+    warm_up_peak: DecayingPeak,
+    /// How much earlier than expected the states came lately, ns.
+    early_peak: DecayingPeak,
+    /// When the hybrid wait expects the next state (0: no expectation), ns.
+    expected_ns: u64,
+    /// The lead of the last warm-up, ns.
+    last_lead_ns: u64,
+    /// When this wait's warm-up ended (0: none in this wait), ns.
+    warm_up_end_ns: u64,
+    /// Warm-ups that were still running when their state was published.
+    warm_up_overlaps: WarmUpOverlaps,
     /// The next command's sample, loaned while waiting (off the path).
     command_loan: PreLoan<TorqueCommand>,
 }
@@ -293,6 +372,12 @@ impl Cycle {
             status: Arc::new(Status::default()),
             warmed: false,
             warm_ups: 0,
+            warm_up_peak: DecayingPeak::default(),
+            early_peak: DecayingPeak::default(),
+            expected_ns: 0,
+            last_lead_ns: 0,
+            warm_up_end_ns: 0,
+            warm_up_overlaps: WarmUpOverlaps::default(),
             command_loan: PreLoan::new(),
         })
     }
@@ -326,6 +411,18 @@ impl Cycle {
     /// Cache warm-ups run so far ([`CycleSettings::warm_up`]).
     pub fn warm_ups(&self) -> u64 {
         self.warm_ups
+    }
+
+    /// The warm-ups that ran into their state's publication (the state then
+    /// waited for them).
+    pub fn warm_up_overlaps(&self) -> WarmUpOverlaps {
+        self.warm_up_overlaps
+    }
+
+    /// How long before its state the last warm-up was due to start
+    /// ([`WarmUpLead::ns`]; 0 before the first), ns.
+    pub fn last_warm_up_lead_ns(&self) -> u64 {
+        self.last_lead_ns
     }
 
     /// Commands sent in a sample loaned while waiting, and loans while
@@ -437,6 +534,7 @@ impl Cycle {
                     self.last_wake_ns
                 };
                 let expected = anchor.saturating_add(self.settings.period_ns);
+                self.expected_ns = expected;
                 let wake_at = expected.saturating_sub(self.settings.hybrid_lead_ns);
                 if now < wake_at {
                     rt::sleep_until_ns(wake_at.min(self.stale_deadline_ns));
@@ -454,7 +552,7 @@ impl Cycle {
 
     /// The cache warm-up ([`CycleSettings::warm_up`]) in the hybrid spin
     /// before the state expected at `expected` (ns): once per wait, when `now`
-    /// is [`warm_up_lead_ns`] before it — late enough that nothing cools the
+    /// is [`WarmUpLead::ns`] before it — late enough that nothing cools the
     /// caches again before the state, early enough that the step is over
     /// when it comes. Skipped when the spin starts after that point has
     /// passed the expected time, and for a law whose step takes more than a
@@ -467,13 +565,25 @@ impl Cycle {
         let Some(step) = self.decider.step_ns() else {
             return;
         };
-        match warm_up_turn(now, expected, step, self.settings.hybrid_lead_ns) {
+        let lead = WarmUpLead {
+            step_ns: step,
+            warm_up_ns: self.warm_up_peak.get(),
+            early_ns: self.early_peak.get(),
+        };
+        let spin = self.settings.hybrid_lead_ns;
+        match warm_up_turn(now, expected, lead, spin) {
             WarmUpTurn::NotYet => {}
             WarmUpTurn::Skip => self.warmed = true,
             WarmUpTurn::Run => {
                 self.warmed = true;
                 if self.decider.warm_up(&self.state) {
                     self.warm_ups += 1;
+                    let end = monotonic_now_ns();
+                    let took = end.saturating_sub(now);
+                    self.timings.warm_up.record(took);
+                    self.warm_up_peak.note(took, spin);
+                    self.last_lead_ns = lead.ns();
+                    self.warm_up_end_ns = end;
                 }
             }
         }
@@ -506,6 +616,21 @@ impl Cycle {
         }
     }
 
+    /// Notes when the state stamped `stamp_ns` came against the hybrid
+    /// wait's expectation (the warm-up's lead follows how early states come)
+    /// and whether this wait's warm-up was still running then.
+    fn note_arrival(&mut self, stamp_ns: u64) {
+        if self.expected_ns != 0 && stamp_ns != 0 {
+            let early = self.expected_ns.saturating_sub(stamp_ns);
+            self.early_peak.note(early, self.settings.hybrid_lead_ns);
+        }
+        if self.warm_up_end_ns != 0 {
+            self.warm_up_overlaps.note(self.warm_up_end_ns, stamp_ns);
+        }
+        self.expected_ns = 0;
+        self.warm_up_end_ns = 0;
+    }
+
     /// Answers `state` (read in place in its sample), received at `wake`
     /// (ns); keeps a copy in `self.state` once the command is out.
     fn answer(&mut self, ports: &Ports, wake: u64, state: &JointState) -> Outcome {
@@ -515,6 +640,7 @@ impl Cycle {
             .then(|| wake.saturating_sub(self.last_wake_ns));
         self.note_state(state, wake);
         self.warmed = false;
+        self.note_arrival(state.header.stamp_ns);
         // Setpoints waiting for this state first (they arrived earlier), then
         // every newly queued one (at most the queue's length: bounded work),
         // in arrival order: the order in which a client sent them.
@@ -603,18 +729,118 @@ mod tests {
 
     const LEAD: u64 = 150_000;
 
+    /// The lead of a law whose last step took `step_ns`, before any warm-up.
+    fn first(step_ns: u64) -> WarmUpLead {
+        WarmUpLead {
+            step_ns,
+            ..WarmUpLead::default()
+        }
+    }
+
     #[test]
-    fn warm_up_lead_is_three_steps_and_at_least_25_us() {
-        assert_eq!(warm_up_lead_ns(3_500), WARM_UP_MIN_LEAD_NS);
-        assert_eq!(warm_up_lead_ns(8_333), WARM_UP_MIN_LEAD_NS);
-        assert_eq!(warm_up_lead_ns(10_000), 30_000);
-        assert_eq!(warm_up_lead_ns(50_000), 150_000);
+    fn warm_up_lead_is_three_steps_and_at_least_25_us_before_the_first_warm_up() {
+        assert_eq!(first(3_500).ns(), WARM_UP_MIN_LEAD_NS);
+        assert_eq!(first(8_333).ns(), WARM_UP_MIN_LEAD_NS);
+        assert_eq!(first(10_000).ns(), 30_000);
+        assert_eq!(first(50_000).ns(), 150_000);
+    }
+
+    #[test]
+    fn warm_up_lead_covers_its_own_duration_and_early_states() {
+        // Warm-ups of up to 22 µs lately: 33 µs (1.5 times), more than 25 µs.
+        let slow = WarmUpLead {
+            step_ns: 3_500,
+            warm_up_ns: 22_000,
+            early_ns: 0,
+        };
+        assert_eq!(slow.ns(), 33_000);
+        // Short warm-ups: the 25 µs floor, or three steps when longer.
+        let quick = WarmUpLead {
+            warm_up_ns: 6_000,
+            ..slow
+        };
+        assert_eq!(quick.ns(), WARM_UP_MIN_LEAD_NS);
+        assert_eq!(
+            WarmUpLead {
+                step_ns: 12_000,
+                ..quick
+            }
+            .ns(),
+            36_000
+        );
+        // States that came up to 9 µs before their expected time: that much earlier.
+        assert_eq!(
+            WarmUpLead {
+                early_ns: 9_000,
+                ..slow
+            }
+            .ns(),
+            42_000
+        );
+        assert_eq!(
+            WarmUpLead {
+                early_ns: 9_000,
+                ..quick
+            }
+            .ns(),
+            34_000
+        );
+    }
+
+    #[test]
+    fn decaying_peak_follows_a_rise_at_once_and_a_fall_slowly() {
+        let mut p = DecayingPeak::default();
+        assert_eq!(p.get(), 0);
+        p.note(20_000, LEAD);
+        assert_eq!(p.get(), 20_000);
+        p.note(5_000, LEAD);
+        assert_eq!(p.get(), 20_000 - 20_000 / 64);
+        // About 44 smaller values halve it; it never falls below the values.
+        for _ in 0..43 {
+            p.note(5_000, LEAD);
+        }
+        assert!((9_500..=10_500).contains(&p.get()), "{}", p.get());
+        for _ in 0..1_000 {
+            p.note(5_000, LEAD);
+        }
+        assert_eq!(p.get(), 5_000);
+        // A value far out counts as the cap, and is forgotten like any other.
+        p.note(900_000, LEAD);
+        assert_eq!(p.get(), LEAD);
+        for _ in 0..200 {
+            p.note(5_000, LEAD);
+        }
+        assert!(p.get() < 10_000, "{}", p.get());
+    }
+
+    #[test]
+    fn a_warm_up_overlaps_a_state_published_before_it_ended() {
+        let mut o = WarmUpOverlaps::default();
+        o.note(1_000_000, 1_000_001);
+        o.note(1_000_000, 1_000_000);
+        assert_eq!(
+            o,
+            WarmUpOverlaps::default(),
+            "ended before or as the state came"
+        );
+        o.note(1_000_000, 996_000);
+        o.note(2_000_000, 1_999_000);
+        assert_eq!(
+            o,
+            WarmUpOverlaps {
+                count: 2,
+                max_ns: 4_000
+            }
+        );
+        // A state without a stamp says nothing.
+        o.note(3_000_000, 0);
+        assert_eq!(o.count, 2);
     }
 
     #[test]
     fn warm_up_runs_in_the_last_lead_before_the_state_only() {
         let expected = 10_000_000;
-        let step = 3_500;
+        let step = first(3_500);
         // The spin starts 150 µs before the state: too early to warm.
         assert_eq!(
             warm_up_turn(expected - LEAD, expected, step, LEAD),
@@ -645,36 +871,74 @@ mod tests {
     }
 
     #[test]
+    fn warm_up_moves_earlier_with_slow_warm_ups_and_early_states() {
+        let expected = 10_000_000;
+        let lead = WarmUpLead {
+            step_ns: 3_500,
+            warm_up_ns: 20_000,
+            early_ns: 10_000,
+        };
+        assert_eq!(
+            warm_up_turn(expected - 40_001, expected, lead, LEAD),
+            WarmUpTurn::NotYet
+        );
+        assert_eq!(
+            warm_up_turn(expected - 40_000, expected, lead, LEAD),
+            WarmUpTurn::Run
+        );
+        // A lead longer than the spin: from the spin's start, never skipped
+        // for it (only a long step of the law skips the warm-up).
+        let stalled = WarmUpLead {
+            warm_up_ns: LEAD,
+            ..lead
+        };
+        assert_eq!(
+            warm_up_turn(expected - LEAD, expected, stalled, LEAD),
+            WarmUpTurn::Run
+        );
+    }
+
+    #[test]
     fn warm_up_of_a_long_step_starts_three_steps_before_or_not_at_all() {
         let expected = 10_000_000;
         // 20 µs steps: 60 µs before the state.
         assert_eq!(
-            warm_up_turn(expected - 60_001, expected, 20_000, LEAD),
+            warm_up_turn(expected - 60_001, expected, first(20_000), LEAD),
             WarmUpTurn::NotYet
         );
         assert_eq!(
-            warm_up_turn(expected - 60_000, expected, 20_000, LEAD),
+            warm_up_turn(expected - 60_000, expected, first(20_000), LEAD),
             WarmUpTurn::Run
         );
         // Three steps fill the spin exactly: still warmed, from its start.
         assert_eq!(
-            warm_up_turn(expected - LEAD, expected, 50_000, LEAD),
+            warm_up_turn(expected - LEAD, expected, first(50_000), LEAD),
             WarmUpTurn::Run
         );
         // Longer: never (the step would still run when the state comes).
         assert_eq!(
-            warm_up_turn(expected - LEAD, expected, 50_001, LEAD),
+            warm_up_turn(expected - LEAD, expected, first(50_001), LEAD),
             WarmUpTurn::Skip
         );
         assert_eq!(
-            warm_up_turn(expected - 1_000, expected, 50_001, LEAD),
+            warm_up_turn(expected - 1_000, expected, first(50_001), LEAD),
             WarmUpTurn::Skip
         );
     }
 
     #[test]
     fn warm_up_near_the_clock_origin_does_not_underflow() {
-        assert_eq!(warm_up_turn(0, 10_000, 3_500, LEAD), WarmUpTurn::Run);
-        assert_eq!(warm_up_turn(10_000, 10_000, 3_500, LEAD), WarmUpTurn::Skip);
+        assert_eq!(warm_up_turn(0, 10_000, first(3_500), LEAD), WarmUpTurn::Run);
+        assert_eq!(
+            warm_up_turn(10_000, 10_000, first(3_500), LEAD),
+            WarmUpTurn::Skip
+        );
+        let far = WarmUpLead {
+            step_ns: 3_500,
+            warm_up_ns: u64::MAX / 2,
+            early_ns: u64::MAX,
+        };
+        assert_eq!(far.ns(), u64::MAX);
+        assert_eq!(warm_up_turn(0, 10_000, far, LEAD), WarmUpTurn::Run);
     }
 }

@@ -366,6 +366,16 @@ fn write_stats(
         cycle.notifications_skipped(),
     );
     stats.counters.insert("warm_ups".into(), cycle.warm_ups());
+    let overlaps = cycle.warm_up_overlaps();
+    stats
+        .counters
+        .insert("warm_up_overlaps".into(), overlaps.count);
+    stats
+        .counters
+        .insert("warm_up_overlap_max_ns".into(), overlaps.max_ns);
+    stats
+        .counters
+        .insert("warm_up_last_lead_ns".into(), cycle.last_warm_up_lead_ns());
     let (preloaned, loan_failures) = cycle.preloaned_sends();
     stats
         .counters
