@@ -837,93 +837,67 @@ mod tests {
         assert_eq!(o.count, 2);
     }
 
+    /// Checks [`warm_up_turn`] with a state expected at 10 ms, at each
+    /// offset from it (ns), against the turn wanted there.
+    fn check(lead: WarmUpLead, cases: &[(i64, WarmUpTurn)]) {
+        let expected = 10_000_000u64;
+        for &(offset, want) in cases {
+            let now = expected.checked_add_signed(offset).unwrap();
+            assert_eq!(
+                warm_up_turn(now, expected, lead, LEAD),
+                want,
+                "{offset} ns from the state, {lead:?}"
+            );
+        }
+    }
+
+    use WarmUpTurn::{NotYet, Run, Skip};
+
     #[test]
     fn warm_up_runs_in_the_last_lead_before_the_state_only() {
-        let expected = 10_000_000;
-        let step = first(3_500);
-        // The spin starts 150 µs before the state: too early to warm.
-        assert_eq!(
-            warm_up_turn(expected - LEAD, expected, step, LEAD),
-            WarmUpTurn::NotYet
-        );
-        assert_eq!(
-            warm_up_turn(expected - 25_001, expected, step, LEAD),
-            WarmUpTurn::NotYet
-        );
-        // From 25 µs before the state until it is due.
-        assert_eq!(
-            warm_up_turn(expected - 25_000, expected, step, LEAD),
-            WarmUpTurn::Run
-        );
-        assert_eq!(
-            warm_up_turn(expected - 1, expected, step, LEAD),
-            WarmUpTurn::Run
-        );
-        // Due or overdue: a step now would delay the answer.
-        assert_eq!(
-            warm_up_turn(expected, expected, step, LEAD),
-            WarmUpTurn::Skip
-        );
-        assert_eq!(
-            warm_up_turn(expected + 40_000, expected, step, LEAD),
-            WarmUpTurn::Skip
+        let lead = LEAD as i64;
+        check(
+            first(3_500),
+            &[
+                // The spin starts 150 µs before the state: too early to warm.
+                (-lead, NotYet),
+                (-25_001, NotYet),
+                // From 25 µs before the state until it is due.
+                (-25_000, Run),
+                (-1, Run),
+                // Due or overdue: a step now would delay the answer.
+                (0, Skip),
+                (40_000, Skip),
+            ],
         );
     }
 
     #[test]
     fn warm_up_moves_earlier_with_slow_warm_ups_and_early_states() {
-        let expected = 10_000_000;
         let lead = WarmUpLead {
             step_ns: 3_500,
             warm_up_ns: 20_000,
             early_ns: 10_000,
         };
-        assert_eq!(
-            warm_up_turn(expected - 40_001, expected, lead, LEAD),
-            WarmUpTurn::NotYet
-        );
-        assert_eq!(
-            warm_up_turn(expected - 40_000, expected, lead, LEAD),
-            WarmUpTurn::Run
-        );
+        check(lead, &[(-40_001, NotYet), (-40_000, Run)]);
         // A lead longer than the spin: from the spin's start, never skipped
         // for it (only a long step of the law skips the warm-up).
         let stalled = WarmUpLead {
             warm_up_ns: LEAD,
             ..lead
         };
-        assert_eq!(
-            warm_up_turn(expected - LEAD, expected, stalled, LEAD),
-            WarmUpTurn::Run
-        );
+        check(stalled, &[(-(LEAD as i64), Run)]);
     }
 
     #[test]
     fn warm_up_of_a_long_step_starts_three_steps_before_or_not_at_all() {
-        let expected = 10_000_000;
+        let spin = LEAD as i64;
         // 20 µs steps: 60 µs before the state.
-        assert_eq!(
-            warm_up_turn(expected - 60_001, expected, first(20_000), LEAD),
-            WarmUpTurn::NotYet
-        );
-        assert_eq!(
-            warm_up_turn(expected - 60_000, expected, first(20_000), LEAD),
-            WarmUpTurn::Run
-        );
+        check(first(20_000), &[(-60_001, NotYet), (-60_000, Run)]);
         // Three steps fill the spin exactly: still warmed, from its start.
-        assert_eq!(
-            warm_up_turn(expected - LEAD, expected, first(50_000), LEAD),
-            WarmUpTurn::Run
-        );
+        check(first(50_000), &[(-spin, Run)]);
         // Longer: never (the step would still run when the state comes).
-        assert_eq!(
-            warm_up_turn(expected - LEAD, expected, first(50_001), LEAD),
-            WarmUpTurn::Skip
-        );
-        assert_eq!(
-            warm_up_turn(expected - 1_000, expected, first(50_001), LEAD),
-            WarmUpTurn::Skip
-        );
+        check(first(50_001), &[(-spin, Skip), (-1_000, Skip)]);
     }
 
     #[test]
