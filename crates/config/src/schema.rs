@@ -343,9 +343,9 @@ pub struct ControllerDaemonSection {
     /// No joint state for this long: the driver is declared lost, ms
     /// (default three control periods, 3 ms at 1 kHz).
     pub stale_timeout_ms: Option<f64>,
-    /// Hybrid wait: warm the caches once per cycle, at the start of the spin
-    /// before the next state, by stepping a copy of the law on the last state
-    /// (default true).
+    /// Hybrid wait: warm the caches once per cycle, in the spin shortly
+    /// before the next state (early enough to be over when it comes), by
+    /// stepping a copy of the law on the last state (default true).
     pub warm_up: Option<bool>,
 }
 
