@@ -128,6 +128,12 @@ fn jitter_reports_every_figure_and_consistent_counts() {
         settings["controller_torque_path_system_allocs"], 0,
         "{settings}"
     );
+    // The law stepped back to back on the controller's core, before and after
+    // the pair (2 × 2 000 timed steps), is the law's reference in the table.
+    let law = &report["figures"]["controller_control_law_time"];
+    assert_eq!(law["back_to_back"]["count"], 4000, "{law}");
+    assert_eq!(law["back_to_back_core"], 1, "{law}");
+    assert!(law["ratio_to_back_to_back"]["p50"].is_number(), "{law}");
     // The commands went out in samples loaned while the controller waited
     // (at most one per answered state).
     let preloaned = settings["controller_commands_in_preloaned_samples"]

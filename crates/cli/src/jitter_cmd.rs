@@ -37,6 +37,7 @@
 
 use anyhow::{Context, bail};
 use hcc_config::Scenario;
+use hcc_control::Controller;
 use hcc_msgs::ipc;
 use hcc_msgs::{Namespace, ServiceNames, monotonic_now_ns};
 use hcc_report::{PercentileCurve, plot_percentiles};
@@ -190,6 +191,70 @@ fn measure_floor(
                 .map_err(|_| anyhow::anyhow!("a floor thread panicked"))
         })
         .collect()
+}
+
+/// Untimed steps before the law's back-to-back reference is timed.
+const LAW_WARM_UP_STEPS: usize = 200;
+/// Timed steps of the law's back-to-back reference, per floor half.
+const LAW_STEPS: usize = 2_000;
+
+/// The scenario's control law stepped back to back on the controller's core:
+/// what one step costs on this machine at this moment with its caches warm
+/// (the step benchmark's "back to back", measured in the same run as the
+/// pair). The law's time in the loop is read against it: their ratio is
+/// what the idle between two states and the machine's neighbours add.
+struct LawReference {
+    core: usize,
+    steps: LatencyHistogram,
+}
+
+/// Steps the scenario's law [`LAW_WARM_UP_STEPS`] + [`LAW_STEPS`] times back
+/// to back in a thread pinned to `core` (SCHED_FIFO `fifo` when permitted),
+/// along a small joint trajectory around the scenario's q0, timing each of the
+/// last [`LAW_STEPS`] (a step that fails is not timed).
+fn measure_law(
+    scenario: &Scenario,
+    core: usize,
+    fifo: Option<i32>,
+) -> anyhow::Result<LawReference> {
+    let mut controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
+        .map_err(|e| anyhow::anyhow!("{}: controller: {e}", scenario.path.display()))?;
+    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+    let steps = std::thread::scope(|scope| {
+        std::thread::Builder::new()
+            .name(format!("hcc-law-{core}"))
+            .spawn_scoped(scope, move || {
+                let settings = RtSettings {
+                    cpu_core: Some(core),
+                    sched_priority: fifo,
+                    lock_memory: false,
+                    prefault_stack_bytes: 256 * 1024,
+                };
+                let _ = rt::prepare_rt_thread(&settings);
+                let mut steps = LatencyHistogram::new();
+                let mut q = q0.clone();
+                let mut qd = vec![0.0; q0.len()];
+                for k in 0..LAW_WARM_UP_STEPS + LAW_STEPS {
+                    let t = k as f64 * 1e-3;
+                    for (j, (qj, qdj)) in q.iter_mut().zip(qd.iter_mut()).enumerate() {
+                        let phase = t + j as f64;
+                        *qj = q0[j] + 0.05 * phase.sin();
+                        *qdj = 0.05 * phase.cos();
+                    }
+                    let start = monotonic_now_ns();
+                    let ok = controller.step(&q, &qd).is_ok();
+                    let took = monotonic_now_ns().saturating_sub(start);
+                    if ok && k >= LAW_WARM_UP_STEPS {
+                        steps.record(took);
+                    }
+                }
+                steps
+            })
+            .map(|h| h.join())
+    })
+    .context("starting the law's reference thread")?
+    .map_err(|_| anyhow::anyhow!("the law's reference thread panicked"))?;
+    Ok(LawReference { core, steps })
 }
 
 /// Busy threads at normal priority, one per core, until dropped.
@@ -436,6 +501,8 @@ struct Row<'a> {
     label: &'static str,
     pair: Figure,
     floor: Option<&'a FloorCore>,
+    /// The law's back-to-back reference (the control law's row only).
+    reference: Option<&'a LawReference>,
 }
 
 fn us(ns: u64) -> String {
@@ -471,17 +538,34 @@ fn table(rows: &[Row]) -> String {
                 out.push_str(&format!("{:>9}", us(v)));
             }
             out.push('\n');
-            out.push_str(&format!("  {:<34}", "  ratio"));
-            for (a, b) in s.values_ns().iter().zip(fs.values_ns()) {
-                out.push_str(&match ratio(*a, b) {
-                    Some(r) => format!("{r:>9.2}"),
-                    None => format!("{:>9}", "-"),
-                });
+            push_ratio(&mut out, &s, &fs);
+        }
+        if let Some(r) = row.reference {
+            let rs = r.steps.summary();
+            out.push_str(&format!(
+                "  {:<34}",
+                format!("  back to back, core {}", r.core)
+            ));
+            for v in rs.values_ns() {
+                out.push_str(&format!("{:>9}", us(v)));
             }
             out.push('\n');
+            push_ratio(&mut out, &s, &rs);
         }
     }
     out
+}
+
+/// The ratio line of a figure `s` to its reference `reference`, per quantile.
+fn push_ratio(out: &mut String, s: &LatencySummary, reference: &LatencySummary) {
+    out.push_str(&format!("  {:<34}", "  ratio"));
+    for (a, b) in s.values_ns().iter().zip(reference.values_ns()) {
+        out.push_str(&match ratio(*a, b) {
+            Some(r) => format!("{r:>9.2}"),
+            None => format!("{:>9}", "-"),
+        });
+    }
+    out.push('\n');
 }
 
 fn summary_json(s: &LatencySummary) -> Value {
@@ -632,6 +716,28 @@ fn floor_phase(
     Ok((floor, steal))
 }
 
+/// The law's back-to-back reference on the controller's core, next to one
+/// half of the floor (`when`), with its result line unless `quiet`.
+fn law_phase(
+    args: &JitterArgs,
+    scenario: &Scenario,
+    plan: &Plan,
+    when: &str,
+) -> anyhow::Result<LawReference> {
+    let law = measure_law(scenario, args.controller_core, plan.fifo)?;
+    if interrupted() {
+        bail!("interrupted during the law's reference");
+    }
+    if !args.quiet {
+        eprintln!(
+            "hcc jitter: control law back to back, core {} ({when}): {}",
+            law.core,
+            law.steps.summary().line_us()
+        );
+    }
+    Ok(law)
+}
+
 /// The two halves of the floor as one measurement: per core, the lateness
 /// histograms merged and the late cycles summed; the steal fraction the mean
 /// of the halves' (equal durations).
@@ -659,13 +765,19 @@ fn join_floors(
 }
 
 /// The figures of the table, each with the floor of its core.
-fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> Vec<Row<'a>> {
+fn figure_rows<'a>(
+    args: &JitterArgs,
+    pair: &Pair,
+    floor: &'a [FloorCore],
+    law: Option<&'a LawReference>,
+) -> Vec<Row<'a>> {
     let floor_of = |core: usize| floor.iter().find(|f| f.core == core);
     let stage = |key, label, name| Row {
         key,
         label,
         pair: pair.controller.figure(name),
         floor: None,
+        reference: None,
     };
     vec![
         Row {
@@ -673,30 +785,35 @@ fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> Ve
             label: "simulator tick lateness",
             pair: pair.sim.figure("tick_lateness"),
             floor: floor_of(args.sim_core),
+            reference: None,
         },
         Row {
             key: "state_to_command_latency",
             label: "state -> command latency",
             pair: pair.sim.figure("state_to_command"),
             floor: floor_of(args.controller_core),
+            reference: None,
         },
         Row {
             key: "controller_wakeup_latency",
             label: "controller wake-up latency",
             pair: pair.controller.figure("wakeup_latency"),
             floor: floor_of(args.controller_core),
+            reference: None,
         },
         Row {
             key: "controller_compute_time",
             label: "controller compute time",
             pair: pair.controller.figure("compute_time"),
             floor: None,
+            reference: None,
         },
         Row {
             key: "controller_control_law_time",
             label: "  of which the control law",
             pair: pair.controller.figure("control_law_time"),
             floor: None,
+            reference: law,
         },
         // The stages of the controller's cycle, from its wake-up: they add
         // up to the compute time (the telemetry comes after the command).
@@ -738,6 +855,7 @@ fn figure_rows<'a>(args: &JitterArgs, pair: &Pair, floor: &'a [FloorCore]) -> Ve
             label: "simulator: state stamp -> sent",
             pair: pair.sim.figure("state_publish"),
             floor: None,
+            reference: None,
         },
     ]
 }
@@ -876,6 +994,12 @@ impl Measured<'_> {
                 v["floor_core"] = json!(f.core);
                 v["floor"] = summary_json(&fs);
                 v["ratio"] = ratios_json(&row.pair.summary, &fs);
+            }
+            if let Some(r) = row.reference {
+                let rs = r.steps.summary();
+                v["back_to_back_core"] = json!(r.core);
+                v["back_to_back"] = summary_json(&rs);
+                v["ratio_to_back_to_back"] = ratios_json(&row.pair.summary, &rs);
             }
             figures.insert(row.key.to_string(), v);
         }
@@ -1150,6 +1274,7 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
     // 1. The floor's first half.
     let half_s = plan.floor_s / 2.0;
     let floor_before = floor_phase(&args, &plan, half_s, "before the pair")?;
+    let law_before = law_phase(&args, &scenario, &plan, "before the pair")?;
 
     // 2. The pair.
     let sim_stats = args.out.join("sim-timings.json");
@@ -1161,11 +1286,14 @@ pub fn run(args: JitterArgs) -> anyhow::Result<()> {
     // 3. The floor's second half: the machine around the pair, not only
     // before it (its stalls come and go from minute to minute).
     let floor_after = floor_phase(&args, &plan, half_s, "after the pair")?;
+    let law_after = law_phase(&args, &scenario, &plan, "after the pair")?;
     let (floor, floor_steal) = join_floors(floor_before, floor_after);
+    let mut law = law_before;
+    law.steps.merge(&law_after.steps);
     drop(load);
     drop(env.dma.take());
 
-    let rows = figure_rows(&args, &pair, &floor);
+    let rows = figure_rows(&args, &pair, &floor, Some(&law));
     let counts = Counts::new(
         &pair.sim,
         floor.iter().find(|f| f.core == args.controller_core),
