@@ -137,6 +137,19 @@ struct FloorCore {
     late_cycles: u64,
 }
 
+/// The real-time settings of a measuring thread of `hcc jitter` (a floor
+/// thread, the law's reference): pinned to `core`, SCHED_FIFO `fifo` when
+/// permitted, its stack prefaulted, memory not locked (the daemons lock
+/// theirs).
+fn measuring_thread(core: usize, fifo: Option<i32>) -> RtSettings {
+    RtSettings {
+        cpu_core: Some(core),
+        sched_priority: fifo,
+        lock_memory: false,
+        prefault_stack_bytes: 256 * 1024,
+    }
+}
+
 /// Bare periodic threads, one per core, all with the same deadlines.
 fn measure_floor(
     cores: &[usize],
@@ -154,12 +167,7 @@ fn measure_floor(
             std::thread::Builder::new()
                 .name(format!("hcc-floor-{core}"))
                 .spawn(move || {
-                    let settings = RtSettings {
-                        cpu_core: Some(core),
-                        sched_priority: fifo,
-                        lock_memory: false,
-                        prefault_stack_bytes: 256 * 1024,
-                    };
+                    let settings = measuring_thread(core, fifo);
                     let report = rt::prepare_rt_thread(&settings);
                     let mut lateness = LatencyHistogram::new();
                     let mut late_cycles = 0;
@@ -224,13 +232,7 @@ fn measure_law(
         std::thread::Builder::new()
             .name(format!("hcc-law-{core}"))
             .spawn_scoped(scope, move || {
-                let settings = RtSettings {
-                    cpu_core: Some(core),
-                    sched_priority: fifo,
-                    lock_memory: false,
-                    prefault_stack_bytes: 256 * 1024,
-                };
-                let _ = rt::prepare_rt_thread(&settings);
+                let _ = rt::prepare_rt_thread(&measuring_thread(core, fifo));
                 let mut steps = LatencyHistogram::new();
                 let mut q = q0.clone();
                 let mut qd = vec![0.0; q0.len()];
