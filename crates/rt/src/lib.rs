@@ -18,8 +18,9 @@
 //! * [`upkeep`]: iceoryx2 connections to peers that appeared or left, made
 //!   while a loop waits instead of inside its next send
 //!   ([`ConnectionUpkeep`]).
-//! * [`init_logging`]: `tracing` to stderr, filtered by `RUST_LOG`, for the
-//!   non-real-time threads.
+//! * [`init_logging`]: the one logging set-up of every hcc process —
+//!   `tracing` to stderr, filtered by `RUST_LOG`, each line prefixed with the
+//!   process's name; for the non-real-time threads.
 //!
 //! Layering: this crate builds on the message contract `hcc-msgs` (its clock
 //! [`hcc_msgs::monotonic_now_ns`] and its iceoryx2 transport); the event wait
@@ -30,6 +31,7 @@
 //! and atomics only.
 
 pub mod args;
+pub mod logging;
 pub mod sleep;
 pub mod stop;
 pub mod thread;
@@ -49,19 +51,4 @@ pub use thread::{
 pub use upkeep::{ConnectionUpkeep, UpkeepCounts};
 pub use wait::WaitStrategy;
 
-/// Logging of a process: `tracing` events to stderr, one line each, as
-/// `LEVEL message` (no timestamps, no colours, no module path), filtered by
-/// `RUST_LOG` (default `info`). Call once at start-up; a second call (or a
-/// subscriber already set by the embedding program) is ignored. Log only from
-/// threads that are not real-time: formatting allocates and writing blocks.
-pub fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .without_time()
-        .with_ansi(false)
-        .with_target(false)
-        .try_init();
-}
+pub use logging::init_logging;

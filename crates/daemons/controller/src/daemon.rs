@@ -8,13 +8,12 @@
 //! SIGINT/SIGTERM. A second, non-real-time thread logs the loop's counters
 //! every 100 ms when they change.
 //!
-//! Logging goes through `tracing` to stderr, filtered by `RUST_LOG` (default
-//! `info`), one line per event prefixed `hcc-controller:` (and `warning:` /
-//! `error:` by level). Only start-up, shutdown and the logging thread log;
+//! Logging is `hcc_rt::init_logging`'s: stderr, filtered by `RUST_LOG`
+//! (default `info`), one line per event prefixed `hcc-controller:` (and
+//! `warning:` / `error:` by level). Only start-up, shutdown and the logging thread log;
 //! the real-time loop never does.
 
 use std::ffi::OsString;
-use std::fmt;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -28,11 +27,7 @@ use hcc_control::Controller;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, IpcNode, Services};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
-use tracing::{Event, Level, Subscriber, error, info, warn};
-use tracing_subscriber::EnvFilter;
-use tracing_subscriber::fmt::format::Writer;
-use tracing_subscriber::fmt::{FmtContext, FormatEvent, FormatFields};
-use tracing_subscriber::registry::LookupSpan;
+use tracing::{error, info, warn};
 
 use crate::cycle::{Cycle, CycleSettings, Outcome, Ports};
 use crate::status::{LoopCounters, Status};
@@ -96,47 +91,8 @@ pub struct Args {
 /// Parses `args` (program name first), runs the daemon, maps the result to
 /// an exit code: 0 after a clean stop, 2 for a start-up error.
 pub fn main_with_args(args: impl IntoIterator<Item = impl Into<OsString> + Clone>) -> ExitCode {
-    init_logging();
+    hcc_rt::init_logging("hcc-controller");
     hcc_rt::run_main(args, run, |e| error!("{e:#}"))
-}
-
-/// Installs the process's `tracing` subscriber (once; later calls keep it):
-/// stderr, `RUST_LOG` or else `info`, the `Prefixed` format.
-fn init_logging() {
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .event_format(Prefixed)
-        .try_init();
-}
-
-/// One line per event, `hcc-controller: [warning: |error: ]message`: no
-/// timestamp, no colours, the wording the daemon has always printed.
-struct Prefixed;
-
-impl<S, N> FormatEvent<S, N> for Prefixed
-where
-    S: Subscriber + for<'a> LookupSpan<'a>,
-    N: for<'a> FormatFields<'a> + 'static,
-{
-    fn format_event(
-        &self,
-        ctx: &FmtContext<'_, S, N>,
-        mut writer: Writer<'_>,
-        event: &Event<'_>,
-    ) -> fmt::Result {
-        let level = match *event.metadata().level() {
-            Level::ERROR => "error: ",
-            Level::WARN => "warning: ",
-            Level::INFO => "",
-            Level::DEBUG => "debug: ",
-            Level::TRACE => "trace: ",
-        };
-        write!(writer, "hcc-controller: {level}")?;
-        ctx.field_format().format_fields(writer.by_ref(), event)?;
-        writeln!(writer)
-    }
 }
 
 /// Everything built at start-up.

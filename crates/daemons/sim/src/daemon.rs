@@ -130,8 +130,8 @@ pub struct Args {
 /// Parses `args` (program name first) and runs the daemon; 0 after a clean
 /// stop, 2 for an error (at start-up or while running).
 pub fn main_with_args(args: impl IntoIterator<Item = impl Into<OsString> + Clone>) -> ExitCode {
-    rt::init_logging();
-    hcc_rt::run_main(args, run, |e| tracing::error!("hcc-sim: error: {e:#}"))
+    rt::init_logging("hcc-sim");
+    hcc_rt::run_main(args, run, |e| tracing::error!("{e:#}"))
 }
 
 /// Counters shared with the logging thread.
@@ -491,32 +491,32 @@ fn log_loop(shared: &Shared, done: &AtomicBool) {
         std::thread::sleep(Duration::from_millis(100));
         if !connected && shared.has_command.load(Ordering::Relaxed) {
             connected = true;
-            tracing::info!("hcc-sim: receiving torque commands");
+            tracing::info!("receiving torque commands");
         }
         let f = shared.in_fallback.load(Ordering::Relaxed);
         if f != fallback {
             fallback = f;
             if f {
                 tracing::warn!(
-                    "hcc-sim: no applicable torque command: fallback active (gravity held, joint damping)"
+                    "no applicable torque command: fallback active (gravity held, joint damping)"
                 );
             } else {
-                tracing::info!("hcc-sim: torque commands are back; fallback ended");
+                tracing::info!("torque commands are back; fallback ended");
             }
         }
         let m = shared.missed.load(Ordering::Relaxed);
         if m != missed {
-            tracing::warn!("hcc-sim: missed commands: {m} (+{})", m - missed);
+            tracing::warn!("missed commands: {m} (+{})", m - missed);
             missed = m;
         }
         let o = shared.overruns.load(Ordering::Relaxed);
         if o != overruns {
-            tracing::warn!("hcc-sim: clock overruns (re-anchored): {o}");
+            tracing::warn!("clock overruns (re-anchored): {o}");
             overruns = o;
         }
         let r = shared.rejected.load(Ordering::Relaxed);
         if r != rejected {
-            tracing::warn!("hcc-sim: rejected commands (invalid or gravity conflict): {r}");
+            tracing::warn!("rejected commands (invalid or gravity conflict): {r}");
             rejected = r;
         }
     }
@@ -572,7 +572,7 @@ pub fn run(args: Args) -> Result<()> {
     set_log_level_from_env_or(LogLevel::Warn);
 
     if let Some(line) = rt::cleanup_stale_resources(file_prefix.as_deref()) {
-        tracing::info!("hcc-sim: {line}");
+        tracing::info!("{line}");
     }
     let node = ipc::create_node(
         "hcc-sim",
@@ -590,10 +590,10 @@ pub fn run(args: Args) -> Result<()> {
     };
     let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
-        tracing::warn!("hcc-sim: {w}");
+        tracing::warn!("{w}");
     }
     tracing::info!(
-        "hcc-sim: {} ({} joints), {:?} mode, wait {}, namespace {:?}, {}; publishing on {:?}",
+        "{} ({} joints), {:?} mode, wait {}, namespace {:?}, {}; publishing on {:?}",
         scenario.name,
         driver.model().nq(),
         mode,
@@ -655,7 +655,7 @@ impl SimLoop<'_> {
     fn log_summary(&self, mode: SimMode) {
         let c = self.driver.counters();
         tracing::info!(
-            "hcc-sim: stopped at t = {:.3} s (k = {}): {} commands applied, {} missed ({} of them after a late tick that left less than the command window), {} fallback cycles, {} rejected, {} overruns",
+            "stopped at t = {:.3} s (k = {}): {} commands applied, {} missed ({} of them after a late tick that left less than the command window), {} fallback cycles, {} rejected, {} overruns",
             self.driver.t(),
             self.driver.k(),
             c.applied_commands,
@@ -667,25 +667,22 @@ impl SimLoop<'_> {
         );
         let u = self.upkeep.counts();
         tracing::info!(
-            "hcc-sim: peer connections made or dropped while waiting for the tick: {} (allocations {}, longest {:.1} µs, failures {})",
+            "peer connections made or dropped while waiting for the tick: {} (allocations {}, longest {:.1} µs, failures {})",
             u.updates,
             u.allocs,
             u.max_ns as f64 / 1e3,
             u.failures
         );
         if mode == SimMode::Realtime {
+            tracing::info!("tick lateness: {}", self.lateness.summary().line_us());
             tracing::info!(
-                "hcc-sim: tick lateness: {}",
-                self.lateness.summary().line_us()
-            );
-            tracing::info!(
-                "hcc-sim: state published → command received: {} ({} late)",
+                "state published → command received: {} ({} late)",
                 self.state_to_command.summary().line_us(),
                 self.counts.late
             );
         }
         tracing::info!(
-            "hcc-sim: state → command (controller stamp − state stamp): {}",
+            "state → command (controller stamp − state stamp): {}",
             self.answer_stamp.summary().line_us()
         );
     }

@@ -83,18 +83,16 @@ struct LoopCounts {
 }
 
 fn main() -> ExitCode {
-    hcc_rt::init_logging();
+    hcc_rt::init_logging("hcc-driver-example");
     let args = Args::parse();
     match run(args) {
         Ok(StopReason::FallbackTimeout) => {
-            tracing::warn!(
-                "hcc-driver-example: stopped the robot: no applicable command within the fallback timeout"
-            );
+            tracing::warn!("stopped the robot: no applicable command within the fallback timeout");
             ExitCode::from(3)
         }
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("hcc-driver-example: error: {e:#}");
+            tracing::error!("{e:#}");
             ExitCode::FAILURE
         }
     }
@@ -297,12 +295,12 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     };
     hcc_rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     if let Err(e) = hcc_rtalloc::lock_memory() {
-        tracing::warn!("hcc-driver-example: {e} (running without locked memory)");
+        tracing::warn!("{e} (running without locked memory)");
     }
     hcc_rtalloc::prefault();
     hcc_rtalloc::prefault_stack(256 * 1024)?;
     tracing::info!(
-        "hcc-driver-example: {n} joints at {rate} Hz in namespace {namespace}, robot gravity compensation {}",
+        "{n} joints at {rate} Hz in namespace {namespace}, robot gravity compensation {}",
         d.hw.compensates_gravity()
     );
 
@@ -343,7 +341,7 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     };
     drop(rt);
     if let Some(e) = d.fault {
-        tracing::error!("hcc-driver-example: {e}; stopped");
+        tracing::error!("{e}; stopped");
     }
     // System allocations of the loop after warm-up, less the upkeep's.
     let alloc = warm.map_or("-".to_string(), |(w, upkeep_before)| {
@@ -358,7 +356,7 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
 fn print_summary(d: &Driver, reason: StopReason, system_allocs: &str) {
     let r = d.logic.rejections();
     println!(
-        "hcc-driver-example: {} periods, {} commands applied, {} missed ({} held, {} fallback, {} fallback cycles), \
+        "{} periods, {} commands applied, {} missed ({} held, {} fallback, {} fallback cycles), \
          rejected: {} old, {} invalid, {} gravity conflict, {} future, {} too late; \
          {} overruns; {} torque writes; stop: {:?}; system allocations in the loop after warm-up: {}",
         d.counts.periods,
