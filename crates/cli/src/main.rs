@@ -16,6 +16,7 @@ mod jitter_cmd;
 mod model_cmd;
 mod plot_cmd;
 mod record_cmd;
+mod replay;
 mod replay_cmd;
 mod run_cmd;
 mod run_schedule;

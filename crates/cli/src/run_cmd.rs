@@ -54,9 +54,6 @@ use crate::run_schedule::Scheduler;
 /// Default scenario of `hcc run`: the paper's simulation #1.
 pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
 
-/// File name of the recording in a run directory.
-pub const RECORDING_FILE: &str = "run.mcap";
-
 /// The simulator's timing report of a real-time run (`hcc-sim --stats`), in
 /// the output directory.
 pub const SIM_TIMINGS_FILE: &str = "sim-timings.json";
@@ -614,7 +611,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .with_context(|| format!("--duration {d}"))?;
     }
     let launch = Launch::new(&args, &scenario)?;
-    let recording = launch.out.join(RECORDING_FILE);
+    let recording = launch.out.join(capture::RECORDING_FILE);
 
     // Subscribe before the children start, so that no sample is missed.
     let receiver = start_receiver(&args, &launch)?;

@@ -39,11 +39,11 @@
 //! or one gain and goal for the whole level. The resolved hierarchy is
 //! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
-pub mod commanding;
 pub mod error;
-pub mod output;
 pub mod schedule;
 pub mod schema;
+pub mod setpoint_limits;
+pub mod torque_filter;
 
 pub use error::ConfigError;
 /// How a daemon loop waits (`[controller_daemon] wait_strategy`): the one
@@ -80,6 +80,14 @@ pub struct Simulation {
     /// Viscous friction per joint.
     pub joint_friction: DVector<f64>,
     pub wrenches: Vec<Wrench>,
+}
+
+impl Simulation {
+    /// The control period in whole ns (as the daemons count it): 1e9 /
+    /// `control_rate_hz`, rounded.
+    pub fn period_ns(&self) -> u64 {
+        (1e9 / self.control_rate_hz).round() as u64
+    }
 }
 
 /// Resolved `[controller_daemon]`.
@@ -128,10 +136,10 @@ pub struct Scenario {
     pub ipc: IpcSection,
     pub controller_daemon: ControllerDaemon,
     pub sim_daemon: SimDaemon,
-    /// Resolved `[commanding]`.
-    pub commanding: commanding::Commanding,
-    /// Resolved `[output]`.
-    pub output: output::Output,
+    /// Resolved `[setpoint_limits]`.
+    pub setpoint_limits: setpoint_limits::SetpointLimits,
+    /// Resolved `[torque_filter]`.
+    pub torque_filter: torque_filter::TorqueFilterSpec,
     /// The `[[setpoint]]` entries, checked and sorted by time.
     pub setpoints: Vec<schedule::ScheduledSetpoint>,
 }
@@ -329,8 +337,10 @@ impl Scenario {
             simulation.control_rate_hz,
         )?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
-        let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &spec.levels, n)?;
-        let output = output::resolve(cx.file, cx.text, &file.output)?;
+        check_renamed_tables(&cx, &file)?;
+        let setpoint_limits =
+            setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
+        let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
@@ -350,11 +360,27 @@ impl Scenario {
             ipc: file.ipc,
             controller_daemon,
             sim_daemon,
-            commanding,
-            output,
+            setpoint_limits,
+            torque_filter,
             setpoints,
         })
     }
+}
+
+/// Tables that were renamed: refused with their new name.
+fn check_renamed_tables(cx: &Ctx, file: &schema::ScenarioFile) -> Result<(), ConfigError> {
+    for (old, present, new) in [
+        ("commanding", file.commanding.is_some(), "setpoint_limits"),
+        ("output", file.output.is_some(), "torque_filter"),
+    ] {
+        if present {
+            return Err(cx.err(
+                old,
+                format!("[{old}] is now called [{new}] (same fields): rename the table"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// `[robot]`: the model from the URDF (path relative to the scenario file).
@@ -531,6 +557,24 @@ impl Scenario {
     /// Task dimension m_i of every level.
     pub fn task_dims(&self) -> Vec<usize> {
         self.spec.task_dims(self.model.nq())
+    }
+
+    /// Control cycles of the run: duration × control rate (the states
+    /// k = 0..=cycles are sampled).
+    pub fn cycles(&self) -> u64 {
+        let s = &self.simulation;
+        (s.duration_s * s.control_rate_hz).round() as u64
+    }
+
+    /// The `[[setpoint]]` entries due within the run, as the messages a client
+    /// sends (each applied at the state of its cycle), in time order.
+    pub fn scheduled_messages(&self) -> Vec<hcc_msgs::Setpoint> {
+        let rate = self.simulation.control_rate_hz;
+        self.setpoints
+            .iter()
+            .filter(|e| e.cycle(rate) <= self.cycles())
+            .map(|e| e.message(rate))
+            .collect()
     }
 }
 

@@ -5,15 +5,17 @@
 //!
 //! After warm-up the real-time thread makes no call into the system
 //! allocator, the pool occupancy is bounded and constant from cycle to cycle,
-//! and the thread takes no page fault. The decision step alone
-//! ([`Decider::decide`], valid and rejected states, stale timeouts) makes no
-//! allocation at all, not even from the pool.
+//! and the thread takes no page fault. The cache warm-up between cycles
+//! makes no allocation at all (the control cycle's own test is in
+//! `hcc-cycle`).
 
 use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::{Answer, Cycle, CycleSettings, Decider, Outcome, Ports};
+use hcc_controller::warm_up::WarmUp;
+use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
+use hcc_cycle::ControlCycle;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames, Setpoint};
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
@@ -85,9 +87,9 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let mut cycle = ControlLoop::new(controller, settings).unwrap();
 
         let q0: Vec<f64> = scenario.q0.iter().copied().collect();
         let mut q = [0.0; MAX_JOINTS];
@@ -177,7 +179,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         drop(rt);
         let during = thread_stats().since(before);
         let after = stats();
-        let counters = cycle.counters();
+        let counters = cycle.cycle().counters().telemetry;
 
         println!(
             "controller loop, {CYCLES} cycles: {} pool allocs/cycle, {} system allocs, {} fallbacks, \
@@ -231,108 +233,56 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
 }
 
 #[test]
-fn the_decision_step_allocates_nothing() {
+fn the_cache_warm_up_allocates_nothing() {
     let scenario = scenario();
-    let n = scenario.model.nq();
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-    // With the whole output pipeline on (rate limit and low-pass).
-    let mut settings = CycleSettings::from_scenario(&scenario);
-    settings.output.torque_rate_limit = Some(10.0);
-    settings.output.low_pass_hz = Some(100.0);
-    // And the cache warm-up between decisions, as the hybrid wait runs it.
-    settings.warm_up = true;
-    let mut decider = Decider::new(controller, &settings).unwrap();
+    let settings = LoopSettings::from_scenario(&scenario);
+    let mut warm_up = WarmUp::new(&controller, true);
+    let mut cycle = ControlCycle::new(controller, &settings.cycle).unwrap();
+    let mut timing = hcc_timing::LatencyHistogram::new();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
-    let mut states = Vec::new();
-    for k in 0..2 * WARM_UP {
-        let mut s = JointState::zeroed();
-        let q: Vec<f64> = q0
-            .iter()
-            .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
-            .collect();
-        s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
-        s.header.seq = k;
-        match k % 97 {
-            // A NaN, a duplicate, a step backwards: the safe command or no answer.
-            13 => s.q[0] = f64::NAN,
-            29 => s.header.seq = k - 1,
-            61 => s.header.seq = k / 2,
-            _ => {}
-        }
-        states.push(s);
-    }
-    // A setpoint every cycle (prepared beforehand): goals along a small
-    // circle, gain changes, full matrices, and rejected ones (NaN, not SPD,
-    // unknown level).
-    let setpoints: Vec<Setpoint> = (0..2 * WARM_UP)
+    let n = q0.len();
+    let states: Vec<JointState> = (0..2 * WARM_UP)
         .map(|k| {
-            let phase = k as f64 * 1e-3;
-            let goal = [0.90 + 0.02 * phase.sin(), 0.80 + 0.02 * phase.cos()];
-            let mut sp = Setpoint::for_level(k % 3 + 1, k, 0, 2)
-                .with_goal(&goal)
-                .unwrap()
-                .with_velocity(&[0.02 * phase.cos(), -0.02 * phase.sin()])
-                .unwrap()
-                .with_duration(0.01);
-            if k.is_multiple_of(5) {
-                // Due two states later: through the queue of waiting setpoints.
-                sp = sp.with_apply_at(k + 2);
-            }
-            match k % 7 {
-                1 => sp = sp.with_stiffness(&[1000.0, 10.0, 10.0, 900.0]).unwrap(),
-                2 => sp.goal[0] = f64::NAN,
-                3 => sp = sp.with_damping(&[40.0, -1.0]).unwrap(),
-                4 => sp.level = 6,
-                _ => {}
-            }
-            sp
+            let mut s = JointState::zeroed();
+            let q: Vec<f64> = q0
+                .iter()
+                .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
+                .collect();
+            s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+            s.header.seq = k;
+            s
         })
         .collect();
-    let decide = |decider: &mut Decider, k: u64| {
-        if k % 500 == 499 {
-            decider.stale(k * 1_000_000);
-        }
-        decider.apply_due_setpoints(k);
-        let code = decider
-            .receive_setpoint(&setpoints[k as usize], k)
-            .unwrap_or(0);
-        let answer = decider.decide(&states[k as usize], k * 1_000_000);
-        let warmed = decider.warm_up(&states[k as usize]);
-        (answer, code, warmed)
+    let period = 1_000_000u64;
+    let mut run = |cycle: &mut ControlCycle, warm_up: &mut WarmUp, k: u64| {
+        let s = &states[k as usize];
+        warm_up.arrival(k * period, 150_000);
+        cycle.decide(s, k * period);
+        let expected = (k + 1) * period;
+        warm_up.turn(
+            expected - 10_000,
+            expected,
+            150_000,
+            (s, cycle.step_ns()),
+            &mut timing,
+        );
     };
     let rt = RtSection::enter();
     for k in 0..WARM_UP {
-        decide(&mut decider, k);
+        run(&mut cycle, &mut warm_up, k);
     }
-    let before = thread_stats();
-    let mut warm_ups = 0u64;
-    let mut answers = [0u64; 2];
-    let mut setpoint_answers = [0u64; 2];
+    let (before, warmed) = (thread_stats(), warm_up.count());
     for k in WARM_UP..2 * WARM_UP {
-        let (answer, code, warmed) = decide(&mut decider, k);
-        warm_ups += u64::from(warmed);
-        setpoint_answers[usize::from(code != 0)] += 1;
-        match answer {
-            Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
-            Answer::Command(_) => answers[0] += 1,
-            Answer::Duplicate => {}
-        }
+        run(&mut cycle, &mut warm_up, k);
     }
     let during = thread_stats().since(before);
     drop(rt);
-    println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
-    assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
-    assert!(warm_ups > 0, "the warm-up never ran");
-    let c = decider.counters().telemetry;
-    assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
-    // Setpoints accepted and rejected, every cycle.
-    assert!(
-        setpoint_answers[0] > 0 && setpoint_answers[1] > 0,
-        "{setpoint_answers:?}"
-    );
+    // (A warm-up is skipped when the law's last step took more than a third
+    // of the spin: on a loaded machine some are.)
+    assert!(warm_up.count() > warmed, "the warm-up never ran");
     assert_eq!(during.pool_allocs, 0, "{during:?}");
     assert_eq!(during.system_allocs, 0, "{during:?}");
-    assert_eq!(during.fallbacks, 0, "{during:?}");
 }
 
 /// The driver side of the in-test loop: publishes state `k`, runs one cycle
@@ -346,7 +296,7 @@ struct TestDriver {
 }
 
 impl TestDriver {
-    fn round_trip(&self, cycle: &mut Cycle, ports: &Ports, k: u64) -> bool {
+    fn round_trip(&self, cycle: &mut ControlLoop, ports: &Ports, k: u64) -> bool {
         let n = self.q.len();
         let q: Vec<f64> = self
             .q
@@ -372,7 +322,7 @@ struct Rig {
     services: Services,
     ports: Ports,
     driver: TestDriver,
-    cycle: Cycle,
+    cycle: ControlLoop,
     k: u64,
     failures: u64,
     _node: ipc::IpcNode,
@@ -394,9 +344,9 @@ impl Rig {
         };
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        let cycle = Cycle::new(controller, settings).unwrap();
+        let cycle = ControlLoop::new(controller, settings).unwrap();
         Rig {
             services,
             ports,

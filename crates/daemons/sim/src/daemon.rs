@@ -5,7 +5,7 @@
 //! **Real-time mode.** At tick k+1 (`clock_nanosleep(CLOCK_MONOTONIC,
 //! TIMER_ABSTIME)` on t_0 + (k+1) T) the driver takes the newest command,
 //! integrates [t_k, t_{k+1}] with the command that answered state k (or holds /
-//! falls back, see [`crate::driver`]), then publishes state k+1 and notifies
+//! falls back, see [`hcc_plant::driver`]), then publishes state k+1 and notifies
 //! `state_ready`. A tick more than 10 periods late re-anchors the clock
 //! (counted as an overrun) instead of bursting. A late tick is caught up with
 //! ticks back to back; a state published in one of them has less than its
@@ -48,7 +48,7 @@ use hcc_msgs::{
 use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
-use crate::driver::{Applied, SimDriver};
+use hcc_plant::{Applied, SimDriver};
 use hcc_timing::LatencyHistogram;
 
 /// Republish period of the current state while waiting for the first command (lockstep).
