@@ -12,7 +12,7 @@ mod capture;
 mod command_cmd;
 mod daemons;
 mod derive;
-mod jitter_cmd;
+mod jitter;
 mod model_cmd;
 mod plot_cmd;
 mod record_cmd;
@@ -42,7 +42,7 @@ enum Command {
     Simulate(simulate_cmd::SimulateArgs),
     /// Measure the timing of the daemons on two cores (simulator on one, controller on the
     /// other) against the machine's own floor; table, jitter.json and jitter.png.
-    Jitter(jitter_cmd::JitterArgs),
+    Jitter(jitter::JitterArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
     Model(model_cmd::ModelArgs),
     /// Derive trajectory.csv, metrics.json and the plots from a recording (FILE.mcap), or
@@ -70,7 +70,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run_cmd::run(args),
         Command::Simulate(args) => simulate_cmd::run(args),
-        Command::Jitter(args) => jitter_cmd::run(args),
+        Command::Jitter(args) => jitter::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),
         Command::Record(args) => record_cmd::run(args),
