@@ -9,17 +9,18 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod capture;
-mod command_cmd;
 mod daemons;
 mod derive;
 mod jitter;
 mod model_cmd;
+mod monitor_cmd;
 mod plot_cmd;
 mod record_cmd;
 mod replay;
 mod replay_cmd;
 mod run_cmd;
 mod run_schedule;
+mod setpoint_cmd;
 mod simulate_cmd;
 
 #[derive(Parser)]
@@ -57,11 +58,11 @@ enum Command {
     /// check that every torque command is bit-identical.
     Replay(replay_cmd::ReplayArgs),
     /// Set a level's goal on a running controller (exit 0 once it accepted it).
-    Goal(command_cmd::GoalArgs),
+    Goal(setpoint_cmd::GoalArgs),
     /// Set a level's stiffness and/or damping on a running controller.
-    Gains(command_cmd::GainsArgs),
+    Gains(setpoint_cmd::GainsArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
-    Monitor(command_cmd::MonitorArgs),
+    Monitor(monitor_cmd::MonitorArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,9 +77,9 @@ fn main() -> ExitCode {
         Command::Record(args) => record_cmd::run(args),
         Command::Export(args) => plot_cmd::export(args),
         Command::Replay(args) => replay_cmd::run(args),
-        Command::Goal(args) => command_cmd::goal(args),
-        Command::Gains(args) => command_cmd::gains(args),
-        Command::Monitor(args) => command_cmd::monitor(args),
+        Command::Goal(args) => setpoint_cmd::goal(args),
+        Command::Gains(args) => setpoint_cmd::gains(args),
+        Command::Monitor(args) => monitor_cmd::monitor(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,6 +1,6 @@
 //! The law's terms of one cycle into a telemetry sample.
 
-use hcc_control::Output;
+use hcc_control::StepOutput;
 use hcc_msgs::{MAX_LEVELS, MAX_TASK_DIM, Telemetry};
 
 /// Writes what the law computed in its last step (`out`) into `t`: per level
@@ -8,7 +8,7 @@ use hcc_msgs::{MAX_LEVELS, MAX_TASK_DIM, Telemetry};
 /// (28)), the conditioning and the singular flag; τ_μ (Eq. (22)) and its
 /// power P_μ = τ_μᵀ q̇ (Sec. IV-C); g(q) when the controller adds it.
 /// Allocation-free.
-pub(crate) fn write_law_terms(t: &mut Telemetry, out: &Output, gravity_compensation: bool) {
+pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compensation: bool) {
     let n = out.tau.len();
     let mut singular = 0u32;
     for i in 0..out.storage.len().min(MAX_LEVELS) {

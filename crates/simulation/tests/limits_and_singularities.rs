@@ -43,7 +43,7 @@ struct Sample {
     twin_tau: f64,
     /// Largest |d(τ − τ_twin)/dt| over the joints (N·m/s).
     twin_rate: f64,
-    /// Per level: its conditioning (`Output::conditioning`).
+    /// Per level: its conditioning (`StepOutput::conditioning`).
     conditioning: Vec<f64>,
 }
 

@@ -24,7 +24,7 @@ use hcc_msgs::{
 use hcc_rt::WaitStrategy;
 use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{Ports, Shared, SimLoop};
+use hcc_sim::daemon::{LoopStatus, Ports, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -58,10 +58,10 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
         command.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
         command.mode = CommandMode::Normal.code();
 
-        let shared = Shared::default();
+        let status = LoopStatus::default();
         let mut driver = SimDriver::new(&scenario).unwrap();
         driver.set_duration(1e6).unwrap();
-        let mut lp = SimLoop::new(driver, &ports, &shared, WaitStrategy::Hybrid);
+        let mut lp = SimLoop::new(driver, &ports, &status, WaitStrategy::Hybrid);
 
         let mut seq = 0u64;
         // The controller answers the newest state; then the loop's period.
