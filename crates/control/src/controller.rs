@@ -1,14 +1,15 @@
 //! The controller: workspace, construction checks and the per-cycle law.
 
 use crate::ControlError;
-use crate::dense::{
-    AlignWork, Conditioning, SpdWork, copy, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
-    gemm_nt_leading, gemm_sym, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, null_space_basis,
-    orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
-};
 use crate::fade::fade_factor;
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
+use hcc_linalg::basis::{AlignWork, null_space_basis, orthonormalize_polar, procrustes_align};
+use hcc_linalg::products::{
+    copy, gemm, gemm_leading, gemm_nt, gemm_nt_leading, gemm_sym, gemm_tn, gemv, gemv_slices,
+    gemv_t, gemv_t_slices, transpose_cols_into, transpose_into,
+};
+use hcc_linalg::spd::{Conditioning, SpdWork, damped_spd_inverse};
 use hcc_model::{Data, Model};
 use nalgebra::{DMatrix, DVector};
 
@@ -719,8 +720,7 @@ impl Controller {
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
         // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
         copy(&mut self.chol, &self.data.m);
-        let n = self.n;
-        hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
+        hcc_model::linalg::cholesky_factor(&mut self.chol)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         sym_sum_transpose(&mut self.mdot, &self.data.c);
         copy(&mut self.out.gravity, &self.data.g);

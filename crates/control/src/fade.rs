@@ -4,7 +4,7 @@
 
 /// The lower levels' torques and τ_μ fade out between `FADE_RANGE × singular_ratio`
 /// and `singular_ratio` of a level's eigenvalue ratio (see the crate docs, "Singularities").
-pub const FADE_RANGE: f64 = crate::dense::EXACT_RATIO_FACTOR;
+pub const FADE_RANGE: f64 = hcc_linalg::spd::EXACT_RATIO_FACTOR;
 
 /// Smoothstep on the log scale: 0 at or below `eps`, 1 at or above `FADE_RANGE × eps`.
 pub(crate) fn fade_factor(ratio: f64, eps: f64) -> f64 {

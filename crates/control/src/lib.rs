@@ -69,7 +69,6 @@
 //! formed: it is applied by Cholesky solves.
 
 pub mod controller;
-pub mod dense;
 mod fade;
 pub mod safety;
 pub mod saturation;

@@ -107,7 +107,8 @@
 //! Allocation-free after `Safety::new`.
 
 use crate::ControlError;
-use crate::dense::{SpdWork, damped_spd_inverse_only};
+use hcc_linalg::products::gemv;
+use hcc_linalg::spd::{SpdWork, damped_spd_inverse_only};
 use hcc_model::Model;
 use nalgebra::{DMatrix, DVector};
 
@@ -594,7 +595,7 @@ impl Safety {
         out.guard_potential = 0.0;
         out.power = 0.0;
         self.fill_power = 0.0;
-        crate::dense::gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
+        gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
         let kinetic = 0.5 * c.qd.dot(&self.mqd);
         let mut potential = c.potential.first().copied().unwrap_or(0.0);
         for i in 1..c.potential.len() {
@@ -631,7 +632,7 @@ impl Safety {
                 continue;
             }
             if !xdot_done {
-                crate::dense::gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+                gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
                 xdot_done = true;
             }
             let k = self.k_above[i].min(ktop);

@@ -2,8 +2,8 @@
 //! error x̃_i, the potential V_i and its gradient. [`jacobian`] is the one place a
 //! task Jacobian is assembled (the controller, the recorders and the checks use it).
 
-use crate::dense::gemv;
 use crate::spec::TaskSpec;
+use hcc_linalg::products::gemv;
 use hcc_model::{Data, FrameId, Model};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Rotation3, UnitQuaternion, Vector3};
 

@@ -7,7 +7,7 @@
 //!    the control rate on each of the two cores (pinned, `SCHED_FIFO` when permitted, timer slack 1 ns, the
 //!    same wait strategy as the daemons: `event` sleeps to each deadline with
 //!    `clock_nanosleep(TIMER_ABSTIME)`, `hybrid` sleeps until
-//!    [`rt::HYBRID_LEAD_NS`] before it and spins) — no IPC, no work. Its
+//!    [`hcc_rt::HYBRID_LEAD_NS`] before it and spins) — no IPC, no work. Its
 //!    lateness is what the machine alone costs.
 //! 2. **Pair.** `hcc-sim` (real time) pinned to one core and `hcc-controller`
 //!    to the other, both `SCHED_FIFO` and `mlockall` when permitted, for the
