@@ -10,36 +10,10 @@ use hcc_simulation::{PlantEnergyModel, column_names};
 use nalgebra::{DMatrix, DVector};
 use std::path::PathBuf;
 
-const SCENARIO: &str = r#"
-[robot]
-urdf = "planar4.urdf"
-tip_link = "tcp"
-gravity = [0.0, -9.81, 0.0]
-
-[[level]]
-task = "joint"
-joints = ["joint1"]
-stiffness = 200.0
-damping = 30.0
-goal = [0.2]
-
-[[level]]
-task = "joint"
-stiffness = 50.0
-damping = 8.0
-goal = [0.2, -0.4, -1.5, 0.3]
-
-[initial]
-q0 = [0.4, -0.5, -1.6, 0.4]
-
-[simulation]
-duration_s = 0.5
-joint_friction = 0.05
-"#;
-
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/test-closed-loop.toml");
-    Scenario::from_toml_str(SCENARIO, &path).unwrap()
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/planar-joint-pd.toml");
+    Scenario::load(&path).unwrap()
 }
 
 /// Level 1: PD on joint 1; level 2: PD on all joints projected away from joint 1

@@ -5,20 +5,17 @@
 //!
 //! After warm-up the real-time thread makes no call into the system
 //! allocator, the pool occupancy is bounded and constant from cycle to cycle,
-//! and the thread takes no page fault. The cache warm-up between cycles
-//! makes no allocation at all (the control cycle's own test is in
-//! `hcc-cycle`).
+//! and the thread takes no page fault (`hcc_rtalloc::LoopAudit`). The cache
+//! warm-up's test is `warm_up.rs`, the control cycle's own is in `hcc-cycle`.
 
 use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::warm_up::WarmUp;
 use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
-use hcc_cycle::ControlCycle;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames, Setpoint};
-use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
+use hcc_rtalloc::{LoopAudit, RtAllocator, RtSection, thread_stats};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -34,12 +31,6 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 fn scenario() -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
-}
-
-/// Occupancy of the pool inside one cycle and after it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Occupancy {
-    after: u64,
 }
 
 #[test]
@@ -97,7 +88,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         let zero = [0.0; MAX_JOINTS];
 
         // One driver period + one controller cycle; returns (ok, occupancy).
-        let mut one = |k: u64| -> (bool, Occupancy) {
+        let mut one = |k: u64| -> bool {
             let s = (k as f64 * 1e-3).sin();
             for j in 0..n {
                 q[j] = q0[j] + 0.05 * s;
@@ -112,7 +103,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                 cycle.prepare_send(&ports);
             }
             let Ok(sample) = state_pub.loan_uninit() else {
-                return (false, Occupancy { after: 0 });
+                return false;
             };
             let mut sample = sample.write_payload(JointState::zeroed());
             let st = sample.payload_mut();
@@ -143,52 +134,27 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                     None => answer.is_none(),
                 };
             }
-            (
-                ok,
-                Occupancy {
-                    after: stats().pool_in_use,
-                },
-            )
+            ok
         };
 
-        // As the daemon does at start-up: lock memory when permitted, so that no
-        // page of the process can be paged out and read back (a major fault).
-        let locked = hcc_rtalloc::lock_memory()
-            .map_err(|e| println!("{e}: major page faults cannot be ruled out"))
-            .is_ok();
-        hcc_rtalloc::prefault();
-        hcc_rtalloc::prefault_stack(512 * 1024).unwrap();
-        let rt = RtSection::enter();
+        // As the daemon does at start-up: memory locked when permitted, pool
+        // and stack pre-faulted, the real-time section entered.
+        let mut audit = LoopAudit::prepare(512 * 1024);
         let mut failures = 0u64;
         for k in 0..WARM_UP {
-            failures += u64::from(!one(k).0);
+            failures += u64::from(!one(k));
         }
-        hcc_rtalloc::reset_high_water();
-        let baseline = stats();
-        let before = thread_stats();
-        let faults_before = page_faults().unwrap();
-        let (ok, first) = one(WARM_UP);
-        failures += u64::from(!ok);
-        let mut varying = 0u64;
-        for k in WARM_UP + 1..WARM_UP + CYCLES {
-            let (ok, occupancy) = one(k);
-            failures += u64::from(!ok);
-            varying += u64::from(occupancy != first);
+        audit.start();
+        for k in WARM_UP..WARM_UP + CYCLES {
+            failures += u64::from(!one(k));
+            audit.note();
         }
-        let faults = page_faults().unwrap().since(faults_before);
-        drop(rt);
-        let during = thread_stats().since(before);
-        let after = stats();
+        let report = audit.finish();
         let counters = cycle.cycle().counters().telemetry;
 
         println!(
-            "controller loop, {CYCLES} cycles: {} pool allocs/cycle, {} system allocs, {} fallbacks, \
-             pool in use {} (high-water {}), page faults {faults:?}, counters {counters:?}",
-            during.pool_allocs as f64 / CYCLES as f64,
-            during.system_allocs,
-            during.fallbacks,
-            after.pool_in_use,
-            after.pool_high_water,
+            "{}; counters {counters:?}",
+            report.line("controller loop", CYCLES)
         );
         assert_eq!(failures, 0, "cycles that did not round-trip correctly");
         // Both ways of sending ran: in a sample loaned while waiting, and
@@ -203,24 +169,10 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         assert_eq!(counters.invalid_states, 0);
         assert_eq!(counters.missed_states, 0);
         assert_eq!(counters.send_failures, 0);
-        assert_eq!(during.system_allocs, 0, "{during:?}");
-        assert_eq!(during.system_frees, 0, "{during:?}");
-        assert_eq!(during.fallbacks, 0, "{during:?}");
-        assert_eq!(after.rt_system_allocs, baseline.rt_system_allocs);
+        report.check().unwrap();
         assert!(
-            during.pool_allocs > 0,
+            report.during.pool_allocs > 0,
             "iceoryx2 loans are served by the pool"
-        );
-        assert_eq!(varying, 0, "pool occupancy constant from cycle to cycle");
-        assert_eq!(after.pool_in_use, baseline.pool_in_use);
-        assert!(
-            after.pool_high_water <= baseline.pool_in_use + 4,
-            "bounded pool occupancy: {after:?}"
-        );
-        assert_eq!(
-            faults.unexpected(locked),
-            0,
-            "{faults:?}, memory locked: {locked}"
         );
     }
     // Everything dropped: only the per-prefix global management segment remains.
@@ -230,59 +182,6 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
     }
     let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
     assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
-}
-
-#[test]
-fn the_cache_warm_up_allocates_nothing() {
-    let scenario = scenario();
-    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-    let settings = LoopSettings::from_scenario(&scenario);
-    let mut warm_up = WarmUp::new(&controller, true);
-    let mut cycle = ControlCycle::new(controller, &settings.cycle).unwrap();
-    let mut timing = hcc_timing::LatencyHistogram::new();
-    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
-    let n = q0.len();
-    let states: Vec<JointState> = (0..2 * WARM_UP)
-        .map(|k| {
-            let mut s = JointState::zeroed();
-            let q: Vec<f64> = q0
-                .iter()
-                .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
-                .collect();
-            s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
-            s.header.seq = k;
-            s
-        })
-        .collect();
-    let period = 1_000_000u64;
-    let mut run = |cycle: &mut ControlCycle, warm_up: &mut WarmUp, k: u64| {
-        let s = &states[k as usize];
-        warm_up.arrival(k * period, 150_000);
-        cycle.decide(s, k * period);
-        let expected = (k + 1) * period;
-        warm_up.turn(
-            expected - 10_000,
-            expected,
-            150_000,
-            (s, cycle.step_ns()),
-            &mut timing,
-        );
-    };
-    let rt = RtSection::enter();
-    for k in 0..WARM_UP {
-        run(&mut cycle, &mut warm_up, k);
-    }
-    let (before, warmed) = (thread_stats(), warm_up.count());
-    for k in WARM_UP..2 * WARM_UP {
-        run(&mut cycle, &mut warm_up, k);
-    }
-    let during = thread_stats().since(before);
-    drop(rt);
-    // (A warm-up is skipped when the law's last step took more than a third
-    // of the spin: on a loaded machine some are.)
-    assert!(warm_up.count() > warmed, "the warm-up never ran");
-    assert_eq!(during.pool_allocs, 0, "{during:?}");
-    assert_eq!(during.system_allocs, 0, "{during:?}");
 }
 
 /// The driver side of the in-test loop: publishes state `k`, runs one cycle
