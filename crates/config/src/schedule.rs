@@ -20,10 +20,10 @@
 
 use std::path::Path;
 
+use hcc_control::LevelSpec;
 use hcc_msgs::{Rejection, Setpoint};
 use serde::Deserialize;
 
-use crate::LevelSpec;
 use crate::error::{ConfigError, invalid};
 
 /// The client id scheduled setpoints carry (in-process and over IPC alike).

@@ -19,10 +19,10 @@
 
 use std::path::Path;
 
+use hcc_control::{LevelSpec, TaskUnit};
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
-use crate::{LevelSpec, TaskUnit};
 
 /// Default peak equilibrium speed of a position task, m/s.
 pub const DEFAULT_MAX_LINEAR_SPEED: f64 = 0.25;
