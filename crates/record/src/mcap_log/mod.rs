@@ -41,6 +41,7 @@ pub use messages::{
     AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
     TimingsMsg, TorqueCommandMsg, mode_name, status_name,
 };
+pub use schemas::schema;
 
 use hcc_msgs::{JointState, Setpoint, Telemetry, TorqueCommand};
 use mcap::records::{MessageHeader, Metadata};

@@ -192,8 +192,9 @@ fn recorder() -> Value {
     )
 }
 
-/// Schema name and JSON Schema text of a topic's channel.
-pub(crate) fn schema(topic: &str) -> (&'static str, String) {
+/// Schema name and JSON Schema text of a topic's channel (the recording's,
+/// and `hcc view`'s live channels of the same topics).
+pub fn schema(topic: &str) -> (&'static str, String) {
     let (name, value) = match topic {
         super::TOPIC_JOINT_STATE => ("hcc.JointState", joint_state()),
         super::TOPIC_TORQUE_COMMAND => ("hcc.TorqueCommand", torque_command()),
