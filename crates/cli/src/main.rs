@@ -20,6 +20,7 @@ mod replay_cmd;
 mod run_cmd;
 mod run_schedule;
 mod simulate_cmd;
+mod view_child;
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +62,9 @@ enum Command {
     Gains(command_cmd::GainsArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
     Monitor(command_cmd::MonitorArgs),
+    /// Serve a running namespace (or a recording, FILE.mcap) live to Foxglove over
+    /// WebSocket: the recording's channels, the chain's transforms, the URDF.
+    View(hcc_view::Args),
 }
 
 fn main() -> ExitCode {
@@ -78,6 +82,7 @@ fn main() -> ExitCode {
         Command::Goal(args) => command_cmd::goal(args),
         Command::Gains(args) => command_cmd::gains(args),
         Command::Monitor(args) => command_cmd::monitor(args),
+        Command::View(args) => hcc_view::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

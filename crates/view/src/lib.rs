@@ -99,6 +99,8 @@ impl ServerListener for Listener {
 
 /// A started server and what feeds it.
 struct Server {
+    /// The channels' context: they close when it is dropped.
+    _ctx: Arc<Context>,
     handle: WebSocketServerHandle,
     listener: Arc<Listener>,
     viewer: Viewer,
@@ -170,6 +172,7 @@ fn start(args: &Args, scenario: Option<&Scenario>, what: &str) -> anyhow::Result
     );
     let _ = out.flush();
     Ok(Server {
+        _ctx: ctx,
         handle,
         listener,
         viewer: Viewer::new(channels, tree, urdf, args.rate),
