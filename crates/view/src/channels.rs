@@ -265,6 +265,14 @@ impl Channels {
         self.recorded[stream as usize].has_sinks()
     }
 
+    /// Whether any client subscribes to any channel.
+    pub fn any_wanted(&self) -> bool {
+        self.recorded.iter().any(|c| c.has_sinks())
+            || self.tf.has_sinks()
+            || self.chain.has_sinks()
+            || self.joint_limits.has_sinks()
+    }
+
     pub fn joint_limits(&mut self, msg: &JointLimitsMsg, log_time: u64) {
         Self::log_json(&mut self.buf, &self.joint_limits, msg, log_time);
     }

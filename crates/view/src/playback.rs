@@ -1,5 +1,7 @@
 //! `hcc view FILE.mcap`: a recording played back through the live server,
-//! paced by its log times (`--speed`), with the transform tree, stick figure
+//! paced by its log times (`--speed`) from the moment a client subscribes
+//! to one of its channels (so that a viewer opened after the command sees
+//! the run from its start), with the transform tree, stick figure
 //! and limits computed from its joint states as live. The scenario comes
 //! from `--config`, else from the recording's scenario record (its file if
 //! it still exists, else the TOML text stored in the recording).
@@ -75,6 +77,17 @@ pub fn run(args: &Args, file: &Path) -> anyhow::Result<()> {
         scenario.as_ref(),
         &format!("playback of {}", file.display()),
     )?;
+    if !args.quiet {
+        eprintln!("hcc view: waiting for a client to subscribe (Ctrl-C to stop)");
+    }
+    while !server.viewer.watched() {
+        if hcc_rt::stop_requested() {
+            server.handle.stop().wait_blocking();
+            return Ok(());
+        }
+        between(&mut server, mcap_log::clock_pair().0);
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let mut start: Option<(u64, Instant)> = None;
     let speed = args.speed;
     let result = mcap_log::read::<anyhow::Error>(file, |log_time, entry| {

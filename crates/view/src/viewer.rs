@@ -206,6 +206,11 @@ impl Viewer {
         }
     }
 
+    /// Whether a client subscribes to any of the streams.
+    pub fn watched(&self) -> bool {
+        self.channels.any_wanted()
+    }
+
     /// The counts so far.
     pub fn counts(&self) -> &ViewMsg {
         &self.counts
