@@ -182,21 +182,67 @@ def test_a_recording_plays_back_unchanged(tmp_path: pathlib.Path) -> None:
             if ch.topic == "/joint_state"
         ]
     assert len(recorded) > 400
+    paths = layout_paths()
+    topics = sorted({p.split(".")[0] for p in paths} | {"/joint_state", "/tf"})
     with fx.view_process(
-        [str(recording), "--rate", "0", "--speed", "0.5"], env, tmp_path / "view.log", binary("hcc")
+        [str(recording), "--rate", "0", "--speed", "0.25"], env, tmp_path / "view.log", binary("hcc")
     ) as (view, port):
         with fx.client(port) as c:
-            c.wait_for_channels(["/joint_state", "/tf"])
-            c.subscribe("/joint_state", "/tf")
-            got, tf = [], 0
-            for m in c.messages(3.0):
+            c.wait_for_channels(topics)
+            c.subscribe(*topics)
+            got, tf, last = [], 0, {}
+            for m in c.messages(4.0):
                 if m.topic == "/joint_state":
                     got.append(m.json())
-                else:
+                if m.topic == "/tf":
                     tf += 1
+                else:
+                    last[m.topic] = m.json()
     by_seq = {m["seq"]: m for m in recorded}
     print(f"\nplayback: {len(got)} of {len(recorded)} recorded joint states, {tf} transform sets")
     # The playback waits for the first subscriber: it sees the whole run.
     assert got == recorded
     assert tf == len(recorded)
     assert len(by_seq) == len(recorded)
+    # The layouts' message paths find their fields in the served messages
+    # (null where the URDF gives no limit; joint indices beyond the planar
+    # arm's 4 joints excepted).
+    n_joints = len(recorded[0]["q"])
+    for p in paths:
+        topic, *fields = p.split(".")
+        v = value_at(last[topic], fields)
+        assert v is not MISSING or max_index(p) >= n_joints, f"{p} has no value"
+
+
+def layout_paths() -> list[str]:
+    """Every message path of the layouts in docs/foxglove."""
+    out = []
+    for f in sorted((ROOT / "docs" / "foxglove").glob("*.json")):
+        for panel in json.loads(f.read_text())["configById"].values():
+            out += [p["value"] for p in panel.get("paths", [])]
+            if "topicPath" in panel:
+                out.append(panel["topicPath"])
+    assert out
+    return out
+
+
+MISSING = object()
+
+
+def value_at(msg: object, fields: list[str]) -> object:
+    """The value at ``a[0].b`` (as split at the dots) in a decoded message, or MISSING."""
+    for f in fields:
+        name, *idx = f.replace("]", "").split("[")
+        if not isinstance(msg, dict) or name not in msg:
+            return MISSING
+        msg = msg[name]
+        for k in idx:
+            if not isinstance(msg, list) or int(k) >= len(msg):
+                return MISSING
+            msg = msg[int(k)]
+    return msg
+
+
+def max_index(path: str) -> int:
+    """The largest index in a message path (-1 without one)."""
+    return max((int(k.split("]")[0]) for k in path.split("[")[1:]), default=-1)
