@@ -64,6 +64,14 @@ fn views_of(namespace: &str) -> Vec<(u32, String)> {
         .collect()
 }
 
+/// After the run: nothing listens on the view's port, no process of the
+/// namespace is left, and no shared memory.
+fn assert_view_gone(port: u16, namespace: &str, prefix: &str) {
+    assert!(!listening(port), "the view still listens after the run");
+    assert!(views_of(namespace).is_empty(), "{:?}", views_of(namespace));
+    assert_clean(namespace, prefix);
+}
+
 #[test]
 fn the_view_stops_with_a_finished_run() {
     let dir = TempDir::new("run_view_finished");

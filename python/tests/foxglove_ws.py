@@ -10,7 +10,6 @@ import contextlib
 import json
 import os
 import pathlib
-import signal
 import socket
 import struct
 import subprocess
@@ -20,7 +19,7 @@ from typing import Any, Iterator
 
 from websockets.sync.client import ClientConnection, connect
 
-from conftest import ROOT
+from procs import started
 
 SUBPROTOCOL = "foxglove.sdk.v1"
 #: Binary opcodes of the server.
@@ -147,25 +146,12 @@ def client(port: int, **kw: Any) -> Iterator[Client]:
 @contextlib.contextmanager
 def view_process(args: list[str], env: dict[str, str], log: pathlib.Path, binary: pathlib.Path) -> Iterator[tuple[subprocess.Popen, int]]:
     """``hcc view ARGS --port 0``; yields the process and the port it printed."""
-    out = open(log, "w")
-    p = subprocess.Popen(
-        [str(binary), "view", *args, "--port", "0"],
-        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=out, text=True,
-    )
-    try:
-        line = p.stdout.readline() if p.stdout else ""
-        assert line.startswith("hcc view: ws://127.0.0.1:"), f"hcc view said {line!r}: {log.read_text()}"
-        port = int(line.split("ws://127.0.0.1:")[1].split()[0])
-        yield p, port
-    finally:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        out.close()
+    with started([str(binary), "view", *args, "--port", "0"], env, log) as p:
+        deadline = time.monotonic() + 60
+        while "hcc view: ws://127.0.0.1:" not in (text := log.read_text()):
+            assert p.poll() is None and time.monotonic() < deadline, f"hcc view said: {text}"
+            time.sleep(0.05)
+        yield p, int(text.split("hcc view: ws://127.0.0.1:")[1].split()[0])
 
 
 def env_with_prefix(prefix: str) -> dict[str, str]:

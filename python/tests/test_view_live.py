@@ -17,14 +17,13 @@ import pathlib
 import subprocess
 import threading
 import time
-
-import pytest
+from typing import Iterator
 
 import foxglove_ws as fx
 from conftest import ROOT, binary, unique
 from hcc.ipc import ServiceNames, Services, create_node, receive_all
 from hcc.msgs import JointState
-from procs import remove_ipc_files
+from procs import remove_ipc_files, started
 
 CONFIG = ROOT / "config" / "paper-sim1.toml"
 RATE = 100.0
@@ -61,30 +60,6 @@ class IoxStates:
         del self.sub, self.services, self.node
 
 
-def start_run(tmp: pathlib.Path, duration: float, port: int, rate: float) -> tuple[subprocess.Popen, str, str]:
-    ns = unique("pyview")
-    prefix = f"{unique('hccview')}_"[:32]
-    cmd = [
-        str(binary("hcc")), "run", str(CONFIG), "--duration", str(duration), "--namespace", ns,
-        "--out", str(tmp / "out"), "--no-plots", "--quiet", "--view", "--view-port", str(port),
-        "--view-rate", str(rate),
-    ]
-    log = open(tmp / "run.log", "w")
-    p = subprocess.Popen(cmd, cwd=ROOT, env=fx.env_with_prefix(prefix), stdout=log, stderr=subprocess.STDOUT)
-    return p, ns, prefix
-
-
-def stop(p: subprocess.Popen, prefix: str) -> None:
-    if p.poll() is None:
-        p.terminate()
-        try:
-            p.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-    remove_ipc_files(prefix)
-
-
 def wait_for_telemetry(c: fx.Client, timeout: float = 60.0) -> None:
     """Subscribes to /telemetry and waits for the first cycle (the run is on)."""
     c.wait_for_channels(["/telemetry", "/joint_state"], timeout=timeout)
@@ -97,23 +72,41 @@ def wait_for_telemetry(c: fx.Client, timeout: float = 60.0) -> None:
     raise AssertionError("no telemetry from the run")
 
 
-def test_joint_states_arrive_at_the_rate_equal_to_iceoryx2(tmp_path: pathlib.Path) -> None:
+@contextlib.contextmanager
+def watched_run(
+    tmp: pathlib.Path, duration: float, rate: float
+) -> Iterator[tuple[subprocess.Popen, fx.Client, IoxStates]]:
+    """``hcc run --view`` (real time, ``duration`` s, the view at ``rate``):
+    yields the run, a client connected once the run is on, and an iceoryx2
+    subscriber of the run's joint states. Everything is stopped afterwards."""
     port = fx.free_port()
-    run, ns, prefix = start_run(tmp_path, 12.0, port, RATE)
+    ns = unique("pyview")
+    prefix = f"{unique('hccview')}_"[:32]
+    cmd = [
+        str(binary("hcc")), "run", str(CONFIG), "--duration", str(duration), "--namespace", ns,
+        "--out", str(tmp / "out"), "--no-plots", "--quiet", "--view", "--view-port", str(port),
+        "--view-rate", str(rate),
+    ]
     try:
-        fx.wait_for_port(port, proc=run)
-        with fx.client(port) as c:
-            wait_for_telemetry(c)
-            iox = IoxStates(ns, prefix)
-            try:
-                c.subscribe("/joint_state")
-                got = [m.json() for m in c.messages(5.0) if m.topic == "/joint_state"]
-                time.sleep(0.1)
-            finally:
-                iox.close()
-        assert run.wait(timeout=120) == 0, (tmp_path / "run.log").read_text()
+        with started(cmd, fx.env_with_prefix(prefix), tmp / "run.log") as run:
+            fx.wait_for_port(port, proc=run)
+            with fx.client(port) as c:
+                wait_for_telemetry(c)
+                iox = IoxStates(ns, prefix)
+                try:
+                    yield run, c, iox
+                finally:
+                    iox.close()
     finally:
-        stop(run, prefix)
+        remove_ipc_files(prefix)
+
+
+def test_joint_states_arrive_at_the_rate_equal_to_iceoryx2(tmp_path: pathlib.Path) -> None:
+    with watched_run(tmp_path, 12.0, RATE) as (run, c, iox):
+        c.subscribe("/joint_state")
+        got = [m.json() for m in c.messages(5.0) if m.topic == "/joint_state"]
+        time.sleep(0.1)
+        assert run.wait(timeout=120) == 0, (tmp_path / "run.log").read_text()
     # The first messages may predate the iceoryx2 subscriber.
     got = [m for m in got if m["seq"] >= min(iox.states, default=0)]
     assert len(got) > 100, f"{len(got)} joint states over WebSocket"
@@ -143,35 +136,23 @@ PHASES = 6
 def test_a_slow_client_does_not_slow_the_loop(tmp_path: pathlib.Path) -> None:
     """Alternating phases of one run: without, then with a client that
     subscribes to everything at every sample and never reads."""
-    port = fx.free_port()
-    run, ns, prefix = start_run(tmp_path, PHASE_S * PHASES + 12.0, port, 0.0)
     rows = []
-    try:
-        fx.wait_for_port(port, proc=run)
-        with fx.client(port) as fast:
-            wait_for_telemetry(fast)
-            iox = IoxStates(ns, prefix)
-            try:
-                fast.subscribe("/joint_state")
-                for k in range(PHASES):
-                    slow_phase = k % 2 == 1
-                    with contextlib.ExitStack() as stack:
-                        if slow_phase:
-                            # max_queue=1: the client's reader stops after one
-                            # frame, then TCP and the server's queue for it fill up.
-                            slow = stack.enter_context(fx.client(port, max_queue=1, close_timeout=0.5))
-                            slow.wait_for_channels(["/telemetry", "/joint_state", "/tf"])
-                            slow.subscribe(*slow.channels)
-                        seq0 = max(iox.states, default=0)
-                        missed0 = iox.latest_missed
-                        got = sum(1 for m in fast.messages(PHASE_S) if m.topic == "/joint_state")
-                        rows.append(
-                            (slow_phase, max(iox.states) - seq0, iox.latest_missed - missed0, got)
-                        )
-            finally:
-                iox.close()
-    finally:
-        stop(run, prefix)
+    with watched_run(tmp_path, PHASE_S * PHASES + 12.0, 0.0) as (run, fast, iox):
+        port = int(fast.ws.remote_address[1])
+        fast.subscribe("/joint_state")
+        for k in range(PHASES):
+            slow_phase = k % 2 == 1
+            with contextlib.ExitStack() as stack:
+                if slow_phase:
+                    # max_queue=1: the client's reader stops after one frame,
+                    # then TCP and the server's queue for it fill up.
+                    slow = stack.enter_context(fx.client(port, max_queue=1, close_timeout=0.5))
+                    slow.wait_for_channels(["/telemetry", "/joint_state", "/tf"])
+                    slow.subscribe(*slow.channels)
+                seq0 = max(iox.states, default=0)
+                missed0 = iox.latest_missed
+                got = sum(1 for m in fast.messages(PHASE_S) if m.topic == "/joint_state")
+                rows.append((slow_phase, max(iox.states) - seq0, iox.latest_missed - missed0, got))
     print("\nphase  slow  states  missed  fast client received")
     for k, (s, states, missed, got) in enumerate(rows):
         print(f"{k:5}  {'yes' if s else 'no ':4}  {states:6}  {missed:6}  {got:6}")

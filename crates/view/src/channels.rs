@@ -23,6 +23,7 @@ use foxglove::messages::{
     SceneUpdate, SpherePrimitive, Timestamp, Vector3, line_primitive,
 };
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
+use hcc_record::mcap_log::schemas::{integer, number, numbers, object};
 use hcc_record::mcap_log::{
     self, TOPIC_JOINT_STATE, TOPIC_SETPOINT, TOPIC_TELEMETRY, TOPIC_TORQUE_COMMAND,
 };
@@ -104,56 +105,38 @@ pub struct JointLimitsMsg {
     pub tau_fraction_max: Option<f64>,
 }
 
-fn schema_of(title: &str, description: &str, properties: serde_json::Value) -> String {
-    json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": title,
-        "description": description,
-        "type": "object",
-        "properties": properties,
-    })
-    .to_string()
-}
-
 fn counts_schema() -> serde_json::Value {
     json!({"type": "object", "properties": {
-        "received": {"type": "integer", "description": "samples received"},
-        "published": {"type": "integer", "description": "samples published"},
-        "gaps": {"type": "integer", "description": "samples lost before the server (sequence gaps)"},
-        "restarts": {"type": "integer", "description": "publisher restarts (sequence went backwards)"},
+        "received": integer("samples received"),
+        "published": integer("samples published"),
+        "gaps": integer("samples lost before the server (sequence gaps)"),
+        "restarts": integer("publisher restarts (sequence went backwards)"),
     }})
-}
-
-fn numbers(description: &str) -> serde_json::Value {
-    json!({"type": "array", "items": {"type": ["number", "null"]}, "description": description})
-}
-
-fn number(description: &str) -> serde_json::Value {
-    json!({"type": ["number", "null"], "description": description})
 }
 
 /// JSON Schema of `/view`.
 pub fn view_schema() -> String {
-    schema_of(
+    object(
         "hcc.View",
         "What hcc view received, published and lost",
         json!({
             "elapsed_s": number("wall time since the server started, s"),
-            "clients": {"type": "integer", "description": "connected clients"},
+            "clients": integer("connected clients"),
             "rate_hz": number("publication rate limit (0: every sample)"),
             "joint_state": counts_schema(),
             "torque_command": counts_schema(),
             "telemetry": counts_schema(),
             "setpoint": counts_schema(),
-            "tf_published": {"type": "integer", "description": "transform sets published"},
-            "bad_states": {"type": "integer", "description": "joint states not drawn (bad size or value)"},
+            "tf_published": integer("transform sets published"),
+            "bad_states": integer("joint states not drawn (bad size or value)"),
         }),
     )
+    .to_string()
 }
 
 /// JSON Schema of `/joint_limits`.
 pub fn joint_limits_schema() -> String {
-    schema_of(
+    object(
         "hcc.JointLimits",
         "The joint state against the URDF's limits (fractions: ±1 at a limit)",
         json!({
@@ -169,15 +152,17 @@ pub fn joint_limits_schema() -> String {
             "tau_fraction_max": number("largest |tau_fraction|"),
         }),
     )
+    .to_string()
 }
 
 /// JSON Schema of `/robot_description` (the field name of ROS's std_msgs/String).
 pub fn robot_description_schema() -> String {
-    schema_of(
+    object(
         "hcc.RobotDescription",
         "The robot's URDF",
         json!({"data": {"type": "string", "description": "URDF XML"}}),
     )
+    .to_string()
 }
 
 /// The channels of one server, on their own context.

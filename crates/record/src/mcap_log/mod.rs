@@ -35,7 +35,7 @@
 //! of the run's length for any practical run: ~100 B per flushed chunk).
 
 mod messages;
-mod schemas;
+pub mod schemas;
 
 pub use messages::{
     AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
