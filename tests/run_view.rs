@@ -90,13 +90,7 @@ fn the_view_stops_with_a_finished_run() {
         .expect("the run did not end");
     let err = std::fs::read_to_string(&err_path).unwrap_or_default();
     assert!(status.success(), "{err}");
-    assert!(!listening(port), "the view still listens after the run");
-    assert!(
-        views_of(&namespace).is_empty(),
-        "{:?}",
-        views_of(&namespace)
-    );
-    assert_clean(&namespace, &prefix);
+    assert_view_gone(port, &namespace, &prefix);
 }
 
 #[test]
@@ -116,11 +110,5 @@ fn the_view_stops_with_an_interrupted_run() {
         .expect("hcc run did not stop within 30 s of SIGINT");
     let err = std::fs::read_to_string(&err_path).unwrap_or_default();
     assert!(!status.success() && err.contains("interrupted"), "{err}");
-    assert!(!listening(port), "the view still listens after the run");
-    assert!(
-        views_of(&namespace).is_empty(),
-        "{:?}",
-        views_of(&namespace)
-    );
-    assert_clean(&namespace, &prefix);
+    assert_view_gone(port, &namespace, &prefix);
 }
