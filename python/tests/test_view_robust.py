@@ -19,7 +19,6 @@ import os
 import pathlib
 import random
 import socket
-import struct
 import subprocess
 import time
 from typing import Iterator

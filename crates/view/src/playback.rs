@@ -47,6 +47,21 @@ fn between(server: &mut Server, log_time: u64) {
     server.viewer.tick(clients, log_time);
 }
 
+/// Serves (URDF requests, counts at `log_time`) until `done` or Ctrl-C;
+/// whether `done` ended it.
+fn serve_until(server: &mut Server, log_time: u64, done: impl Fn(&Server) -> bool) -> bool {
+    loop {
+        if done(server) {
+            return true;
+        }
+        if hcc_rt::stop_requested() {
+            return false;
+        }
+        between(server, log_time);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Stop of the playback by a signal (not an error of the file).
 #[derive(Debug)]
 struct Stopped;
@@ -80,13 +95,11 @@ pub fn run(args: &Args, file: &Path) -> anyhow::Result<()> {
     if !args.quiet {
         eprintln!("hcc view: waiting for a client to subscribe (Ctrl-C to stop)");
     }
-    while !server.viewer.watched() {
-        if hcc_rt::stop_requested() {
-            server.handle.stop().wait_blocking();
-            return Ok(());
-        }
-        between(&mut server, mcap_log::clock_pair().0);
-        std::thread::sleep(Duration::from_millis(20));
+    if !serve_until(&mut server, mcap_log::clock_pair().0, |s| {
+        s.viewer.watched()
+    }) {
+        server.handle.stop().wait_blocking();
+        return Ok(());
     }
     let mut start: Option<(u64, Instant)> = None;
     let speed = args.speed;
@@ -136,10 +149,7 @@ pub fn run(args: &Args, file: &Path) -> anyhow::Result<()> {
     }
     if !args.exit_at_end {
         let end = start.map_or(0, |(t0, w0)| t0 + w0.elapsed().as_nanos() as u64);
-        while !hcc_rt::stop_requested() {
-            between(&mut server, end);
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        serve_until(&mut server, end, |_| false);
     }
     server.handle.stop().wait_blocking();
     Ok(())
