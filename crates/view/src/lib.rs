@@ -136,12 +136,6 @@ fn robot(
 /// Starts the WebSocket server on `args.bind`:`args.port` for `scenario`
 /// and prints its address on stdout (one line, `hcc view: ws://HOST:PORT ...`).
 fn start(args: &Args, scenario: Option<&Scenario>, what: &str) -> anyhow::Result<Server> {
-    if !(args.rate.is_finite() && args.rate >= 0.0) {
-        bail!(
-            "--rate must be a number of samples per second ≥ 0, not {}",
-            args.rate
-        );
-    }
     let (tree, urdf, assets) = robot(scenario)?;
     let ctx = Context::new();
     let channels = Channels::new(&ctx)?;
@@ -181,6 +175,12 @@ fn start(args: &Args, scenario: Option<&Scenario>, what: &str) -> anyhow::Result
 
 /// Runs `hcc view`: the live server of `--namespace`, or the playback of FILE.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if !(args.rate.is_finite() && args.rate >= 0.0) {
+        bail!(
+            "--rate must be a number of samples per second ≥ 0, not {}",
+            args.rate
+        );
+    }
     hcc_rt::install_stop_handler()
         .map_err(|e| anyhow::anyhow!("cannot install the SIGINT/SIGTERM handlers: {e}"))?;
     match (&args.file, &args.namespace) {
