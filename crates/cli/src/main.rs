@@ -22,6 +22,7 @@ mod run_cmd;
 mod run_schedule;
 mod setpoint_cmd;
 mod simulate_cmd;
+mod view_child;
 
 #[derive(Parser)]
 #[command(
@@ -63,6 +64,9 @@ enum Command {
     Gains(setpoint_cmd::GainsArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
     Monitor(monitor_cmd::MonitorArgs),
+    /// Serve a running namespace (or a recording, FILE.mcap) live to Foxglove over
+    /// WebSocket: the recording's channels, the chain's transforms, the URDF.
+    View(hcc_view::Args),
 }
 
 fn main() -> ExitCode {
@@ -80,6 +84,7 @@ fn main() -> ExitCode {
         Command::Goal(args) => setpoint_cmd::goal(args),
         Command::Gains(args) => setpoint_cmd::gains(args),
         Command::Monitor(args) => monitor_cmd::monitor(args),
+        Command::View(args) => hcc_view::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
