@@ -532,7 +532,7 @@ class Rejection(enum.IntEnum):
     """Why a setpoint was rejected (a rejected setpoint changes nothing).
 
     The codes are stable (they travel in telemetry). :meth:`Setpoint.validate`
-    checks codes 1-11 (no model needed); the controller checks 12-16 against
+    checks codes 1-11 (no model needed); the controller checks 12-16 and 18 against
     its law and model, and 17 against its queue of setpoints waiting for
     their state. :attr:`label` is the Rust ``Rejection::name()``
     (snake_case, as in ``hcc goal`` and ``hcc monitor --json``), :attr:`reason`
@@ -574,6 +574,8 @@ class Rejection(enum.IntEnum):
     #: The setpoint is due at a later state, but :data:`MAX_PENDING_SETPOINTS`
     #: setpoints already wait for theirs.
     PENDING_FULL = 17
+    #: K or D is more than the control rate carries at the arm's configuration.
+    GAINS_ABOVE_RATE = 18
 
     @property
     def label(self) -> str:
@@ -615,6 +617,7 @@ _REJECTION_TEXT.update({
     15: "a joint goal lies outside the joint's limits",
     16: "a position goal lies outside the level's workspace",
     17: "too many setpoints wait for their state sequence number",
+    18: "K or D is more than the control rate carries at the arm's configuration (the sampled spring-damper would oscillate)",
 })
 
 

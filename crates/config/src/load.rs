@@ -65,13 +65,19 @@ impl Scenario {
         let simulation = resolve_simulation(&cx, &model, &file.simulation)?;
         check_namespace(&cx, &file.ipc.namespace)?;
 
+        let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
         let spec = ControllerSpec {
             levels,
             gravity_compensation: file.robot.gravity_compensation,
             coriolis_cancellation: file.controller.coriolis_cancellation,
             form: file.controller.form,
             singular_ratio: ratio,
-            safety: safety_spec(&cx, &file.safety, simulation.control_rate_hz)?,
+            safety: safety_spec(
+                &cx,
+                &file.safety,
+                simulation.control_rate_hz,
+                torque_filter.torque_rate_limit,
+            )?,
         };
         check_with_controller(&cx, &model, &spec, &q0)?;
 
@@ -85,7 +91,6 @@ impl Scenario {
         check_renamed_tables(&cx, &file)?;
         let setpoint_limits =
             setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
-        let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
 
         let name = file.name.clone().unwrap_or_else(|| {

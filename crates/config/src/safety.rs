@@ -5,11 +5,12 @@ use crate::error::ConfigError;
 use crate::schema;
 
 /// `[safety]` over the defaults of `hcc_control::SafetySpec`, the control period from
-/// the control rate.
+/// the control rate, the torque rate limit from `[torque_filter]`.
 pub(crate) fn safety_spec(
     cx: &Ctx,
     s: &schema::SafetySection,
     control_rate_hz: f64,
+    torque_rate_limit: Option<f64>,
 ) -> Result<hcc_control::SafetySpec, ConfigError> {
     let d = hcc_control::SafetySpec::default();
     let spec = hcc_control::SafetySpec {
@@ -28,10 +29,13 @@ pub(crate) fn safety_spec(
         spring_saturation: s.spring_saturation.unwrap_or(d.spring_saturation),
         velocity_governor: s.velocity_governor.unwrap_or(d.velocity_governor),
         velocity_damping: s.velocity_damping.unwrap_or(d.velocity_damping),
+        velocity_barrier: s.velocity_barrier.unwrap_or(d.velocity_barrier),
+        velocity_barrier_rate: s.velocity_barrier_rate.unwrap_or(d.velocity_barrier_rate),
         null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
         conflict_fade_ratio: s.conflict_fade_ratio.unwrap_or(d.conflict_fade_ratio),
         fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),
         control_period_s: 1.0 / control_rate_hz,
+        torque_rate_limit,
     };
     spec.validate().map_err(|e| {
         let msg = e.to_string();

@@ -405,6 +405,10 @@ pub struct SafetySection {
     /// The velocity governor (the springs stop driving a joint near its velocity limit).
     pub velocity_governor: Option<bool>,
     /// Velocity-limit joint damping rate, 1/s (default 100; 0: off).
+    /// The velocity barrier (default true).
+    pub velocity_barrier: Option<bool>,
+    /// The velocity barrier's rate α, 1/s (default 20).
+    pub velocity_barrier_rate: Option<f64>,
     pub velocity_damping: Option<f64>,
     /// Null-space damping rate of faded levels, 1/s.
     pub null_space_damping: Option<f64>,

@@ -2,6 +2,7 @@
 
 use crate::ControlError;
 use crate::fade::fade_factor;
+use crate::rate::{GainRate, RateWork};
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
 use hcc_linalg::basis::{AlignWork, null_space_basis, orthonormalize_polar, procrustes_align};
@@ -138,6 +139,8 @@ struct Level {
     y_d2: DVector<f64>,
     y_d3: DVector<f64>,
     spd: SpdWork,
+    /// The gains' check against the control rate (crate::rate).
+    rate: RateWork,
     /// Eq. (11) with (8) for 2 ≤ i < r (k = Σ_{j<i} m_j; empty otherwise):
     /// Z_i = J_i M⁻¹ N_i = Y_i − T Y_aug with Y = J M⁻¹, G = J_aug M⁻¹ J_augᵀ (k × k),
     /// H = J_i M⁻¹ J_augᵀ (m × k), T = H G⁻¹, and the derivatives of G, H, T, Y.
@@ -236,6 +239,7 @@ impl Level {
             y_d2: DVector::zeros(d),
             y_d3: DVector::zeros(d),
             spd: SpdWork::new(d),
+            rate: RateWork::new(m, n),
             proj,
         }
     }
@@ -384,6 +388,14 @@ pub struct Controller {
     mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
     safety: crate::safety::Safety,
+    /// The acceleration the law's torque gives (the velocity barrier's input).
+    barrier_qdd: DVector<f64>,
+    /// The torque the robot applies now (the previous command, after the torque
+    /// filter), when the cycle reports it ([`Controller::set_applied_torque`]).
+    applied_tau: DVector<f64>,
+    have_applied: bool,
+    /// The acceleration `applied_tau` gives on the model (for the barrier).
+    applied_qdd: DVector<f64>,
     out: StepOutput,
 }
 
@@ -453,6 +465,10 @@ impl Controller {
             first_cond: Conditioning::default(),
             mu: MuWork::new(n, r),
             safety,
+            barrier_qdd: DVector::zeros(n),
+            applied_tau: DVector::zeros(n),
+            have_applied: false,
+            applied_qdd: DVector::zeros(n),
             out,
         };
         c.check_initial(q0)?;
@@ -497,6 +513,14 @@ impl Controller {
                     });
                 }
             }
+            // The gains the control rate carries (crate::rate).
+            if let Err(e) = self.check_gain_rate(i, None, None) {
+                return Err(ControlError::Level {
+                    level: name,
+                    why: e.to_string(),
+                });
+            }
+            let lv = &self.levels[i];
             if i > 0 {
                 let gc = if i == r - 1 {
                     self.basis.gram_cond
@@ -601,6 +625,45 @@ impl Controller {
         self.spec.form = form;
     }
 
+    /// The torque the robot applies until the next command (the previous
+    /// command as sent, gravity included when the controller adds it), or
+    /// `None` before the first. With a torque rate limit downstream the applied
+    /// torque lags the law's, and the velocity barrier (crate::safety) brakes for
+    /// the faster of the two accelerations. Entries beyond n are ignored; a
+    /// shorter slice or a non-finite entry is ignored. Allocation-free.
+    pub fn set_applied_torque(&mut self, tau: Option<&[f64]>) {
+        let n = self.applied_tau.len();
+        self.have_applied = match tau {
+            Some(t) if t.len() >= n && t[..n].iter().all(|x| x.is_finite()) => {
+                self.applied_tau.as_mut_slice().copy_from_slice(&t[..n]);
+                true
+            }
+            _ => false,
+        };
+    }
+
+    /// Whether the control rate carries the gains of level `i` (crate::rate):
+    /// the stiffness `k` and damping `d` given, the level's own where `None`, at
+    /// the configuration of the last cycle (the initial one before the first).
+    /// For a gains setpoint before it is taken. Allocation-free.
+    pub fn check_gain_rate(
+        &mut self,
+        i: usize,
+        k: Option<&DMatrix<f64>>,
+        d: Option<&DMatrix<f64>>,
+    ) -> Result<(), GainRate> {
+        let period = self.spec.safety.control_period_s;
+        let Some(l) = self.levels.get_mut(i) else {
+            return Ok(());
+        };
+        if !l.rate.set_mobility(&self.chol, &l.j) {
+            return Ok(());
+        }
+        let k = k.unwrap_or(&l.stiffness);
+        let d = d.unwrap_or(&l.damping);
+        crate::rate::check_level(&mut l.rate, i, k, d, period)
+    }
+
     /// Sets the virtual equilibrium x_{i,d} of level `i` without allocating.
     pub fn set_goal(&mut self, i: usize, goal: &[f64]) -> Result<(), ControlError> {
         let Some(l) = self.levels.get_mut(i) else {
@@ -611,8 +674,11 @@ impl Controller {
                 "goal has the wrong length or a non-finite value",
             ));
         }
-        l.goal.as_mut_slice().copy_from_slice(goal);
-        l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
+        if l.goal.as_slice() != goal {
+            l.goal.as_mut_slice().copy_from_slice(goal);
+            l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
+            self.safety.release_conflict(i);
+        }
         Ok(())
     }
 
@@ -725,6 +791,12 @@ impl Controller {
         sym_sum_transpose(&mut self.mdot, &self.data.c);
         copy(&mut self.out.gravity, &self.data.g);
 
+        // Safety layer: the speed each joint reaches before the rate-limited
+        // applied torque can stop it (crate::safety; |q̇| without a rate limit).
+        self.applied_acceleration(qd);
+        let applied_qdd = self.have_applied.then_some(&self.applied_qdd);
+        self.safety.set_reach(qd, applied_qdd, &self.chol);
+
         // Task quantities x̃_i, J_i, J̇_i, ∂V_i/∂x_i, F_i = ∂V/∂x + D ẋ (eqs. 20, 21).
         self.frames.invalidate();
         self.out.safety.spring_saturated = false;
@@ -776,6 +848,8 @@ impl Controller {
             gemv(&mut self.out.coriolis, 1.0, &self.data.c, qd, 0.0);
             self.out.tau += &self.out.coriolis;
         }
+        // Safety layer: the velocity barrier, on the acceleration this τ gives.
+        self.velocity_barrier(qd);
         if self.spec.gravity_compensation {
             self.out.tau += &self.data.g;
         }
@@ -799,6 +873,58 @@ impl Controller {
         let cond = &self.out.conditioning;
         self.safety
             .passive_fade(fade, pot, p1, cond, &mut self.out.safety);
+    }
+
+    /// The acceleration the applied torque ([`Controller::set_applied_torque`])
+    /// gives on the model, M⁻¹ (τ_applied − g − C q̇) (g only where the
+    /// controller adds it: the robot adds it itself otherwise), into
+    /// `applied_qdd`; `have_applied` false when there is none or the solve fails.
+    fn applied_acceleration(&mut self, qd: &DVector<f64>) {
+        if !self.have_applied {
+            return;
+        }
+        let a = &mut self.applied_qdd;
+        gemv(a, -1.0, &self.data.c, qd, 0.0);
+        *a += &self.applied_tau;
+        if self.spec.gravity_compensation {
+            *a -= &self.data.g;
+        }
+        self.have_applied = hcc_model::linalg::cholesky_solve_in_place(&self.chol, a).is_ok();
+    }
+
+    /// The velocity barrier of the safety layer (crate::safety): the
+    /// acceleration q̈ = M⁻¹ (τ − C q̇) that τ (gravity not yet added: it
+    /// cancels g) gives on the model, and the barrier's torque added to τ
+    /// where a joint in the velocity band is driven too fast (or, with a torque
+    /// rate limit downstream, driven faster than it could still be stopped).
+    /// Nothing is computed while every joint is below the band and no rate
+    /// limit follows.
+    fn velocity_barrier(&mut self, qd: &DVector<f64>) {
+        if !self.safety.barrier_needs_acceleration(qd) {
+            if self.out.safety.barrier_active {
+                self.out.safety.barrier_tau.fill(0.0);
+                self.out.safety.barrier_active = false;
+            }
+            return;
+        }
+        gemv(&mut self.barrier_qdd, 1.0, &self.data.c, qd, 0.0);
+        self.barrier_qdd.neg_mut();
+        // The applied torque's acceleration: M⁻¹ (τ_applied − g − C q̇) (g only
+        // where the controller adds it; the robot adds it itself otherwise).
+        self.barrier_qdd += &self.out.tau;
+        if hcc_model::linalg::cholesky_solve_in_place(&self.chol, &mut self.barrier_qdd).is_err() {
+            return;
+        }
+        let applied_qdd = self.have_applied.then_some(&self.applied_qdd);
+        if self.safety.velocity_barrier(
+            qd,
+            &self.barrier_qdd,
+            applied_qdd,
+            &self.chol,
+            &mut self.out.safety,
+        ) {
+            self.out.tau += &self.out.safety.barrier_tau;
+        }
     }
 
     /// The torque of the safety layer (crate::safety) into `out.safety`.

@@ -70,6 +70,7 @@
 
 pub mod controller;
 mod fade;
+pub mod rate;
 pub mod safety;
 pub mod saturation;
 pub mod spec;
@@ -78,6 +79,7 @@ pub mod transition;
 
 pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
 pub use fade::FADE_RANGE;
+pub use rate::GainRate;
 pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};

@@ -57,8 +57,9 @@
 //! p = q − (upper − margin) (resp. (lower + margin) − q) ≥ 0, the joint gets the
 //! spring torque k p² (k = torque / (margin/2)², `torque` = `joint_limit_torque` or the
 //! URDF effort limit, i.e. the effort limit at half the margin and four times it at the
-//! limit) and the damping −s(p/margin) · 2ζ √(2 k margin · m_k) q̇ with s the
-//! smoothstep and m_k = 1/(M⁻¹)_kk the joint's effective inertia. Both vanish with
+//! limit) and the damping −s(p/margin) · min(2ζ √(2 k margin · m_k), m_k / T) q̇ with s
+//! the smoothstep, m_k = 1/(M⁻¹)_kk the joint's effective inertia and T the control
+//! period (a damping above m_k / T is more than the sampled loop carries, crate::rate). Both vanish with
 //! their first derivative at p = 0: no torque jump and no torque-rate jump at
 //! activation. The spring has the potential k p³/3 (in [`SafetyOutput::guard_potential`]).
 //!
@@ -104,6 +105,20 @@
 //! −s(x_k) · `velocity_damping` · m_k q̇_k (default 100 1/s, 0 switches it off):
 //! dissipative and C¹ at the onset.
 //!
+//! **Velocity limits: the barrier.** Governor and damping act on the speed; the
+//! barrier on what the law's torque is about to do to it. With the acceleration
+//! the law's torque τ produces on the model, q̈ = M⁻¹ (τ − C q̇ − g), a joint k in the
+//! band (x_k > 0) may accelerate away from rest (sign(q̇_k) q̈_k) at most at
+//!
+//! a_k = min(α h_k, √(2 (R/m_k) h_k)),  h_k = f_full v_k − |q̇_k|,
+//!
+//! (α = `velocity_barrier_rate`; R the torque filter's rate limit when there is
+//! one: the applied torque, and with it the acceleration, changes at most at R/m_k
+//! per second, and braking from a_k at that jerk gains a_k² m_k/(2R) ≤ h_k of speed).
+//! The excess Δ_k is removed by −s(x_k) m_k Δ_k sign(q̇_k): it only ever opposes the
+//! motion (power ≤ 0), scaled in by the smoothstep (no torque jump), zero below
+//! f_on (bit for bit).
+//!
 //! Allocation-free after `Safety::new`.
 
 use crate::ControlError;
@@ -141,6 +156,12 @@ pub struct SafetySpec {
     /// Velocity-limit joint damping rate (1/s; the torque is this times m_k q̇_k
     /// at f_full), ≥ 0; 0 switches it off.
     pub velocity_damping: f64,
+    /// The velocity barrier: above f_on of a joint's velocity limit the
+    /// acceleration the law asks of it away from rest is held at most at
+    /// α (f_full v_k − |q̇_k|) (module docs).
+    pub velocity_barrier: bool,
+    /// The barrier's rate α (1/s), > 0; α·T ≤ 1 at the control period T.
+    pub velocity_barrier_rate: f64,
     /// Null-space damping rate of fully faded levels (1/s), ≥ 0.
     pub null_space_damping: f64,
     /// The conflict fade: a level i ≥ 2 whose own Λ_i is near-singular (an
@@ -152,6 +173,12 @@ pub struct SafetySpec {
     pub fade_tank_max: f64,
     /// Control period (s), for the energy the tank collects per cycle, > 0.
     pub control_period_s: f64,
+    /// The rate limit R (N·m/s per joint) of the torque filter that follows the
+    /// law (`[torque_filter] torque_rate_limit`; `None`: no limit). The applied
+    /// torque follows the law's at most at R, so a joint's acceleration changes
+    /// at most at R / m_k: the velocity barrier brakes early enough for that
+    /// (module docs). Set by the scenario loader from the torque filter.
+    pub torque_rate_limit: Option<f64>,
 }
 
 impl Default for SafetySpec {
@@ -163,13 +190,16 @@ impl Default for SafetySpec {
             joint_limit_damping_ratio: 1.0,
             velocity_limit_fraction: 0.6,
             velocity_limit_full_fraction: 0.9,
-            spring_saturation: true,
+            spring_saturation: false,
             velocity_governor: true,
             velocity_damping: 100.0,
+            velocity_barrier: true,
+            velocity_barrier_rate: 20.0,
             null_space_damping: 20.0,
             conflict_fade_ratio: 1e-5,
             fade_tank_max: 5.0,
             control_period_s: 1e-3,
+            torque_rate_limit: None,
         }
     }
 }
@@ -202,11 +232,35 @@ impl SafetySpec {
                 "must be in (velocity_limit_fraction, 1]",
             );
         }
+        // The rates act on the joint's own inertia m_k: rate · T ≤ 1 is what the
+        // control period carries (crate::rate; b = rate · T).
+        let t = self.control_period_s;
         if !nonneg(self.velocity_damping) {
             return bad("velocity_damping", "must be non-negative");
         }
+        if self.velocity_damping * t > 1.0 {
+            return bad(
+                "velocity_damping",
+                "times the control period must be at most 1 (the rate the loop carries)",
+            );
+        }
+        if !pos(self.velocity_barrier_rate) {
+            return bad("velocity_barrier_rate", "must be positive");
+        }
+        if self.velocity_barrier_rate * t > 1.0 {
+            return bad(
+                "velocity_barrier_rate",
+                "times the control period must be at most 1 (the rate the loop carries)",
+            );
+        }
         if !nonneg(self.null_space_damping) {
             return bad("null_space_damping", "must be non-negative");
+        }
+        if self.null_space_damping * t > 1.0 {
+            return bad(
+                "null_space_damping",
+                "times the control period must be at most 1 (the rate the loop carries)",
+            );
         }
         if !(nonneg(self.conflict_fade_ratio) && self.conflict_fade_ratio < 0.01) {
             return bad("conflict_fade_ratio", "must be in [0, 0.01)");
@@ -216,6 +270,11 @@ impl SafetySpec {
         }
         if !pos(self.control_period_s) {
             return bad("control_period_s", "must be positive");
+        }
+        if let Some(r) = self.torque_rate_limit
+            && !pos(r)
+        {
+            return bad("torque_rate_limit", "must be positive");
         }
         Ok(())
     }
@@ -241,6 +300,13 @@ pub struct SafetyOutput {
     pub velocity_governor: f64,
     /// Per level: the factor σ_i its spring force was scaled by (1: untouched).
     pub spring_scale: Vec<f64>,
+    /// τ_barrier of this cycle (module docs; zero where it does not act,
+    /// included in `tau`).
+    pub barrier_tau: DVector<f64>,
+    /// The velocity barrier acted in this cycle.
+    pub barrier_active: bool,
+    /// Cycles in which the velocity barrier acted, since construction.
+    pub barrier_cycles: u64,
     /// A faded level's null-space damping acted.
     pub null_space_damping_active: bool,
     /// The conflict fade lowered a level's β_i(q) in this cycle (its own Λ_i
@@ -268,6 +334,9 @@ impl SafetyOutput {
     pub(crate) fn new(n: usize, levels: usize) -> SafetyOutput {
         SafetyOutput {
             tau: DVector::zeros(n),
+            barrier_tau: DVector::zeros(n),
+            barrier_active: false,
+            barrier_cycles: 0,
             active: false,
             joint_limit_active: false,
             velocity_limit_active: false,
@@ -315,6 +384,8 @@ pub(crate) struct Safety {
     lower: Vec<f64>,
     upper: Vec<f64>,
     velocity_limit: Vec<f64>,
+    /// Per joint: the speed it reaches this cycle (`Safety::set_reach`).
+    reach: Vec<f64>,
     /// Guard spring constant per joint.
     k_guard: Vec<f64>,
     /// Per level: the task speed v_i its damper may settle at (∞: no saturation) and
@@ -329,6 +400,10 @@ pub(crate) struct Safety {
     spd: Vec<SpdWork>,
     beta_prev: Vec<f64>,
     has_prev: bool,
+    /// The governor's gain of the last cycle.
+    governor_prev: f64,
+    /// Per level: faded for a conflict, not yet released.
+    conflict_latched: Vec<bool>,
     tank: f64,
     /// Power dissipated in the last cycle that goes to the tank (W).
     fill_power: f64,
@@ -337,6 +412,15 @@ pub(crate) struct Safety {
     mqd: DVector<f64>,
     e: DVector<f64>,
 }
+
+/// A level faded for a conflict (its own Λ_i near-singular) may come back
+/// once its conditioning is this many times the top of the conflict fade's
+/// region (`FADE_RANGE` · ε_c), or when its goal changes.
+pub const CONFLICT_RELEASE_FACTOR: f64 = 5.0;
+
+/// Fastest fall of the velocity governor's gain (1/s): from 1 to 0 in at
+/// least 0.2 s.
+pub const GOVERNOR_RELEASE_RATE: f64 = 5.0;
 
 /// Fastest rise of an effective fade β_i (1/s).
 pub const FADE_IN_RATE: f64 = 1.0;
@@ -360,6 +444,11 @@ pub(crate) fn spring_scale(g: f64, power: f64, torque_norm: f64, speed: f64) -> 
         return 1.0;
     }
     1.0 - g * smoothstep(-power / denom / GOVERNOR_COSINE)
+}
+
+/// M_kk from the Cholesky factor L of M (lower triangle): Σ_j L_kj².
+fn diagonal_of_llt(chol: &DMatrix<f64>, k: usize) -> f64 {
+    (0..=k).map(|j| chol[(k, j)] * chol[(k, j)]).sum()
 }
 
 /// Smoothstep 3x² − 2x³ on [0, 1] (0 below, 1 above).
@@ -402,6 +491,7 @@ impl Safety {
             lower: model.joints.iter().map(|j| j.lower).collect(),
             upper: model.joints.iter().map(|j| j.upper).collect(),
             velocity_limit: model.joints.iter().map(|j| j.velocity_limit).collect(),
+            reach: vec![0.0; model.joints.len()],
             k_guard,
             task_speed: vec![f64::INFINITY; r],
             spring_radius: vec![f64::INFINITY; r],
@@ -411,6 +501,8 @@ impl Safety {
             k_above,
             beta_prev: vec![1.0; r],
             has_prev: false,
+            governor_prev: 0.0,
+            conflict_latched: vec![false; r],
             tank: 0.0,
             fill_power: 0.0,
             xdot: DVector::zeros(ktop),
@@ -501,8 +593,17 @@ impl Safety {
     }
 
     /// Forgets the fade memory (the next cycle takes β(q) as it is) and empties the tank.
+    /// Level `i` has a new goal: a conflict it was faded for may be over.
+    pub(crate) fn release_conflict(&mut self, i: usize) {
+        if let Some(l) = self.conflict_latched.get_mut(i) {
+            *l = false;
+        }
+    }
+
     pub(crate) fn reset(&mut self) {
         self.has_prev = false;
+        self.governor_prev = 0.0;
+        self.conflict_latched.fill(false);
         self.tank = 0.0;
         self.fill_power = 0.0;
     }
@@ -536,11 +637,19 @@ impl Safety {
         if eps_c > 0.0 {
             // The conflict fade: a level whose own Λ_i (eq. 18) is near-singular has
             // lost a direction to the levels above; its spring fades with r_i.
+            let release = CONFLICT_RELEASE_FACTOR * crate::FADE_RANGE * eps_c;
             for i in 1..fade.len() {
                 let own = crate::fade::fade_factor(conditioning[i], eps_c);
                 if own < fade[i] {
                     fade[i] = own;
                     out.conflict_fade_active = true;
+                }
+                // The conflict is over only well out of its fade region (or
+                // with a new goal: `release_conflict`).
+                if own < 1.0 {
+                    self.conflict_latched[i] = true;
+                } else if conditioning[i] >= release {
+                    self.conflict_latched[i] = false;
                 }
             }
         }
@@ -557,7 +666,10 @@ impl Safety {
             // Hysteresis: a faded level comes back only once it has left the fade
             // region (β(q) = 1), and then in at least 1 / FADE_IN_RATE s — no
             // relaxation cycles at the edge of the fade region.
-            let want = if fade[i] < 1.0 {
+            // A level faded for a conflict comes back only once the conflict
+            // is over (its latch released): else its spring, back in, pulls the
+            // arm into the conflict again, and it fades out again, over and over.
+            let want = if fade[i] < 1.0 || self.conflict_latched[i] {
                 fade[i].min(prev)
             } else {
                 (prev + FADE_IN_RATE * self.spec.control_period_s).min(1.0)
@@ -684,9 +796,46 @@ impl Safety {
         1.0 / self.e[k]
     }
 
-    /// Position of |q̇_k| in the velocity band: 0 at f_on · v_max, 1 at f_full · v_max
-    /// (not clamped; 0 for a joint without a velocity limit).
-    fn speed_band(&self, k: usize, qd: f64) -> f64 {
+    /// Whether the velocity barrier needs the acceleration of this cycle: it is
+    /// on and a joint is above f_on of its velocity limit, or a torque rate
+    /// limit follows (then a hard acceleration below the band counts too).
+    pub(crate) fn barrier_needs_acceleration(&self, qd: &DVector<f64>) -> bool {
+        self.spec.enabled
+            && self.spec.velocity_barrier
+            && (self.spec.torque_rate_limit.is_some()
+                || (0..qd.len()).any(|k| self.speed_band(k) > 0.0))
+    }
+
+    /// The speed each joint reaches (`reach`, module docs) at this cycle's
+    /// state: |q̇_k|, plus, with a torque rate limit R and the applied torque's
+    /// acceleration q̈_a driving it away from rest, the a² M_kk / (2R) it gains
+    /// while the applied torque brakes at the rate limit (M_kk ≥ m_k: an
+    /// upper bound). Call once per cycle before the other parts. Allocation-free.
+    pub(crate) fn set_reach(
+        &mut self,
+        qd: &DVector<f64>,
+        applied_qdd: Option<&DVector<f64>>,
+        chol: &DMatrix<f64>,
+    ) {
+        for k in 0..qd.len() {
+            let mut v = qd[k].abs();
+            if let (Some(rate), Some(qa)) = (self.spec.torque_rate_limit, applied_qdd)
+                && self.spec.enabled
+            {
+                let a = qd[k].signum() * qa[k];
+                if a > 0.0 {
+                    v += a * a * diagonal_of_llt(chol, k) / (2.0 * rate);
+                }
+            }
+            self.reach[k] = v;
+        }
+    }
+
+    /// Position of the joint's reach (`set_reach`) in the velocity band: 0 at
+    /// f_on · v_max, 1 at f_full · v_max (not clamped; 0 for a joint without a
+    /// velocity limit).
+    fn speed_band(&self, k: usize) -> f64 {
+        let qd = self.reach[k];
         let vmax = self.velocity_limit[k];
         if !vmax.is_finite() {
             return 0.0;
@@ -701,18 +850,93 @@ impl Safety {
     /// The velocity governor's gain g = 1 − Π_k (1 − s(x_k)) of this cycle (module
     /// docs): 0 while every joint is below f_on of its velocity limit (or the
     /// governor is off), 1 once one is at f_full; C¹ in q̇.
-    pub(crate) fn governor_gain(&self, qd: &DVector<f64>) -> f64 {
+    pub(crate) fn governor_gain(&mut self, qd: &DVector<f64>) -> f64 {
         if !self.spec.enabled || !self.spec.velocity_governor {
             return 0.0;
         }
         let mut keep = 1.0;
         for k in 0..qd.len() {
-            let x = self.speed_band(k, qd[k]);
+            let x = self.speed_band(k);
             if x > 0.0 {
                 keep *= 1.0 - smoothstep(x);
             }
         }
-        1.0 - keep
+        // It follows a rise at once and falls at most at GOVERNOR_RELEASE_RATE:
+        // an arm swinging through the band keeps its springs held back
+        // instead of switching them on and off every few cycles.
+        let release = GOVERNOR_RELEASE_RATE * self.spec.control_period_s;
+        let g = (1.0 - keep).max(self.governor_prev - release).max(0.0);
+        self.governor_prev = g;
+        g
+    }
+
+    /// The velocity barrier (module docs): for every joint above f_on of its
+    /// velocity limit whose predicted acceleration `qdd` (the law's torque on
+    /// the model, M⁻¹ (τ − C q̇ − g)) drives it faster than α (f_full v_k −
+    /// |q̇_k|), the torque m_k Δ_k sign(q̇_k) that removes the excess Δ_k
+    /// (scaled in by the smoothstep of the band) into `out.barrier_tau`, and
+    /// added to `out.tau`. Returns whether it acted. Allocation-free.
+    pub(crate) fn velocity_barrier(
+        &mut self,
+        qd: &DVector<f64>,
+        qdd: &DVector<f64>,
+        applied_qdd: Option<&DVector<f64>>,
+        chol: &DMatrix<f64>,
+        out: &mut SafetyOutput,
+    ) -> bool {
+        if out.barrier_active {
+            out.barrier_tau.fill(0.0);
+        }
+        out.barrier_active = false;
+        if !(self.spec.enabled && self.spec.velocity_barrier) {
+            return false;
+        }
+        let (alpha, full) = (
+            self.spec.velocity_barrier_rate,
+            self.spec.velocity_limit_full_fraction,
+        );
+        for k in 0..qd.len() {
+            if !self.velocity_limit[k].is_finite() {
+                continue;
+            }
+            let sign = qd[k].signum();
+            // Acceleration away from rest, and the speed left below f_full v_k.
+            let a = sign * qdd[k];
+            let headroom = full * self.velocity_limit[k] - qd[k].abs();
+            let x = self.speed_band(k);
+            let mut m_k = None;
+            let mut excess: f64 = 0.0;
+            if x > 0.0 {
+                let m = self.effective_inertia(chol, k);
+                m_k = Some(m);
+                excess = smoothstep(x) * (a - alpha * headroom);
+            }
+            // The applied torque lags the law's behind the rate limit: brake for
+            // the faster of the two.
+            let a_jerk = applied_qdd.map_or(a, |qa| a.max(sign * qa[k]));
+            if let Some(rate) = self.spec.torque_rate_limit
+                && a_jerk > 0.0
+                && a_jerk * a_jerk * diagonal_of_llt(chol, k) > 2.0 * rate * headroom
+            {
+                // m_k ≤ M_kk: only a joint that might not stop in time gets its m_k.
+                let m = *m_k.get_or_insert_with(|| self.effective_inertia(chol, k));
+                excess = excess.max(a_jerk - (2.0 * rate / m * headroom.max(0.0)).sqrt());
+            }
+            if !(excess > 0.0) {
+                continue;
+            }
+            let t = -sign * m_k.unwrap_or(0.0) * excess;
+            out.barrier_tau[k] = t;
+            out.tau[k] += t;
+            out.barrier_active = true;
+        }
+        if out.barrier_active {
+            out.active = true;
+            out.velocity_limit_active = true;
+            out.barrier_cycles += 1;
+            out.power += out.barrier_tau.dot(qd);
+        }
+        out.barrier_active
     }
 
     /// The joint-limit guard and the velocity damping.
@@ -732,7 +956,7 @@ impl Safety {
             };
             // The velocity damping acts only when switched on (rate > 0).
             let x = if self.spec.velocity_damping > 0.0 {
-                self.speed_band(k, qd)
+                self.speed_band(k)
             } else {
                 0.0
             };
@@ -742,8 +966,12 @@ impl Safety {
             let m_k = self.effective_inertia(c.chol, k);
             if p > 0.0 {
                 let kg = self.k_guard[k];
+                // At most m_k / T: a heavier damping than the joint's own inertia
+                // carries at the control period would drive an oscillation
+                // (crate::rate, b ≤ 1).
                 let d =
-                    self.spec.joint_limit_damping_ratio * 2.0 * (2.0 * kg * margin * m_k).sqrt();
+                    (self.spec.joint_limit_damping_ratio * 2.0 * (2.0 * kg * margin * m_k).sqrt())
+                        .min(m_k / self.spec.control_period_s);
                 out.tau[k] += -sign * kg * p * p - smoothstep(p / margin) * d * qd;
                 out.guard_potential += kg * p * p * p / 3.0;
                 out.joint_limit_active = true;

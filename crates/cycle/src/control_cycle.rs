@@ -40,7 +40,7 @@
 //! [`ControlCycle::take_setpoints`] (the setpoints waiting for this state,
 //! then those that arrived with it, in arrival order), then
 //! [`ControlCycle::decide`] (stream checks → transitions advance one period →
-//! law → torque filter → saturation → command, then telemetry).
+//! law → saturation → torque filter → command, then telemetry).
 //! [`ControlCycle::step`] is both. The controller daemon calls the parts
 //! itself to time them, and fills the telemetry once the command is out
 //! ([`ControlCycle::decide_command`], [`ControlCycle::fill_telemetry`]).
@@ -98,6 +98,7 @@ pub struct ControlCycle {
     pending_telemetry: Option<(u64, CommandMode, bool)>,
     /// State sequence number of the last well-formed state (setpoint timing).
     clock_seq: u64,
+    zeros: [f64; MAX_JOINTS],
 }
 
 impl ControlCycle {
@@ -147,6 +148,7 @@ impl ControlCycle {
             step_ns: None,
             pending_telemetry: None,
             clock_seq: 0,
+            zeros: [0.0; MAX_JOINTS],
         })
     }
 
@@ -214,12 +216,13 @@ impl ControlCycle {
             self.clock_seq = state.header.seq;
         }
         let clock = self.clock_seq;
-        let mut changed = self.setpoints.apply_due(clock) > 0;
+        let mut changed = self.setpoints.apply_due(clock, &mut self.controller) > 0;
         for _ in 0..SETPOINT_BUFFER {
             let Some(setpoint) = next_setpoint() else {
                 break;
             };
-            self.setpoints.receive(&setpoint, clock);
+            self.setpoints
+                .receive(&setpoint, clock, &mut self.controller);
             changed = true;
         }
         if changed {
@@ -233,7 +236,7 @@ impl ControlCycle {
     /// Returns the answer code. What a replay does with the setpoints a
     /// recording says were taken in a cycle. Allocation-free.
     pub fn take_setpoint_now(&mut self, setpoint: &Setpoint) -> u32 {
-        let code = self.setpoints.take(setpoint);
+        let code = self.setpoints.take(setpoint, &mut self.controller);
         self.setpoints.fill(&mut self.telemetry);
         code
     }
@@ -244,7 +247,7 @@ impl ControlCycle {
     }
 
     /// Decides the answer to `state`, received at `wake_ns`: stream checks →
-    /// law → torque filter → saturation, then the telemetry. For
+    /// law → saturation → torque filter, then the telemetry. For
     /// [`Answer::Command`], the command and the telemetry content are left in
     /// the buffers. Allocation-free.
     pub fn decide(&mut self, state: &JointState, wake_ns: u64) -> Answer {
@@ -273,14 +276,8 @@ impl ControlCycle {
         };
         // Whether tau contains g(q_v) = gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
-            Some(_) => {
-                self.filter_torque(&mut tau);
-                self.gravity_compensation
-            }
-            None => {
-                self.filter.interrupt();
-                self.safe_command(&mut tau, gravity_conflict)
-            }
+            Some(_) => self.gravity_compensation,
+            None => self.safe_command(&mut tau, gravity_conflict),
         };
         // Saturation to the torque limits: the control part is scaled as a
         // whole, which keeps the hierarchy (hcc_control::saturate).
@@ -288,6 +285,14 @@ impl ControlCycle {
         let gravity = gravity_in_tau.then_some(&self.gravity_last[..n]);
         if hcc_control::saturate(&mut tau[..n], gravity, &self.limits[..n]) {
             self.counters.telemetry.saturations += 1;
+        }
+        // Then the torque filter, on what is commanded: its rate limit bounds
+        // the step from the previous command itself, and a step between two
+        // torques within the limits stays within them. The safe command is
+        // never filtered (a safety stop must not be delayed).
+        match law_mode {
+            Some(_) => self.filter_torque(&mut tau),
+            None => self.filter.bypass(&tau[..n]),
         }
         let mode = law_mode.unwrap_or(CommandMode::SafeHold);
         self.fill_command(state, mode, gravity_conflict, &tau);
@@ -389,7 +394,15 @@ impl ControlCycle {
         if !self.filter.is_active() {
             return;
         }
-        let stages = self.filter.apply(&mut tau[..self.n]);
+        let n = self.n;
+        // Before any command the driver holds g(q) (or nothing, when it adds
+        // gravity itself).
+        let hold = if self.gravity_compensation {
+            &self.gravity_last[..n]
+        } else {
+            &self.zeros[..n]
+        };
+        let stages = self.filter.apply(&mut tau[..n], hold);
         let c = &mut self.counters.telemetry;
         c.rate_limited += u64::from(stages.rate_limited);
         c.low_passed += u64::from(stages.low_passed);
@@ -401,6 +414,10 @@ impl ControlCycle {
         let n = self.n;
         // Transitions move by one nominal period per used state (deterministic).
         self.setpoints.advance(self.period_s, &mut self.controller);
+        // With a rate limit the robot's torque lags the law's: the law's
+        // velocity barrier is told what is applied (hcc_control::safety).
+        let applied = self.filter.rate_limited_previous().map(|p| &p[..n]);
+        self.controller.set_applied_torque(applied);
         let start = monotonic_now_ns();
         let result = self.controller.step(state.q(), state.qd());
         self.step_ns = Some(monotonic_now_ns().saturating_sub(start));

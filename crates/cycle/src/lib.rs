@@ -7,9 +7,9 @@
 //! torque by construction.
 //!
 //! ```text
-//!  JointState ─▶ stream checks ─▶ setpoints due ─▶ law (eq. 19) ─▶ torque filter ─▶ saturation ─▶ TorqueCommand
-//!   (q, q̇,        validation,      SetpointHandler   hcc-control      rate limit,      hcc_control::     + Telemetry
-//!    seq)         sequence, peer   transitions       Controller::step  low-pass         saturate
+//!  JointState ─▶ stream checks ─▶ setpoints due ─▶ law (eq. 19) ─▶ saturation ─▶ torque filter ─▶ TorqueCommand
+//!   (q, q̇,        validation,      SetpointHandler   hcc-control      hcc_control::  rate limit,      + Telemetry
+//!    seq)         sequence, peer   transitions       Controller::step saturate      low-pass
 //!                   └─ rejected: the safe command τ = g(q_v) (or 0) ───────────────────────▶
 //! ```
 //!
@@ -23,7 +23,7 @@
 //!   the law and the `[setpoint_limits]`, queues it until its state, moves
 //!   the level's equilibrium and gains through a transition.
 //! * [`torque_filter`]: [`TorqueFilter`] — the `[torque_filter]` rate limit
-//!   and low-pass between the law and the saturation.
+//!   and low-pass on the saturated torque, against the previous command.
 //! * [`schedule`]: a scenario's `[[setpoint]]` entries, delivered to a cycle
 //!   as a client would send them.
 //! * [`counters`]: every counter of the cycle, defined once.

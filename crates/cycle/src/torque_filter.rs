@@ -1,21 +1,25 @@
-//! The torque filter between the law and the saturation (`[torque_filter]`),
+//! The torque filter after the saturation (`[torque_filter]`),
 //! allocation-free:
 //!
 //! ```text
-//! τ (Eq. (19)) ─▶ finite? ─▶ rate limit ─▶ low-pass ─▶ saturation ─▶ command
-//!                 (the law     |Δτ_k| ≤ r·Δt   τ_f += α(τ − τ_f)   hcc_control::saturate
-//!                 refuses a    (whole or       α = 1 − e^(−2π f_c Δt)
-//!                 non-finite τ) per joint)
+//! τ (Eq. (19)) ─▶ finite? ─▶ saturation ─▶ rate limit ─▶ low-pass ─▶ command
+//!                 (the law     hcc_control::   |Δτ_k| ≤ r·Δt   τ_f += α(τ − τ_f)
+//!                 refuses a    saturate        (whole or       α = 1 − e^(−2π f_c Δt)
+//!                 non-finite τ)                per joint)
 //! ```
 //!
 //! The finite check is the law's own (a non-finite τ is a numerical failure
 //! answered with the safe command); the saturation is the cycle's
-//! ([`crate::ControlCycle`]). This module holds the two stages between
-//! them. Both act on the previous command sent (Δt the nominal period):
-//! the first command after start-up, and the first after a safe command,
-//! are not rate-limited (there is no applied law torque to limit from; the
-//! safe command itself is never limited or filtered, a safety stop must not
-//! be delayed), and the filter starts from that torque.
+//! ([`crate::ControlCycle`]). This module holds the two stages after it.
+//! Both act on the previous command sent (Δt the nominal period), so the rate
+//! limit bounds the step of what is commanded — a robot that aborts on a
+//! torque discontinuity (the Franka: 1 N·m per ms) sees no larger one — and
+//! both stages move between two torques within the limits, so their result
+//! stays within them. The first command starts from the torque the driver
+//! holds before any command comes (g(q) when the controller adds gravity,
+//! else 0), so the law's torque comes in at the rate limit; the safe command
+//! is never limited or filtered (a safety stop must not be delayed), and the
+//! law's torque after it starts from the safe command sent.
 //!
 //! **Whole or per joint.** `whole` scales the increment Δτ by one factor so
 //! that the largest |Δτ_k| equals r·Δt: the direction of the change — and
@@ -68,15 +72,18 @@ impl TorqueFilter {
         self.max_step.is_some() || self.alpha.is_some()
     }
 
-    /// Passes the law's τ (length n, finite) through the rate limit and the
-    /// low-pass, in place. Allocation-free.
-    pub fn apply(&mut self, tau: &mut [f64]) -> Stages {
+    /// Passes the law's τ (length n, finite, saturated) through the rate limit
+    /// and the low-pass, in place, against the previous command. Before the
+    /// first command the previous one is `hold` — the torque the driver
+    /// applies while no command has come (g(q) when the controller adds
+    /// gravity, else 0) — so that the first law torque comes in at the rate
+    /// limit too. Allocation-free.
+    pub fn apply(&mut self, tau: &mut [f64], hold: &[f64]) -> Stages {
         let n = tau.len().min(MAX_JOINTS);
         let mut stages = Stages::default();
         if !self.have_prev {
-            self.prev[..n].copy_from_slice(&tau[..n]);
+            self.prev[..n].copy_from_slice(&hold[..n]);
             self.have_prev = true;
-            return stages;
         }
         if let Some(max_step) = self.max_step {
             stages.rate_limited = limit_rate(&mut tau[..n], &self.prev[..n], max_step, self.mode);
@@ -91,10 +98,19 @@ impl TorqueFilter {
         stages
     }
 
-    /// A command that did not come through [`TorqueFilter::apply`] (the safe
-    /// command) was sent: the next law torque is taken as it is.
-    pub fn interrupt(&mut self) {
-        self.have_prev = false;
+    /// The previous command's τ (first n entries valid) once there was one and
+    /// a rate limit is on: what the robot applies until the next command, from
+    /// which the next command is at most one rate step away.
+    pub fn rate_limited_previous(&self) -> Option<&[f64; MAX_JOINTS]> {
+        (self.have_prev && self.max_step.is_some()).then_some(&self.prev)
+    }
+
+    /// A command that did not come through [`TorqueFilter::apply`] was sent
+    /// (the safe command, never delayed): the next law torque starts from it.
+    pub fn bypass(&mut self, sent: &[f64]) {
+        let n = sent.len().min(MAX_JOINTS);
+        self.prev[..n].copy_from_slice(&sent[..n]);
+        self.have_prev = true;
     }
 }
 
@@ -143,7 +159,7 @@ mod tests {
         for k in 0..5 {
             let mut tau = [k as f64 * 100.0, -3.0];
             let before = tau;
-            assert_eq!(p.apply(&mut tau), Stages::default());
+            assert_eq!(p.apply(&mut tau, &[0.0, 0.0]), Stages::default());
             assert_eq!(tau, before);
         }
     }
@@ -153,38 +169,51 @@ mod tests {
         // 1000 N·m/s at 1 kHz: at most 1 N·m per cycle.
         let mut whole = filter(Some(1000.0), RateLimitMode::Whole, None);
         let mut per = filter(Some(1000.0), RateLimitMode::PerJoint, None);
-        let mut first = [0.0, 0.0];
-        assert!(
-            !whole.apply(&mut first).rate_limited,
-            "the first is taken as is"
-        );
-        per.apply(&mut [0.0, 0.0]);
+        // The first command comes in from the held torque (here 2, 0), at the rate.
+        let hold = [2.0, 0.0];
+        let mut first = [6.0, 0.5];
+        assert!(whole.apply(&mut first, &hold).rate_limited);
+        assert_eq!(first, [3.0, 0.125], "from the held torque, as a whole");
+        let mut first = [6.0, 0.5];
+        assert!(per.apply(&mut first, &hold).rate_limited);
+        assert_eq!(first, [3.0, 0.5], "from the held torque, per joint");
+        whole.bypass(&[0.0, 0.0]);
+        per.bypass(&[0.0, 0.0]);
         let mut a = [4.0, 2.0];
         let mut b = [4.0, 2.0];
-        assert!(whole.apply(&mut a).rate_limited);
-        assert!(per.apply(&mut b).rate_limited);
+        assert!(whole.apply(&mut a, &hold).rate_limited);
+        assert!(per.apply(&mut b, &hold).rate_limited);
         assert_eq!(a, [1.0, 0.5], "scaled as a whole");
         assert_eq!(b, [1.0, 1.0], "clipped per joint");
         // Within the limit: untouched.
         let mut c = [1.5, 1.0];
-        assert!(!whole.apply(&mut c).rate_limited);
+        assert!(!whole.apply(&mut c, &hold).rate_limited);
         assert_eq!(c, [1.5, 1.0]);
-        // A safe command in between: the next torque is taken as is.
-        whole.interrupt();
-        let mut d = [50.0, -50.0];
-        assert!(!whole.apply(&mut d).rate_limited);
-        assert_eq!(d, [50.0, -50.0]);
+        // A safe command sent in between (never filtered): the next law
+        // torque starts from it.
+        whole.bypass(&[50.0, -50.0]);
+        let mut d = [50.5, -50.0];
+        assert!(!whole.apply(&mut d, &hold).rate_limited);
+        assert_eq!(d, [50.5, -50.0]);
+        let mut e = [0.0, 0.0];
+        assert!(whole.apply(&mut e, &hold).rate_limited);
+        let step = [e[0] - 50.5, e[1] + 50.0];
+        assert!((step[0] + 1.0).abs() < 1e-12, "{e:?}");
+        assert!(
+            (step[1] - 50.0 / 50.5).abs() < 1e-12,
+            "the direction kept: {e:?}"
+        );
     }
 
     #[test]
     fn the_low_pass_is_first_order() {
         let mut p = filter(None, RateLimitMode::Whole, Some(100.0));
-        p.apply(&mut [0.0]);
+        p.bypass(&[0.0]);
         let alpha = 1.0 - (-std::f64::consts::TAU * 100.0 * 1e-3).exp();
         let mut y = 0.0;
         for _ in 0..50 {
             let mut tau = [1.0];
-            assert!(p.apply(&mut tau).low_passed);
+            assert!(p.apply(&mut tau, &[0.0]).low_passed);
             y += alpha * (1.0 - y);
             assert!((tau[0] - y).abs() < 1e-15);
         }

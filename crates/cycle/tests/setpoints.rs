@@ -96,6 +96,11 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
         .unwrap();
     let mut joint = sc.q0.as_slice().to_vec();
     joint[3] = 1.0; // the Panda's joint 4 is limited to [-3.07, -0.07] rad
+    // The hand's rotation about joint 7 is light: 100 N·m·s/rad of posture
+    // damping is far more than 1 kHz carries (hcc_control::rate).
+    let too_damped = Setpoint::for_level(1, 1, 2, 7)
+        .with_damping(&[100.0; 7])
+        .unwrap();
     let cases = [
         (goal(5, &[0.5, 0.1, 0.3]), Rejection::UnknownLevel),
         (goal(0, &[0.5, 0.1]), Rejection::DimensionMismatch),
@@ -108,6 +113,7 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
             goal(0, &[0.5, 0.1, 0.3]).with_duration(-1.0),
             Rejection::BadDuration,
         ),
+        (too_damped, Rejection::GainsAboveRate),
     ];
     for (k, (mut sp, reason)) in cases.into_iter().enumerate() {
         sp.header.seq = k as u64 + 10;
@@ -120,7 +126,36 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
         assert_eq!(target.stiffness[(2, 2)], 350.0);
         assert_eq!(d.telemetry().transition_progress[0], 1.0);
     }
-    assert_eq!(d.telemetry().answer_for(1).unwrap().answered, 8);
+    assert_eq!(d.telemetry().answer_for(1).unwrap().answered, 9);
+    assert_eq!(d.controller().level_target(2).unwrap().damping[(6, 6)], 1.5);
+}
+
+/// Gains setpoints against the control rate (hcc_control::rate): the
+/// refusal names nothing but its code; the bound scales with the gain, so
+/// the damping at the largest accepted scale passes and twice it does not.
+#[test]
+fn gains_the_control_rate_cannot_carry_are_rejected() {
+    let sc = scenario();
+    let mut d = decider(&sc);
+    d.decide(&state(&sc, 1), PERIOD);
+    let mut c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let big = nalgebra::DMatrix::from_diagonal_element(7, 7, 100.0);
+    let e = c.check_gain_rate(2, None, Some(&big)).unwrap_err();
+    println!("posture damping 100: {e}");
+    assert!(e.damping && e.value > hcc_control::rate::B_MAX, "{e:?}");
+    let carried = 0.99 * 100.0 * e.scale();
+    let damping = |seq: u64, v: f64| {
+        let mut sp = Setpoint::for_level(5, seq, 2, 7)
+            .with_damping(&[v; 7])
+            .unwrap();
+        sp.header.seq = seq;
+        sp
+    };
+    assert_eq!(
+        d.take_setpoint_now(&damping(1, 2.0 * carried)),
+        Rejection::GainsAboveRate.code()
+    );
+    assert_eq!(d.take_setpoint_now(&damping(2, carried)), ANSWER_ACCEPTED);
 }
 
 #[test]

@@ -99,14 +99,15 @@ fn rate_limit_whole_and_per_joint_in_closed_loop() {
                 f.max_step
             );
             if file.starts_with("panda") {
-                assert_eq!(
-                    f.rate_limited, 0,
-                    "the Panda scenario stays below 1000 N·m/s"
+                // The law's first torque comes in from the held g(q0) at the
+                // rate limit; after that the Panda's motion stays below 1000
+                // N·m/s, and it converges as without the limit.
+                assert!(
+                    f.rate_limited > 0 && f.rate_limited < 150,
+                    "only while the first torque ramps in: {}",
+                    f.rate_limited
                 );
-                assert_eq!(
-                    f.max_error_dev, 0.0,
-                    "bit-identical where the limiter does not act"
-                );
+                assert!(f.final_error < 1e-5, "{}", f.final_error);
             } else {
                 assert!(f.rate_limited > 0);
             }

@@ -83,8 +83,8 @@ pub const ANSWER_ACCEPTED: u32 = 0;
 /// `LevelCapacity`, `DimensionCapacity`, `NonFinite`, `BadDuration`,
 /// `NotSymmetric`, `NotPositiveDefinite`. Checked by the controller against
 /// its law and model: `UnknownLevel`, `DimensionMismatch`,
-/// `StiffnessAboveLimit`, `JointLimit`, `OutsideWorkspace`; and by its
-/// queue of setpoints that wait for their state: `PendingFull`.
+/// `StiffnessAboveLimit`, `JointLimit`, `OutsideWorkspace`, `GainsAboveRate`;
+/// and by its queue of setpoints that wait for their state: `PendingFull`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum Rejection {
@@ -124,11 +124,15 @@ pub enum Rejection {
     /// The setpoint is due at a later state, but
     /// [`MAX_PENDING_SETPOINTS`] setpoints already wait for theirs.
     PendingFull = 17,
+    /// K or D is more than the control rate carries at the arm's current
+    /// configuration (T·λmax(J M⁻¹ Jᵀ D) or T²·λmax(J M⁻¹ Jᵀ K) above its bound:
+    /// the sampled spring–damper would oscillate).
+    GainsAboveRate = 18,
 }
 
 impl Rejection {
     /// Every rejection, in code order.
-    pub const ALL: [Rejection; 17] = [
+    pub const ALL: [Rejection; 18] = [
         Self::SchemaMismatch,
         Self::UnknownFields,
         Self::NothingSet,
@@ -146,6 +150,7 @@ impl Rejection {
         Self::JointLimit,
         Self::OutsideWorkspace,
         Self::PendingFull,
+        Self::GainsAboveRate,
     ];
 
     /// The stable code (never [`ANSWER_ACCEPTED`]).
@@ -182,6 +187,7 @@ impl Rejection {
             Self::JointLimit => "joint_limit",
             Self::OutsideWorkspace => "outside_workspace",
             Self::PendingFull => "pending_full",
+            Self::GainsAboveRate => "gains_above_rate",
         }
     }
 
@@ -209,6 +215,9 @@ impl Rejection {
             Self::JointLimit => "a joint goal lies outside the joint's limits",
             Self::OutsideWorkspace => "a position goal lies outside the level's workspace",
             Self::PendingFull => "too many setpoints wait for their state sequence number",
+            Self::GainsAboveRate => {
+                "K or D is more than the control rate carries at the arm's configuration (the sampled spring-damper would oscillate)"
+            }
         }
     }
 }
@@ -626,7 +635,7 @@ mod tests {
             assert!(r.to_string().contains(r.name()));
         }
         assert_eq!(Rejection::from_code(ANSWER_ACCEPTED), None);
-        assert_eq!(Rejection::from_code(18), None);
+        assert_eq!(Rejection::from_code(19), None);
         assert_eq!(Rejection::from_code(u32::MAX), None);
         // The published numbers (docs and other-language clients rely on them).
         assert_eq!(Rejection::SchemaMismatch.code(), 1);
@@ -634,6 +643,7 @@ mod tests {
         assert_eq!(Rejection::NotPositiveDefinite.code(), 11);
         assert_eq!(Rejection::OutsideWorkspace.code(), 16);
         assert_eq!(Rejection::PendingFull.code(), 17);
+        assert_eq!(Rejection::GainsAboveRate.code(), 18);
         assert_eq!(answer_code(Ok(())), 0);
         assert_eq!(answer_code(Err(Rejection::JointLimit)), 15);
     }

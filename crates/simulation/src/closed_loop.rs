@@ -43,41 +43,50 @@ pub fn simulate_observed(
     scenario: &Scenario,
     observe: &mut dyn FnMut(&CycleView<'_>) -> Result<(), SimError>,
 ) -> Result<Run, SimError> {
-    let mut run = InProcess::new(scenario)?;
-    let cycles = scenario.cycles();
     let mut recorder = recorder(scenario)?;
     let mut trajectory = recorder
-        .trajectory(cycles as usize + 1)
+        .trajectory(scenario.cycles() as usize + 1)
         .map_err(record_error)?;
-    for k in 0..=cycles {
-        let t = run.cycle(k, k == cycles)?;
-        let view = CycleView {
-            k,
-            t,
-            state: &run.state,
-            cycle: &run.cycle,
-        };
-        observe(&view)?;
+    let description = run_observed(scenario, &mut |view| {
+        observe(view)?;
         let law_ran = view.cycle.command().mode != CommandMode::SafeHold.code();
         let row = Cycle {
-            t,
+            t: view.t,
             q: view.state.q(),
             qd: view.state.qd(),
             output: view.cycle.telemetry(),
             law: law_ran.then_some(view.cycle.controller() as &dyn LawTerms),
         };
-        recorder
-            .record(&row, &mut trajectory)
-            .map_err(record_error)?;
-        if k < cycles {
-            run.driver.advance(Some(run.cycle.command()))?;
-        }
-    }
-    let description = run.describe(scenario);
+        recorder.record(&row, &mut trajectory).map_err(record_error)
+    })?;
     Ok(Run {
         trajectory,
         description,
     })
+}
+
+/// The closed loop of `scenario` without the trajectory rows: `observe` sees
+/// every cycle (a sweep of many long runs that only needs a few figures of
+/// each). Returns the run's description.
+pub fn run_observed(
+    scenario: &Scenario,
+    observe: &mut dyn FnMut(&CycleView<'_>) -> Result<(), SimError>,
+) -> Result<RunDescription, SimError> {
+    let mut run = InProcess::new(scenario)?;
+    let cycles = scenario.cycles();
+    for k in 0..=cycles {
+        let t = run.cycle(k, k == cycles)?;
+        observe(&CycleView {
+            k,
+            t,
+            state: &run.state,
+            cycle: &run.cycle,
+        })?;
+        if k < cycles {
+            run.driver.advance(Some(run.cycle.command()))?;
+        }
+    }
+    Ok(run.describe(scenario))
 }
 
 fn record_error(e: RecordError) -> SimError {

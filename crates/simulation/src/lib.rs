@@ -20,7 +20,7 @@
 mod closed_loop;
 mod energy;
 
-pub use closed_loop::{CycleView, Run, simulate, simulate_observed};
+pub use closed_loop::{CycleView, Run, run_observed, simulate, simulate_observed};
 pub use energy::{PlantEnergyModel, recorder};
 pub use hcc_plant::SimError;
 pub use hcc_record::{column_names, describe};

@@ -7,8 +7,9 @@
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_simulation::{CycleView, simulate_observed};
-use nalgebra::{DMatrix, DVector};
+use hcc_config::schedule::{SCHEDULE_CLIENT_ID, ScheduledSetpoint};
+use hcc_simulation::{CycleView, run_observed};
+use nalgebra::DVector;
 
 fn load(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -45,6 +46,11 @@ struct Sample {
     twin_rate: f64,
     /// Per level: its conditioning (`StepOutput::conditioning`).
     conditioning: Vec<f64>,
+    /// Largest |τ_k − τ_{k−1}| over the joints of the command against the
+    /// previous cycle's (N·m).
+    tau_step: f64,
+    /// The command was the safe command (the law failed numerically).
+    safe_hold: bool,
 }
 
 /// The log of a run of the control cycle (the daemon's), per cycle.
@@ -54,6 +60,8 @@ struct Logged {
     /// The same controller without a part of the safety layer, stepped on the same states.
     twin: Option<hcc_control::Controller>,
     prev_twin: DVector<f64>,
+    /// The previous command's torque (none before the first).
+    prev_tau: Option<Vec<f64>>,
     log: Vec<Sample>,
 }
 
@@ -72,7 +80,16 @@ impl Logged {
             twin_rate = (&d - &self.prev_twin).amax() / self.period_s;
             self.prev_twin.copy_from(&d);
         }
+        let tau = v.cycle.command().tau();
+        let tau_step = self.prev_tau.as_ref().map_or(0.0, |p| {
+            p.iter()
+                .zip(tau)
+                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()))
+        });
+        self.prev_tau = Some(tau.to_vec());
         self.log.push(Sample {
+            safe_hold: v.cycle.command().mode == hcc_msgs::CommandMode::SafeHold.code(),
+            tau_step,
             t: v.t,
             q: q.to_vec(),
             qd: qd.to_vec(),
@@ -127,9 +144,10 @@ fn run_logged(
         prev_safety: DVector::zeros(n),
         twin,
         prev_twin: DVector::zeros(n),
+        prev_tau: None,
         log: Vec::new(),
     };
-    simulate_observed(&scenario, &mut |v| {
+    run_observed(&scenario, &mut |v| {
         logged.observe(v);
         Ok(())
     })
@@ -308,6 +326,10 @@ fn limit_figures(scenario: &Scenario, log: &[Sample]) -> (f64, f64) {
     (beyond, speed)
 }
 
+/// A goal step at t = 0 far out of reach (no transition: the scenario's own
+/// goal): the spring pulls with hundreds of N while the torque filter lets the
+/// torque change by 1 N·m per cycle, so the velocity limits have to brake for
+/// the applied torque's lag as well (crate hcc_control::safety, "the barrier").
 #[test]
 fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits() {
     // 1.3 m from the base; joints 4 and 6 asked beyond their upper limits
@@ -332,11 +354,16 @@ fn panda_out_of_reach_and_posture_beyond_limits_comes_to_rest_inside_the_limits(
     assert!(log.iter().all(|s| s.finite));
     assert!(max_speed(&log, 4.0) < 0.01);
     assert!(beyond <= 0.0, "a joint beyond its limit by {beyond} rad");
-    assert!(speed < 1.0, "a joint at {speed} × its velocity limit");
-    // Smooth onset: the first cycle's rate a small part of the largest, and the
-    // largest under the output pipeline's usual rate limit (1000 N·m/s).
-    assert!(onset[0] < 0.1 * gov_rate, "a torque jump at the onset");
-    assert!(gov_rate < 1000.0, "velocity limits: {gov_rate} N·m/s");
+    assert!(speed <= 0.95, "a joint at {speed} × its velocity limit");
+    // What the robot sees: the shipped torque filter's 1 N·m per cycle, also
+    // while the governor and the barrier cut the law's torque.
+    let step = largest_command_step(&log);
+    assert!(step <= 1.0 + 1e-9, "a torque step of {step} N·m");
+}
+
+/// The largest |τ_k − τ_k,prev| of the commands sent (N·m).
+fn largest_command_step(log: &[Sample]) -> f64 {
+    log.iter().map(|s| s.tau_step).fold(0.0, f64::max)
 }
 
 /// A TCP goal the Panda reaches only with its elbow stretched, and the hand asked to
@@ -464,70 +491,99 @@ fn settle_time(log: &[Sample]) -> f64 {
     t
 }
 
-/// The shortest time in which the joints can cover the distance from `q0` to `q`
-/// with every joint at `fraction` of its URDF velocity limit (max_k |Δq_k| / (f v_k)).
-fn shortest_move(joints: &[hcc_model::Joint], q0: &[f64], q: &[f64], fraction: f64) -> f64 {
-    joints
+/// A goal of the sweep, sent as a client sends it: the Panda starts at rest
+/// with its levels' goals where it stands, and at t = 0 setpoints ask for the
+/// TCP goal `tcp` (the level's workspace box opened to every goal drawn, so
+/// that goals out of reach are accepted) and the posture goal `posture` (at
+/// most at the URDF limits: the controller refuses a joint goal beyond them).
+/// The controller takes them through its transitions (the equilibria move at
+/// most at the levels' `max_speed`).
+fn sweep_scenario(tcp: [f64; 3], posture: &[f64]) -> Scenario {
+    let mut s = load("panda-pose-posture.toml");
+    let start = hcc_control::Controller::new(&s.model, s.spec.clone(), &s.q0)
+        .unwrap()
+        .step(s.q0.as_slice(), &vec![0.0; s.model.nq()])
+        .unwrap()
+        .task_error[0]
+        .clone()
+        + &s.spec.levels[0].goal;
+    s.spec.levels[0].goal = start;
+    s.spec.levels[2].goal = s.q0.clone();
+    s.setpoint_limits.levels[0].workspace = Some((vec![-2.0; 3], vec![2.0; 3]));
+    let inside: Vec<f64> = posture
         .iter()
-        .enumerate()
-        .map(|(k, j)| (q[k] - q0[k]).abs() / (fraction * j.velocity_limit))
-        .fold(0.0, f64::max)
+        .zip(&s.model.joints)
+        .map(|(q, j)| q.clamp(j.lower, j.upper))
+        .collect();
+    let setpoint = |seq: u64, level: usize, goal: &[f64]| ScheduledSetpoint {
+        t_s: 0.0,
+        setpoint: hcc_msgs::Setpoint::for_level(SCHEDULE_CLIENT_ID, seq, level, goal.len())
+            .with_goal(goal)
+            .unwrap(),
+    };
+    s.setpoints = vec![setpoint(1, 0, &tcp), setpoint(2, 2, &inside)];
+    s
 }
 
-/// Seeded random Panda goals, 3 s each from the scenario's start: TCP goals from
-/// 0.3 m to 1.4 m from the shoulder (within and beyond reach), posture goals up
-/// to 0.5 rad beyond the limits of every joint. `SWEEP_GOALS` goals (default 100
-/// here; `SWEEP_GOALS=500 cargo test --release -p hcc-plant --test
-/// limits_and_singularities sweep -- --nocapture` runs the full sweep;
-/// `SWEEP_SECONDS` sets the time per goal, `SWEEP_DETAIL` prints every goal not
-/// settled and every one over a velocity limit, `SWEEP_SAFETY` changes `[safety]`
-/// fields for a comparison, e.g. `conflict_fade_ratio=0,null_space_damping=50`,
-/// `SWEEP_DAMPING` the levels' damping, e.g. `60,4,6`: D_i = that × I;
-/// `SWEEP_GAIN_SCALE=s` every level s times faster, K_i × s², D_i × s;
-/// `SWEEP_SINGULAR_RATIO` the singular ratio ε of `[controller.singularity]`;
-/// `SWEEP_ONLY=g` runs goal g alone and prints its course every 0.5 s;
-/// `SWEEP_HORIZON=T` runs each goal for T s as well and prints, for the goals
-/// not settled in time, when they settle for good and how far their end
-/// configuration is from the start at the URDF velocity limits).
-/// Every goal not settled is classified ([`Unsettled`]). With the defaults (3 s,
-/// at least 100 goals, no `SWEEP_SAFETY`) at least 35 % must settle: 43 % of the
-/// first 100 goals and 42.8 % of 500 do with the conflict fade (31 % and 31.6 %
-/// without it, with the joint damping at 50 1/s), so the floor catches a loss of
-/// the conflict fade, with 8 goals in 100 of margin for numerical differences of a
-/// chaotic sweep.
+/// What one sweep goal did.
+struct GoalRun {
+    g: usize,
+    /// When it settled for good ([`settle_time`]; infinity: not within the run).
+    settle: f64,
+    /// max |q̇| over the 0.1 s before 12 s.
+    speed_at_12: f64,
+    /// Largest |q̇_k| / velocity limit, largest torque step (N·m per cycle).
+    speed_ratio: f64,
+    tau_step: f64,
+    /// Deepest beyond a position limit (≤ 0: inside).
+    beyond: f64,
+    /// Why it is not settled at the end ([`Unsettled`]), if it is not.
+    class: Option<Unsettled>,
+}
+
+/// Seeded random Panda goals (`config/panda-pose-posture.toml` with its torque
+/// filter, the safety layer's defaults), each from the scenario's start: TCP
+/// goals from 0.3 m to 1.4 m from the shoulder (within and beyond reach),
+/// posture goals up to 0.5 rad beyond the limits of every joint.
+/// `SWEEP_GOALS` goals (default 40) of `SWEEP_SECONDS` each (default 30 s);
+/// `SWEEP_GOALS=500 cargo test --release -p hcc-simulation --test
+/// limits_and_singularities sweep -- --nocapture` runs the full sweep of
+/// docs/limits-and-singularities.md. `SWEEP_DETAIL` prints every goal not
+/// settled by 12 s and every one above 0.9 of a velocity limit; `SWEEP_ONLY=g`
+/// runs goal g alone and prints its course every 0.5 s; `SWEEP_SAFETY`
+/// changes `[safety]` fields for a comparison, e.g. `velocity_damping=50`.
+///
+/// Asserted on every goal: no NaN, no joint beyond its position limits, every
+/// joint speed ≤ 0.95 × its URDF velocity limit, every torque step ≤ 1 N·m
+/// (the Franka's torque-discontinuity rule, through the shipped torque
+/// filter). Printed: when the goals settle (at rest, max |q̇| < 0.01 rad/s, or
+/// converged for good) — median, p95, max and the share by 3, 6, 12, 20 s —
+/// with the classes of those not settled. Asserted with the defaults (30 s
+/// per goal): every goal settled, ≥ 87.5 % by 12 s (the target is 95 %), none faster than 0.05 rad/s
+/// at 12 s.
 #[test]
-fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
-    let goals: usize = std::env::var("SWEEP_GOALS")
-        .ok()
+fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
+    let env = |k: &str| std::env::var(k).ok();
+    let goals: usize = env("SWEEP_GOALS")
         .and_then(|s| s.parse().ok())
-        .unwrap_or(100);
-    // `SWEEP_SECONDS`: the time each goal has (default 3 s).
-    let seconds: f64 = std::env::var("SWEEP_SECONDS")
-        .ok()
+        .unwrap_or(40);
+    let seconds: f64 = env("SWEEP_SECONDS")
         .and_then(|s| s.parse().ok())
-        .unwrap_or(3.0);
+        .unwrap_or(30.0);
+    let only: Option<usize> = env("SWEEP_ONLY").and_then(|s| s.parse().ok());
+    let detail = env("SWEEP_DETAIL").is_some();
     let base = load("panda-pose-posture.toml");
+    assert!(
+        base.torque_filter
+            .torque_rate_limit
+            .is_some_and(|r| r <= 1000.0),
+        "the Panda scenario ships the torque filter"
+    );
     let joints = base.model.joints.clone();
-    let mut rng = Rng(0x5eed_1234_abcd_0001);
-    let (mut settled, mut worst_beyond, mut worst_speed) = (0, f64::NEG_INFINITY, 0.0f64);
-    let mut unsettled = Vec::new();
     let eps = base.spec.singular_ratio;
-    let mut classes = std::collections::BTreeMap::new();
-    let mut travel_min = Vec::new();
+    let mut rng = Rng(0x5eed_1234_abcd_0001);
+    let mut runs = Vec::new();
     let mut overridden = false;
-    // `SWEEP_HORIZON`: also run each goal this long (s) and report, for the goals
-    // not settled by `seconds`, whether they settle by then and how far their end
-    // configuration is from the start at the URDF velocity limits.
-    let horizon: f64 = std::env::var("SWEEP_HORIZON")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0.0);
-    let mut late = Vec::new();
-    // `SWEEP_ONLY=g`: run goal g alone (the others drawn, not run) and print its
-    // course once a second.
-    let only: Option<usize> = std::env::var("SWEEP_ONLY")
-        .ok()
-        .and_then(|s| s.parse().ok());
     for g in 0..goals {
         let radius = rng.range(0.3, 1.4);
         let (az, el) = (rng.range(-3.1, 3.1), rng.range(-0.8, 1.2));
@@ -543,47 +599,16 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
         if only.is_some_and(|o| o != g) {
             continue;
         }
-        let mut scenario = panda(tcp, &posture);
-        overridden = sweep_safety_overrides(&mut scenario);
-        if let Ok(v) = std::env::var("SWEEP_DAMPING") {
-            for (l, x) in v.split(',').enumerate() {
-                let x: f64 = x.parse().unwrap();
-                let m = scenario.spec.levels[l].damping.nrows();
-                scenario.spec.levels[l].damping = DMatrix::identity(m, m) * x;
-            }
-            overridden = true;
-        }
-        if let Ok(v) = std::env::var("SWEEP_SINGULAR_RATIO") {
-            // The singular ratio ε of `[controller.singularity]` (fade region ε … 100 ε).
-            scenario.spec.singular_ratio = v.parse().unwrap();
-            overridden = true;
-        }
-        if let Ok(v) = std::env::var("SWEEP_GAIN_SCALE") {
-            // Every level s times faster: K_i × s², D_i × s (the damping ratios kept).
-            let x: f64 = v.parse().unwrap();
-            for l in &mut scenario.spec.levels {
-                l.stiffness *= x * x;
-                l.damping *= x;
-            }
-            overridden = true;
-        }
-        let full = run(scenario.clone(), seconds.max(horizon));
-        // The run up to `seconds` (the simulation is deterministic: a longer run
-        // has the shorter one as its prefix).
-        let cut = if horizon > seconds {
-            full.partition_point(|s| s.t < seconds - 1e-9)
-        } else {
-            full.len()
-        };
-        let log = &full[..cut];
-        assert!(full.iter().all(|s| s.finite), "goal {g}: a NaN");
+        let mut scenario = sweep_scenario(tcp, &posture);
+        overridden |= sweep_safety_overrides(&mut scenario);
+        let log = run(scenario.clone(), seconds);
+        assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
         if only.is_some() {
-            for smp in full.iter().step_by(500) {
+            for smp in log.iter().step_by(500) {
                 println!(
-                    "goal {g} t {:5.1}: |q̇| {:.3?} E {:.3} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
+                    "goal {g} t {:5.1}: |q̇| {:.3?} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
                     smp.t,
                     smp.qd.iter().map(|x| x.abs()).collect::<Vec<_>>(),
-                    smp.energy,
                     smp.errors,
                     smp.conditioning
                         .iter()
@@ -596,132 +621,170 @@ fn sweep_of_random_panda_goals_no_nan_no_joint_beyond_its_limits() {
                 );
             }
         }
-        let (beyond, speed) = limit_figures(&scenario, &full);
-        worst_beyond = worst_beyond.max(beyond);
-        worst_speed = worst_speed.max(speed);
-        // With the safety layer switched off (`SWEEP_SAFETY=enabled=0`, the paper's
-        // law alone) nothing keeps the joints inside: the end stops are counted, not asserted.
-        assert!(
-            beyond <= 0.0 || !scenario.spec.safety.enabled,
-            "goal {g}: a joint {beyond} rad beyond its limit"
-        );
-        if std::env::var_os("SWEEP_DETAIL").is_some() && speed > 1.0 {
-            let (mut best, mut at) = (0.0, (0, 0));
-            for (c, smp) in full.iter().enumerate() {
-                for (k, j) in joints.iter().enumerate() {
-                    let r = smp.qd[k].abs() / j.velocity_limit;
-                    if r > best {
-                        best = r;
-                        at = (c, k);
-                    }
-                }
-            }
-            let smp = &full[at.0];
+        let (beyond, speed_ratio) = limit_figures(&scenario, &log);
+        if only.is_some() {
+            trace_peak_speed(&joints, &log);
+        }
+        let settle = settle_time(&log);
+        let run = GoalRun {
+            g,
+            settle,
+            speed_at_12: if seconds >= 12.0 {
+                max_speed_between(&log, 11.9, 12.0)
+            } else {
+                f64::NAN
+            },
+            speed_ratio,
+            tau_step: log.iter().skip(1).map(|s| s.tau_step).fold(0.0, f64::max),
+            beyond,
+            class: settle.is_infinite().then(|| classify(&log, seconds, eps)),
+        };
+        if detail && (run.settle > 12.0 || run.speed_ratio > 0.9) {
+            let last = log.last().unwrap();
             println!(
-                "goal {g}: speed {best:.2} × limit at joint {} t = {:.3} s; guard {} faded {} governor {:.2} saturated {}; q {:.2?}",
-                at.1 + 1,
-                smp.t,
-                smp.guard,
-                smp.faded,
-                smp.governor,
-                smp.saturated,
-                smp.q
+                "goal {g}: safe holds {}, first at {:?} s; tcp {tcp:.3?} posture {posture:.2?}; settled at {:.2} s; |q̇|/limit {:.3}; |q̇| at 12 s {:.3}; errors {:.4?}; conditioning {:?}; faded {} guard {} governor {:.2}; q {:.3?}",
+                log.iter().filter(|s| s.safe_hold).count(),
+                log.iter().find(|s| s.safe_hold).map(|s| s.t),
+                run.settle,
+                run.speed_ratio,
+                run.speed_at_12,
+                last.errors,
+                last.conditioning
+                    .iter()
+                    .map(|c| format!("{c:.2e}"))
+                    .collect::<Vec<_>>(),
+                last.faded,
+                last.guard,
+                last.governor,
+                last.q,
             );
         }
-        let rest = max_speed(log, seconds - 0.1) < 0.01;
-        let last = log.last().unwrap();
-        let converged = last.errors[0] < 1e-3 && last.errors[1] < 1e-2;
-        if rest || converged {
-            settled += 1;
-        } else {
-            let class = classify(log, seconds, eps);
-            let q0: Vec<f64> = scenario.q0.iter().copied().collect();
-            let t_min = shortest_move(&joints, &q0, &last.q, 0.9);
-            if horizon > seconds {
-                // Where the goal settles given the horizon, and whether any motion
-                // within the URDF velocity limits could have got there by `seconds`.
-                let end = full.last().unwrap();
-                let settled_late = max_speed(&full, horizon - 0.1) < 0.01
-                    || (end.errors[0] < 1e-3 && end.errors[1] < 1e-2);
-                let reach = shortest_move(&joints, &q0, &end.q, 1.0);
-                late.push((g, class, settled_late, reach, settle_time(&full)));
-            }
-            *classes.entry(class).or_insert(0usize) += 1;
-            if class == Unsettled::Travelling {
-                travel_min.push(t_min);
-            }
-            unsettled.push((
-                g,
-                class,
-                max_speed(log, seconds - 0.1),
-                last.errors[0],
-                last.errors[1],
-                radius,
-            ));
-            if std::env::var_os("SWEEP_DETAIL").is_some() {
-                let at = |t: f64| log.iter().find(|s| s.t >= t).unwrap_or(last);
-                println!(
-                    "goal {g}: tcp {tcp:.3?} posture {posture:.2?}; |q̇| at 1/2/3 s {:.3}/{:.3}/{:.3}; errors {:.4?}; conditioning {:?}; faded {} guard {} governor {:.2}; q {:.3?}; q̇ {:.3?}",
-                    at(1.0).qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
-                    at(2.0).qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
-                    last.qd.iter().map(|x| x.abs()).fold(0.0, f64::max),
-                    last.errors,
-                    last.conditioning
-                        .iter()
-                        .map(|c| format!("{c:.2e}"))
-                        .collect::<Vec<_>>(),
-                    last.faded,
-                    last.guard,
-                    last.governor,
-                    last.q,
-                    last.qd,
-                );
-            }
-        }
+        runs.push(run);
     }
-    println!(
-        "sweep: {goals} goals, {settled} at rest or converged by {seconds} s ({:.1} %); deepest beyond a limit {worst_beyond:.3e} rad (≤ 0: inside); largest |q̇|/limit {worst_speed:.2}; not settled (goal, class, max |q̇| over the last 0.1 s, TCP and orientation errors, TCP goal radius): {unsettled:.3?}",
-        100.0 * settled as f64 / goals as f64
-    );
-    travel_min.sort_by(f64::total_cmp);
-    println!(
-        "sweep: not settled by class {classes:?}; travelling: shortest time from the start to where they are at 0.9 of the velocity limits {travel_min:.2?} s"
-    );
-    if horizon > seconds {
-        let settled_late: Vec<_> = late.iter().filter(|l| l.2).collect();
-        let out_of_time = settled_late.iter().filter(|l| l.3 > seconds).count();
-        let mut by_class = std::collections::BTreeMap::new();
-        for l in &settled_late {
-            let e = by_class.entry(l.1).or_insert((0usize, 0usize));
-            e.0 += 1;
-            if l.3 > seconds {
-                e.1 += 1;
-            }
-        }
-        let mut reach: Vec<f64> = settled_late.iter().map(|l| l.3).collect();
-        reach.sort_by(f64::total_cmp);
-        let mut times = std::collections::BTreeMap::new();
-        for l in &late {
-            times.entry(l.1).or_insert_with(Vec::new).push(l.4);
-        }
-        let never: Vec<_> = late.iter().filter(|l| !l.2).map(|l| (l.0, l.1)).collect();
-        println!("sweep: not settled by {horizon} s (goal, class at {seconds} s): {never:?}");
-        for (class, t) in &mut times {
-            t.sort_by(f64::total_cmp);
-            println!("sweep: {class:?}: settled at {t:.1?} s (inf: not by {horizon} s)");
-        }
-        println!(
-            "sweep: of the {} goals not settled by {seconds} s, {} settle by {horizon} s; of those, {out_of_time} end where no motion within the URDF velocity limits gets by {seconds} s (max_k |Δq_k|/v_k > {seconds} s); by class (settled by {horizon} s, of which out of time): {by_class:?}; max_k |Δq_k|/v_k of those settled: {reach:.2?} s",
-            late.len(),
-            settled_late.len()
-        );
-    }
-    if seconds == 3.0 && goals >= 100 && !overridden {
+    report_sweep(&runs, seconds);
+    for r in &runs {
+        let g = r.g;
         assert!(
-            settled as f64 >= 0.35 * goals as f64,
-            "only {settled} of {goals} goals settled by 3 s"
+            r.beyond <= 0.0 || overridden,
+            "goal {g}: a joint {} rad beyond its limit",
+            r.beyond
+        );
+        assert!(
+            r.speed_ratio <= 0.95 || overridden,
+            "goal {g}: a joint at {:.3} × its velocity limit",
+            r.speed_ratio
+        );
+        assert!(
+            r.tau_step <= 1.0 + 1e-9,
+            "goal {g}: a torque step of {} N·m",
+            r.tau_step
         );
     }
+    if seconds >= 30.0 && only.is_none() && !overridden {
+        let n = runs.len() as f64;
+        let by = |t: f64| runs.iter().filter(|r| r.settle <= t).count() as f64 / n;
+        assert_eq!(by(30.0), 1.0, "every goal settles within 30 s");
+        // The target is 95 % by 12 s; the 40-goal run settles 90 %, the rest
+        // are goals beyond reach creeping along the reach boundary (singular
+        // level 1) until 17–27 s (docs/limits-and-singularities.md). Held at
+        // what is reached, so that a regression shows.
+        assert!(
+            by(12.0) >= 0.875,
+            "{:.1} % settled by 12 s",
+            100.0 * by(12.0)
+        );
+        let fast: Vec<_> = runs
+            .iter()
+            .filter(|r| r.speed_at_12 >= 0.05)
+            .map(|r| r.g)
+            .collect();
+        assert!(
+            fast.is_empty(),
+            "goals still faster than 0.05 rad/s at 12 s: {fast:?}"
+        );
+    }
+}
+
+/// Where a goal is fastest against a velocity limit: the joint, the time,
+/// and the course around it every 10 ms (for `SWEEP_ONLY`).
+fn trace_peak_speed(joints: &[hcc_model::Joint], log: &[Sample]) {
+    let (mut best, mut at) = (0.0, (0, 0));
+    for (c, smp) in log.iter().enumerate() {
+        for (k, j) in joints.iter().enumerate() {
+            let r = smp.qd[k].abs() / j.velocity_limit;
+            if r > best {
+                best = r;
+                at = (c, k);
+            }
+        }
+    }
+    println!(
+        "peak: {best:.3} × the limit of joint {} at t = {:.3} s",
+        at.1 + 1,
+        log[at.0].t
+    );
+    for smp in log[at.0.saturating_sub(300)..(at.0 + 100).min(log.len())]
+        .iter()
+        .step_by(10)
+    {
+        println!(
+            "  t {:.3}: q̇/limit {:.2?} governor {:.2} step {:.2} guard {} faded {}",
+            smp.t,
+            smp.qd
+                .iter()
+                .zip(joints)
+                .map(|(v, j)| v / j.velocity_limit)
+                .collect::<Vec<_>>(),
+            smp.governor,
+            smp.tau_step,
+            smp.guard,
+            smp.faded
+        );
+    }
+}
+
+/// max |q̇| over the samples in [from, to].
+fn max_speed_between(log: &[Sample], from: f64, to: f64) -> f64 {
+    log.iter()
+        .filter(|s| s.t >= from && s.t <= to)
+        .flat_map(|s| s.qd.iter().map(|x| x.abs()))
+        .fold(0.0, f64::max)
+}
+
+/// Prints the sweep's figures: limits, torque steps, the settling distribution
+/// and the classes of the goals not settled.
+fn report_sweep(runs: &[GoalRun], seconds: f64) {
+    let n = runs.len().max(1) as f64;
+    let mut settle: Vec<f64> = runs.iter().map(|r| r.settle).collect();
+    settle.sort_by(f64::total_cmp);
+    let q =
+        |p: f64| settle[((p * (settle.len() as f64 - 1.0)).round() as usize).min(settle.len() - 1)];
+    let share = |t: f64| 100.0 * runs.iter().filter(|r| r.settle <= t).count() as f64 / n;
+    let worst = |f: fn(&GoalRun) -> f64| runs.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+    println!(
+        "sweep: {} goals of {seconds} s; deepest beyond a position limit {:.2e} rad (≤ 0: inside); largest |q̇|/velocity limit {:.3}; largest torque step {:.3} N·m; largest |q̇| at 12 s {:.4} rad/s",
+        runs.len(),
+        worst(|r| r.beyond),
+        worst(|r| r.speed_ratio),
+        worst(|r| r.tau_step),
+        worst(|r| r.speed_at_12),
+    );
+    println!(
+        "sweep: settled (at rest or converged for good) after median {:.2} s, p95 {:.2} s, max {:.2} s; by 3 s {:.1} %, 6 s {:.1} %, 12 s {:.1} %, 20 s {:.1} %, {seconds} s {:.1} %",
+        q(0.5),
+        q(0.95),
+        q(1.0),
+        share(3.0),
+        share(6.0),
+        share(12.0),
+        share(20.0),
+        share(seconds),
+    );
+    let mut classes = std::collections::BTreeMap::new();
+    for r in runs.iter().filter_map(|r| r.class.map(|c| (r.g, c))) {
+        classes.entry(r.1).or_insert_with(Vec::new).push(r.0);
+    }
+    println!("sweep: not settled within {seconds} s, by class (goals): {classes:?}");
 }
 
 /// `SWEEP_SAFETY=field=value,…`: the `[safety]` fields of a comparison run (numeric
@@ -749,6 +812,31 @@ fn sweep_safety_overrides(s: &mut Scenario) -> bool {
             "joint_limit_margin" => sp.joint_limit_margin = x,
             "joint_limit_damping_ratio" => sp.joint_limit_damping_ratio = x,
             "enabled" => sp.enabled = x != 0.0,
+            "velocity_governor" => sp.velocity_governor = x != 0.0,
+            "velocity_barrier" => sp.velocity_barrier = x != 0.0,
+            "velocity_barrier_rate" => sp.velocity_barrier_rate = x,
+            "spring_saturation" => sp.spring_saturation = x != 0.0,
+            // The torque filter: its rate limit (N·m/s, 0: off), per joint (1) or
+            // whole (0), its low-pass (Hz, 0: off).
+            "torque_rate_limit" => s.torque_filter.torque_rate_limit = (x > 0.0).then_some(x),
+            "per_joint" => {
+                s.torque_filter.rate_limit_mode = if x != 0.0 {
+                    hcc_config::torque_filter::RateLimitMode::PerJoint
+                } else {
+                    hcc_config::torque_filter::RateLimitMode::Whole
+                }
+            }
+            "low_pass_hz" => s.torque_filter.low_pass_hz = (x > 0.0).then_some(x),
+            // The posture level's and the TCP level's transition speeds.
+            "posture_max_speed" => s.setpoint_limits.levels[2].max_speed = x,
+            "tcp_max_speed" => s.setpoint_limits.levels[0].max_speed = x,
+            // Every level x times faster: K_i × x², D_i × x.
+            "gain_scale" => {
+                for l in &mut s.spec.levels {
+                    l.stiffness *= x * x;
+                    l.damping *= x;
+                }
+            }
             _ => panic!("SWEEP_SAFETY: unknown field {k:?}"),
         }
     }
@@ -763,9 +851,9 @@ fn sweep_safety_overrides(s: &mut Scenario) -> bool {
 /// acts there (their torques are the paper's law bit for bit) and the plant's end stops
 /// are never touched. The Panda scenario as shipped reaches no position limit and no
 /// singularity either, but without the velocity limits its wrist went over its URDF
-/// velocity limit: there the velocity limits act (spring saturation, governor,
-/// damping — and nothing else), the plant sees no joint over its velocity limit, and
-/// the governor's and damping's torque rate stays under 1000 N·m/s.
+/// velocity limit: there the velocity limits act (governor, damping, barrier — and
+/// nothing else), no joint passes 0.95 of its velocity limit, and the commands
+/// step by at most 1 N·m per cycle (the shipped torque filter).
 #[test]
 fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
     for name in [
@@ -793,13 +881,13 @@ fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
         if panda {
             assert!(vel + sat > 0, "{name}: the velocity limits never acted");
             assert!(
-                speed < 1.0,
+                speed <= 0.95,
                 "{name}: a joint at {speed} × its velocity limit"
             );
-            if let Some(&first) = onset.first() {
-                assert!(first < 0.1 * gov_rate, "a torque jump at the onset");
-            }
-            assert!(gov_rate < 1000.0, "velocity limits: {gov_rate} N·m/s");
+            // The scenario ships the torque filter (1000 N·m/s): what the
+            // velocity limits change comes in at the robot's rate.
+            let step = largest_command_step(&log);
+            assert!(step <= 1.0 + 1e-9, "{name}: a torque step of {step} N·m");
         } else {
             assert_eq!(vel + sat, 0, "{name}: the velocity limits acted");
         }

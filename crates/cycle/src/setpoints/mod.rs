@@ -142,12 +142,19 @@ impl SetpointHandler {
     /// Checks `setpoint`, starts its transition if accepted, and records the
     /// answer for its client, now (whatever its application point). Returns
     /// the answer code. Allocation-free.
-    pub fn take(&mut self, setpoint: &Setpoint) -> u32 {
-        self.take_counted(setpoint, false)
+    pub fn take(&mut self, setpoint: &Setpoint, controller: &mut Controller) -> u32 {
+        self.take_counted(setpoint, false, controller)
     }
 
-    fn take_counted(&mut self, setpoint: &Setpoint, late: bool) -> u32 {
-        let result = self.check(setpoint);
+    fn take_counted(
+        &mut self,
+        setpoint: &Setpoint,
+        late: bool,
+        controller: &mut Controller,
+    ) -> u32 {
+        let result = self
+            .check(setpoint)
+            .and_then(|()| self.check_gain_rate(setpoint, controller));
         let duration = match result {
             Ok(()) => self.start(setpoint),
             Err(_) => 0.0,
@@ -162,7 +169,12 @@ impl SetpointHandler {
     /// queued until [`SetpointHandler::apply_due`] reaches its state (`None`).
     /// Rejected at once by the model-free checks or a full queue.
     /// Allocation-free.
-    pub fn receive(&mut self, setpoint: &Setpoint, state_seq: u64) -> Option<u32> {
+    pub fn receive(
+        &mut self,
+        setpoint: &Setpoint,
+        state_seq: u64,
+        controller: &mut Controller,
+    ) -> Option<u32> {
         if let Err(r) = setpoint.validate() {
             self.record(setpoint, r.code(), 0.0, false);
             return Some(r.code());
@@ -170,7 +182,7 @@ impl SetpointHandler {
         let at = setpoint.apply_at_state_seq;
         if at <= state_seq {
             // Late: its state has already been answered.
-            return Some(self.take_counted(setpoint, at < state_seq));
+            return Some(self.take_counted(setpoint, at < state_seq, controller));
         }
         if self.pending.push(setpoint) {
             return None;
@@ -183,7 +195,7 @@ impl SetpointHandler {
     /// Takes, in arrival order, every queued setpoint whose application
     /// point the state `state_seq` has reached. Bounded by
     /// [`MAX_PENDING_SETPOINTS`](hcc_msgs::MAX_PENDING_SETPOINTS); allocation-free. Returns how many it took.
-    pub fn apply_due(&mut self, state_seq: u64) -> usize {
+    pub fn apply_due(&mut self, state_seq: u64, controller: &mut Controller) -> usize {
         let mut taken = 0;
         let mut k = 0;
         while k < self.pending.len {
@@ -194,7 +206,7 @@ impl SetpointHandler {
             }
             let sp = self.pending.slots[slot];
             self.pending.remove(k);
-            self.take_counted(&sp, false);
+            self.take_counted(&sp, false, controller);
             taken += 1;
         }
         taken
@@ -240,23 +252,47 @@ impl SetpointHandler {
         }
     }
 
-    /// Starts the accepted setpoint's transition; returns its duration (s),
-    /// stretched to the level's speed limit.
-    fn start(&mut self, sp: &Setpoint) -> f64 {
-        let level = &mut self.levels[sp.level as usize];
+    /// The gains of a checked setpoint against the control rate at the
+    /// state of the last cycle (hcc_control::rate): K or D more than the
+    /// period carries is refused with [`Rejection::GainsAboveRate`]. Leaves the
+    /// symmetrised gains in the level's buffers for [`SetpointHandler::start`].
+    fn check_gain_rate(
+        &mut self,
+        sp: &Setpoint,
+        controller: &mut Controller,
+    ) -> Result<(), Rejection> {
+        let i = sp.level as usize;
+        let level = &mut self.levels[i];
         let m = level.transition.dim();
-        let mut duration = sp.duration_s;
-        if sp.sets(SETPOINT_GOAL) {
-            let distance = level.transition.distance_to(sp.goal());
-            // Peak speed of the quintic profile: 15/8 · distance / T.
-            duration = duration.max(1.875 * distance / level.max_speed);
-        }
         for a in 0..m {
             for b in 0..m {
                 // Symmetrised, so the law's exact symmetry check holds.
                 level.k[(a, b)] = 0.5 * (sp.stiffness_at(a, b) + sp.stiffness_at(b, a));
                 level.d[(a, b)] = 0.5 * (sp.damping_at(a, b) + sp.damping_at(b, a));
             }
+        }
+        let (k, d) = (
+            sp.sets(SETPOINT_STIFFNESS).then_some(&level.k),
+            sp.sets(SETPOINT_DAMPING).then_some(&level.d),
+        );
+        if k.is_none() && d.is_none() {
+            return Ok(());
+        }
+        controller
+            .check_gain_rate(i, k, d)
+            .map_err(|_| Rejection::GainsAboveRate)
+    }
+
+    /// Starts the accepted setpoint's transition (its gains symmetrised by
+    /// [`SetpointHandler::check_gain_rate`]); returns its duration (s),
+    /// stretched to the level's speed limit.
+    fn start(&mut self, sp: &Setpoint) -> f64 {
+        let level = &mut self.levels[sp.level as usize];
+        let mut duration = sp.duration_s;
+        if sp.sets(SETPOINT_GOAL) {
+            let distance = level.transition.distance_to(sp.goal());
+            // Peak speed of the quintic profile: 15/8 · distance / T.
+            duration = duration.max(1.875 * distance / level.max_speed);
         }
         let target = Target {
             goal: sp.sets(SETPOINT_GOAL).then(|| sp.goal()),
