@@ -41,6 +41,7 @@
 
 pub mod commanding;
 pub mod error;
+pub mod franka;
 pub mod output;
 pub mod schedule;
 pub mod schema;
@@ -134,6 +135,8 @@ pub struct Scenario {
     pub output: output::Output,
     /// The `[[setpoint]]` entries, checked and sorted by time.
     pub setpoints: Vec<schedule::ScheduledSetpoint>,
+    /// Resolved `[franka]` (libfranka's defaults where not given).
+    pub franka: franka::Franka,
 }
 
 /// Loader context: the file, its text, and helpers that build located errors.
@@ -332,6 +335,7 @@ impl Scenario {
         let commanding = commanding::resolve(cx.file, cx.text, &file.commanding, &spec.levels, n)?;
         let output = output::resolve(cx.file, cx.text, &file.output)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
+        let franka = franka::resolve(cx.file, cx.text, &file.franka)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -353,6 +357,7 @@ impl Scenario {
             commanding,
             output,
             setpoints,
+            franka,
         })
     }
 }
