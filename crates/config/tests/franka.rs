@@ -198,3 +198,24 @@ fn malformed_franka_tables_name_the_field_and_line() {
         failures.join("\n")
     );
 }
+
+#[test]
+fn shipped_franka_scenarios_load_as_the_driver_needs_them() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    for f in ["fr3-pose-posture.toml", "panda-fer-pose-posture.toml"] {
+        let s = Scenario::load(dir.join(f)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s.model.nq(), 7, "{f}");
+        // The robot adds gravity itself.
+        assert!(!s.spec.gravity_compensation, "{f}");
+        // The output pipeline keeps two cycles' change within one step the
+        // robot accepts.
+        let rate = s.output.torque_rate_limit.expect("a torque-rate limit");
+        assert!(2.0 * rate * 1e-3 <= 1.0, "{f}: {rate}");
+        assert_eq!(s.franka.torque_rate_limit, FRANKA_MAX_TORQUE_RATE, "{f}");
+        assert_eq!(
+            s.controller_daemon.torque_limits.as_slice(),
+            FRANKA_TORQUE_LIMITS,
+            "{f}"
+        );
+    }
+}

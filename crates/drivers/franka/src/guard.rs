@@ -37,6 +37,8 @@ pub struct GuardCounts {
     pub rate_limited: u64,
     /// The largest step clipped away, N·m (how far the command was off).
     pub max_clipped_step: f64,
+    /// The largest step written, N·m (at most the rate limit times 1 ms).
+    pub max_step_written: f64,
 }
 
 /// The guard: limits, the largest derivative, and the last torque written.
@@ -97,18 +99,25 @@ impl TorqueGuard {
             *t = clamped;
         }
         self.counts.limited += u64::from(limited);
+        let max_step = self.max_step();
+        let too_fast = tau
+            .iter()
+            .zip(&self.last)
+            .any(|(t, l)| (t - l).abs() > max_step);
         // Finite by now, so limit_rate_torques cannot fail (it refuses
-        // non-finite values only).
-        if let Ok(stepped) = franka::limit_rate_torques(&self.max_rate, tau, &self.last) {
+        // non-finite values only). Within the rate, τ is left bit for bit.
+        if too_fast && let Ok(stepped) = franka::limit_rate_torques(&self.max_rate, tau, &self.last)
+        {
             let mut clipped = 0.0_f64;
             for (t, s) in tau.iter().zip(&stepped) {
                 clipped = clipped.max((t - s).abs());
             }
-            if clipped > 0.0 {
-                self.counts.rate_limited += 1;
-                self.counts.max_clipped_step = self.counts.max_clipped_step.max(clipped);
-            }
+            self.counts.rate_limited += 1;
+            self.counts.max_clipped_step = self.counts.max_clipped_step.max(clipped);
             *tau = stepped;
+        }
+        for (t, l) in tau.iter().zip(&self.last) {
+            self.counts.max_step_written = self.counts.max_step_written.max((t - l).abs());
         }
         self.last = *tau;
     }
@@ -151,6 +160,8 @@ mod tests {
             }
         }
         assert_eq!(g.last()[0], 5.0);
+        assert!(g.counts().max_step_written <= 1.0);
+        assert!((g.counts().max_step_written - step).abs() < 1e-12);
     }
 
     #[test]

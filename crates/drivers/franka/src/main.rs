@@ -487,6 +487,10 @@ fn stats(
             "guard_max_clipped_step_mnm",
             (g.max_clipped_step * 1e3).round() as u64,
         ),
+        (
+            "max_torque_step_written_mnm",
+            (g.max_step_written * 1e3).ceil() as u64,
+        ),
         ("states_skipped", c.states_skipped),
         ("bad_states", c.bad_states),
         ("idle_states", c.idle_states),
