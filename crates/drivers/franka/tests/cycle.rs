@@ -57,12 +57,14 @@ impl TorqueMotion for FakeMotion {
         if let Some(e) = self.fail.take() {
             return Err(e);
         }
-        let mut s = RobotState::default();
-        s.time = franka::Duration::from_millis(self.next_id);
-        s.q = self.q;
-        s.dq = self.dq;
-        s.tau_J = [0.5; JOINTS];
-        s.control_command_success_rate = 1.0;
+        let s = RobotState {
+            time: franka::Duration::from_millis(self.next_id),
+            q: self.q,
+            dq: self.dq,
+            tau_J: [0.5; JOINTS],
+            control_command_success_rate: 1.0,
+            ..RobotState::default()
+        };
         self.next_id += 1;
         Ok(s)
     }
