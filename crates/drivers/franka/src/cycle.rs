@@ -241,6 +241,8 @@ impl<'a> FrankaCycle<'a> {
         self.guard.restart();
         self.stopping = false;
         self.motion_cycles = 0;
+        // Gaps before the motion (a recovery, its start) are not states skipped.
+        self.last_id = 0;
         self.counts.motions += 1;
     }
 
