@@ -186,18 +186,34 @@ def test_fr3_reaches_two_goals_without_a_reflex(tmp_path: pathlib.Path) -> None:
     port = free_port()
     run = Run(tmp_path, FR3, port)
     try:
-        with franka_sim(tmp_path, port) as sim_log, run.controller(), run.driver() as driver:
-            wait_for_line(run.driver_log, "applying torque commands", driver, 60)
-            for goal in (GOAL_1, GOAL_2):
-                run.reach(goal)
-            stats = run.stop_driver(driver)
-        assert_clean(stats, sim_log)
-        c = stats["counters"]
-        assert c["applied_commands"] > 0 and c["motions"] == 1, c
-        for name in ("state_to_joint_state", "command_to_torque", "driver_added"):
-            assert stats["figures"][name]["summary"]["count"] > 1000, name
+        with franka_sim(tmp_path, port) as sim_log:
+            # The robot's own model: the server serves franka_description's
+            # hand-less FR3, the URDF shipped in config/robots/fr3.
+            urdf = tmp_path / "served.urdf"
+            cmd = [str(binary("hcc-franka")), "--robot-ip", f"127.0.0.1:{port}"]
+            cmd += ["--no-realtime", "--save-urdf", str(urdf)]
+            out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60)
+            assert out.returncode == 0, out.stderr
+            shipped = ROOT / "config" / "robots" / "fr3" / "fr3.urdf"
+            assert urdf.read_text() == shipped.read_text()
+            reach_two_goals(run, sim_log)
     finally:
         remove_ipc_files(run.prefix)
+
+
+def reach_two_goals(run: Run, sim_log: pathlib.Path) -> None:
+    """Controller and driver on the server: two goals by `hcc goal`, then a
+    clean stop; nothing the robot would refuse."""
+    with run.controller(), run.driver() as driver:
+        wait_for_line(run.driver_log, "applying torque commands", driver, 60)
+        for goal in (GOAL_1, GOAL_2):
+            run.reach(goal)
+        stats = run.stop_driver(driver)
+    assert_clean(stats, sim_log)
+    c = stats["counters"]
+    assert c["applied_commands"] > 0 and c["motions"] == 1, c
+    for name in ("state_to_joint_state", "command_to_torque", "driver_added"):
+        assert stats["figures"][name]["summary"]["count"] > 1000, name
 
 
 def test_controller_killed_then_restarted(tmp_path: pathlib.Path) -> None:
