@@ -27,6 +27,7 @@ import re
 import signal
 import socket
 import subprocess
+import tempfile
 import time
 from typing import Iterator
 
@@ -42,7 +43,7 @@ MJCF = ROOT / "config" / "robots" / "fr3" / "fr3-nomesh.xml"
 LAUNCHER = pathlib.Path(__file__).with_name("franka_sim_launcher.py")
 PEER = pathlib.Path(__file__).with_name("libfranka_peer.py")
 #: The pylibfranka comparison needs the fixed FCI port: one test at a time.
-PORT_1337_LOCK = pathlib.Path("/tmp/hcc-franka-sim-1337.lock")
+PORT_1337_LOCK = pathlib.Path(tempfile.gettempdir()) / "hcc-franka-sim-1337.lock"
 
 #: The flange goals of the runs (m): the first, then one sent mid-run.
 GOAL_1 = [0.50, 0.10, 0.56]

@@ -8,34 +8,19 @@ use hcc_config::franka::{
 use hcc_config::{ConfigError, Scenario};
 use std::path::PathBuf;
 
-/// A small valid scenario; `[franka]` is appended by the cases.
-const BASE: &str = r#"name = "base"
-
-[robot]
-urdf = "planar4.urdf"
-root_link = "base"
-tip_link = "tcp"
-gravity = [0.0, -9.81, 0.0]
-
-[[level]]
-task = "position"
-frame = "tcp"
-axes = ["x", "y"]
-stiffness = [1000.0, 1000.0]
-damping = [40.0, 40.0]
-goal = [0.90, 0.80]
-
-[initial]
-q0 = [0.4, -0.5088, -1.6578, 0.3966]
-"#;
+/// A valid scenario (the paper's simulation #1); `[franka]` is appended by
+/// the cases.
+const BASE: &str = include_str!("../../../config/paper-sim1.toml");
 
 fn load(franka: &str) -> Result<Scenario, ConfigError> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/test-scenario.toml");
     Scenario::from_toml_str(&format!("{BASE}\n[franka]\n{franka}"), &path)
 }
 
-/// The line of `[franka]`'s first field.
-const FIRST_LINE: usize = 21;
+/// The line of `[franka]`'s first field (after the blank line and the header).
+fn first_line() -> usize {
+    BASE.lines().count() + 3
+}
 
 #[test]
 fn absent_fields_take_libfranka_s_defaults() {
@@ -182,10 +167,11 @@ fn malformed_franka_tables_name_the_field_and_line() {
                 if !msg.contains(named) {
                     failures.push(format!("{name}: message does not name {field:?}: {msg}"));
                 }
-                if e.line() != Some(FIRST_LINE) {
+                if e.line() != Some(first_line()) {
                     failures.push(format!(
-                        "{name}: line {:?}, expected {FIRST_LINE}: {msg}",
-                        e.line()
+                        "{name}: line {:?}, expected {}: {msg}",
+                        e.line(),
+                        first_line()
                     ));
                 }
             }
