@@ -193,9 +193,12 @@ fn shipped_franka_scenarios_load_as_the_driver_needs_them() {
         assert_eq!(s.model.nq(), 7, "{f}");
         // The robot adds gravity itself.
         assert!(!s.spec.gravity_compensation, "{f}");
-        // The output pipeline keeps two cycles' change within one step the
+        // The torque filter keeps two cycles' change within one step the
         // robot accepts.
-        let rate = s.output.torque_rate_limit.expect("a torque-rate limit");
+        let rate = s
+            .torque_filter
+            .torque_rate_limit
+            .expect("a torque-rate limit");
         assert!(2.0 * rate * 1e-3 <= 1.0, "{f}: {rate}");
         assert_eq!(s.franka.torque_rate_limit, FRANKA_MAX_TORQUE_RATE, "{f}");
         assert_eq!(

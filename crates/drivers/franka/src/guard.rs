@@ -17,7 +17,7 @@
 //!    `limitRate` ([`franka::limit_rate_torques`]).
 //!
 //! Each step counts the cycles it changed something. The controller's own
-//! output pipeline (`[output] torque_rate_limit`) should already keep the
+//! torque filter (`[torque_filter] torque_rate_limit`) should already keep the
 //! steps small: a clipped cycle here means the two disagree, and the
 //! counters say so. Allocation-free.
 
