@@ -3,9 +3,12 @@
 Every wire type has the same size, alignment and field offsets as its
 ``#[repr(C)]`` Rust definition (``tests/test_layout.py`` compares them with
 the Rust compiler's own figures), and its ``type_name()`` returns the
-iceoryx2 type name of the Rust type including the schema version, so
-iceoryx2 connects a Python peer to the Rust peers and refuses one built
-against another schema (``IncompatibleTypes``).
+iceoryx2 type name of the Rust type including the version of its part of
+the contract (``@driver<N>``: joint state and torque command; ``@client<N>``:
+setpoints and telemetry), so iceoryx2 connects a Python peer to the Rust
+peers and refuses one built against another version of that part
+(``IncompatibleTypes``). The two parts are versioned apart: a telemetry
+change bumps :data:`CLIENT_SCHEMA_VERSION` only, and drivers keep working.
 
 Joint vectors hold :data:`MAX_JOINTS` entries of which the first
 ``header.n_joints`` are meaningful; writers keep the tail zero.
@@ -18,8 +21,12 @@ import enum
 import math
 from typing import Any, Sequence
 
-#: Version of the message schema; part of every type name.
-SCHEMA_VERSION: int = 3
+#: Version of the driver-facing part of the contract (joint state, torque
+#: command, their events and flags); part of their type names (``@driver<N>``).
+DRIVER_SCHEMA_VERSION: int = 3
+#: Version of the client-facing part (setpoints, telemetry, rejection codes);
+#: part of their type names (``@client<N>``).
+CLIENT_SCHEMA_VERSION: int = 3
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -50,8 +57,12 @@ MAX_PENDING_SETPOINTS: int = 32
 _Joints = ctypes.c_double * MAX_JOINTS
 
 
-def _type_name(name: str) -> str:
-    return f"hcc_msgs::{name}@schema{SCHEMA_VERSION}"
+def _driver_type_name(name: str) -> str:
+    return f"hcc_msgs::{name}@driver{DRIVER_SCHEMA_VERSION}"
+
+
+def _client_type_name(name: str) -> str:
+    return f"hcc_msgs::{name}@client{CLIENT_SCHEMA_VERSION}"
 
 
 class MsgError(ValueError):
@@ -116,14 +127,13 @@ class Header(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("Header")
+        return f"hcc_msgs::Header@driver{DRIVER_SCHEMA_VERSION}@client{CLIENT_SCHEMA_VERSION}"
 
-    def check(self, msg: str, expected_n: int) -> int:
-        """Checks the schema version and the joint count; returns n."""
-        if self.schema_version != SCHEMA_VERSION:
-            raise MsgError(
-                f"{msg}: schema version {self.schema_version}, expected {SCHEMA_VERSION}"
-            )
+    def check(self, msg: str, expected_n: int, version: int = DRIVER_SCHEMA_VERSION) -> int:
+        """Checks the schema version (of the message's part: ``version``) and
+        the joint count; returns n."""
+        if self.schema_version != version:
+            raise MsgError(f"{msg}: schema version {self.schema_version}, expected {version}")
         return _check_n(msg, self.n_joints, expected_n)
 
     def n(self) -> int:
@@ -131,8 +141,12 @@ class Header(ctypes.Structure):
         return min(self.n_joints, MAX_JOINTS)
 
 
-def _new_header() -> Header:
-    return Header(schema_version=SCHEMA_VERSION)
+def _driver_header() -> Header:
+    return Header(schema_version=DRIVER_SCHEMA_VERSION)
+
+
+def _client_header() -> Header:
+    return Header(schema_version=CLIENT_SCHEMA_VERSION)
 
 
 class JointState(ctypes.Structure):
@@ -161,12 +175,12 @@ class JointState(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("JointState")
+        return _driver_type_name("JointState")
 
     @classmethod
     def zeroed(cls) -> "JointState":
         """All-zero state with the current schema and status OK."""
-        return cls(header=_new_header())
+        return cls(header=_driver_header())
 
     def n(self) -> int:
         """Number of valid joints (clamped to the capacity)."""
@@ -236,12 +250,12 @@ class TorqueCommand(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("TorqueCommand")
+        return _driver_type_name("TorqueCommand")
 
     @classmethod
     def zeroed(cls) -> "TorqueCommand":
         """All-zero command with the current schema and mode NORMAL."""
-        return cls(header=_new_header())
+        return cls(header=_driver_header())
 
     def n(self) -> int:
         """Number of valid joints (clamped to the capacity)."""
@@ -305,7 +319,7 @@ class TelemetryCounters(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("TelemetryCounters")
+        return _client_type_name("TelemetryCounters")
 
 
 class TelemetryTimings(ctypes.Structure):
@@ -321,7 +335,7 @@ class TelemetryTimings(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("TelemetryTimings")
+        return _client_type_name("TelemetryTimings")
 
 
 class SetpointAnswer(ctypes.Structure):
@@ -359,7 +373,7 @@ class SetpointAnswer(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("SetpointAnswer")
+        return _client_type_name("SetpointAnswer")
 
     def accepted(self) -> bool:
         """Whether the setpoint was accepted."""
@@ -427,7 +441,7 @@ class Telemetry(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("Telemetry")
+        return _client_type_name("Telemetry")
 
     def n(self) -> int:
         """Number of valid joints (clamped to the capacity)."""
@@ -539,7 +553,7 @@ class Rejection(enum.IntEnum):
     the text for a person.
     """
 
-    #: ``header.schema_version`` differs from :data:`SCHEMA_VERSION`.
+    #: ``header.schema_version`` differs from :data:`CLIENT_SCHEMA_VERSION`.
     SCHEMA_MISMATCH = 1
     #: ``fields`` has bits this schema does not define.
     UNKNOWN_FIELDS = 2
@@ -758,12 +772,12 @@ class Setpoint(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name of the Rust type."""
-        return _type_name("Setpoint")
+        return _client_type_name("Setpoint")
 
     @classmethod
     def zeroed(cls) -> "Setpoint":
         """An all-zero setpoint with the current schema (sets nothing)."""
-        return cls(header=_new_header())
+        return cls(header=_client_header())
 
     @classmethod
     def for_level(cls, client_id: int, seq: int, level: int, dim: int) -> "Setpoint":
@@ -856,7 +870,7 @@ class Setpoint(ctypes.Structure):
     def check(self) -> Rejection | None:
         """The model-free checks of ``Setpoint::validate``, in its order; the
         first failure or None."""
-        if self.header.schema_version != SCHEMA_VERSION:
+        if self.header.schema_version != CLIENT_SCHEMA_VERSION:
             return Rejection.SCHEMA_MISMATCH
         if self.fields & ~SETPOINT_FIELDS_KNOWN:
             return Rejection.UNKNOWN_FIELDS

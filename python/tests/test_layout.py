@@ -27,7 +27,8 @@ def rust() -> dict[str, Any]:
 
 
 def test_constants(rust: dict[str, Any]) -> None:
-    assert rust["schema_version"] == msgs.SCHEMA_VERSION
+    assert rust["driver_schema_version"] == msgs.DRIVER_SCHEMA_VERSION
+    assert rust["client_schema_version"] == msgs.CLIENT_SCHEMA_VERSION
     assert rust["max_joints"] == msgs.MAX_JOINTS
     assert rust["max_levels"] == msgs.MAX_LEVELS
     assert rust["max_task_dim"] == msgs.MAX_TASK_DIM
@@ -120,7 +121,7 @@ def test_validation_mirrors_the_rust_checks() -> None:
     with pytest.raises(msgs.MsgError):
         c.validate(2)
     c.tau[1] = 0.0
-    c.header.schema_version = msgs.SCHEMA_VERSION + 1
+    c.header.schema_version = msgs.DRIVER_SCHEMA_VERSION + 1
     with pytest.raises(msgs.MsgError):
         c.validate(2)
 
@@ -158,7 +159,7 @@ def test_setpoint_checks_mirror_the_rust_validate() -> None:
     assert s.check() is None
     # Header, fields and capacities.
     s = _goal(0, [1.0])
-    s.header.schema_version = msgs.SCHEMA_VERSION + 1
+    s.header.schema_version = msgs.CLIENT_SCHEMA_VERSION + 1
     assert s.check() is R.SCHEMA_MISMATCH
     s = _goal(0, [1.0])
     s.fields |= 1 << 7
@@ -245,7 +246,7 @@ def test_setpoint_builders_fill_and_size_check() -> None:
     assert s.check() is None
     assert s.apply_at_state_seq == 1234
     assert (s.client_id, s.header.seq, s.level, s.header.schema_version) == (
-        7, 3, 1, msgs.SCHEMA_VERSION,
+        7, 3, 1, msgs.CLIENT_SCHEMA_VERSION,
     )
     assert s.fields == msgs.SETPOINT_FIELDS_KNOWN
     assert s.stiffness_full() and not s.damping_full()

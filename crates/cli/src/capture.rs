@@ -470,8 +470,12 @@ pub fn run_metadata(
     m.insert("hcc_version".into(), env!("CARGO_PKG_VERSION").into());
     m.insert("iceoryx2_version".into(), ICEORYX2_VERSION.into());
     m.insert(
-        "msgs_schema_version".into(),
-        hcc_msgs::SCHEMA_VERSION.to_string(),
+        "msgs_driver_schema_version".into(),
+        hcc_msgs::DRIVER_SCHEMA_VERSION.to_string(),
+    );
+    m.insert(
+        "msgs_client_schema_version".into(),
+        hcc_msgs::CLIENT_SCHEMA_VERSION.to_string(),
     );
     m.insert("namespace".into(), namespace.into());
     m.insert("start_unix_ns".into(), clock.0.to_string());

@@ -40,6 +40,7 @@
 //! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
 pub mod error;
+pub mod franka;
 pub mod schedule;
 pub mod schema;
 pub mod setpoint_limits;

@@ -8,6 +8,7 @@ use nalgebra::DVector;
 
 use crate::daemons::{ControllerDaemon, SimDaemon};
 use crate::error::{ConfigError, invalid};
+use crate::franka;
 use crate::schedule;
 use crate::schema::IpcSection;
 use crate::setpoint_limits;
@@ -43,6 +44,8 @@ pub struct Scenario {
     pub torque_filter: torque_filter::TorqueFilterSpec,
     /// The `[[setpoint]]` entries, checked and sorted by time.
     pub setpoints: Vec<schedule::ScheduledSetpoint>,
+    /// Resolved `[franka]` (libfranka's defaults where not given).
+    pub franka: franka::Franka,
 }
 
 impl Scenario {

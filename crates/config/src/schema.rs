@@ -46,6 +46,9 @@ pub struct ScenarioFile {
     /// `[[setpoint]]`: setpoints scheduled in time.
     #[serde(default, rename = "setpoint")]
     pub setpoints: Vec<crate::schedule::SetpointSection>,
+    /// `[franka]`: the Franka driver's settings (every field optional).
+    #[serde(default)]
+    pub franka: crate::franka::FrankaSection,
 }
 
 /// `[robot]`

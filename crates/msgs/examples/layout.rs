@@ -1,5 +1,6 @@
 //! Prints the memory layout of every contract type as JSON: size, alignment
-//! and the offset of each field, plus the schema version, the iceoryx2 type
+//! and the offset of each field, plus the versions of the contract's two
+//! parts (driver-facing, client-facing), the iceoryx2 type
 //! names, the service names and settings, the flag bits, the setpoint
 //! constants and the rejection codes with their names and reasons. Bindings
 //! in other languages compare their mirrors of the types with this output so
@@ -10,14 +11,14 @@
 use std::mem::{align_of, offset_of, size_of};
 
 use hcc_msgs::{
-    ANSWER_ACCEPTED, COMMAND_FLAG_GRAVITY_INCLUDED, EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED,
-    GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, Header, JointState,
-    MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_PENDING_SETPOINTS,
-    MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S, Rejection, SCHEMA_VERSION,
-    SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
-    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN,
-    SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST,
-    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+    ANSWER_ACCEPTED, CLIENT_SCHEMA_VERSION, COMMAND_FLAG_GRAVITY_INCLUDED, DRIVER_SCHEMA_VERSION,
+    EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN,
+    GAIN_STIFFNESS_FULL, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS,
+    MAX_NAMESPACE_LEN, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S,
+    Rejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
+    SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
+    STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
+    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -170,7 +171,7 @@ fn main() {
         })
         .collect();
     println!(
-        "{{\n  \"schema_version\": {SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
+        "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
         ipc::FILE_PREFIX_ENV,
         object(&services),
         rejections.join(", "),

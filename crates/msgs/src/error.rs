@@ -15,13 +15,16 @@ use thiserror::Error;
 /// `"telemetry"`), `field` the offending field.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 pub enum MsgError {
-    /// The header's schema version differs from [`crate::SCHEMA_VERSION`].
+    /// The header's schema version differs from the version of the
+    /// message's part of the contract ([`crate::SchemaPart`]).
     #[error(
-        "{msg}.header.schema_version = {found}, but this build speaks schema {expected}; \
+        "{msg}.header.schema_version = {found}, but this build speaks {part} schema {expected}; \
          rebuild both peers against the same hcc-msgs"
     )]
     SchemaMismatch {
         msg: &'static str,
+        /// `"driver"` or `"client"` ([`crate::SchemaPart::name`]).
+        part: &'static str,
         found: u32,
         expected: u32,
     },

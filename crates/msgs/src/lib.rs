@@ -100,14 +100,34 @@
 //!
 //! ## Versions
 //!
-//! [`SCHEMA_VERSION`] is carried in every header ([`check_schema`]) and is
-//! part of every iceoryx2 type name (`hcc_msgs::JointState@schema3`), so
-//! iceoryx2 itself refuses to connect peers of different schemas when a
-//! service is opened (`IncompatibleTypes`; size and alignment are compared
-//! too). iceoryx2's own version must match exactly between peers as well:
-//! every service records the iceoryx2 version that created it, and opening it
-//! from another version fails (`VersionMismatch`). Build all peers of one
-//! robot against the same hcc-msgs and iceoryx2 versions.
+//! The contract has two parts, versioned apart ([`SchemaPart`]), so that a
+//! change on one side of the controller does not break the peers of the
+//! other side:
+//!
+//! | part | version | messages and events |
+//! |------|---------|---------------------|
+//! | driver-facing | [`DRIVER_SCHEMA_VERSION`] | [`JointState`], [`TorqueCommand`], the `state_ready` and `command_ready` events ([`EVENT_STATE_PUBLISHED`], [`EVENT_COMMAND_PUBLISHED`]), the `STATE_FLAG_*` and `COMMAND_FLAG_*` bits, [`DriverStatus`], [`CommandMode`] |
+//! | client-facing | [`CLIENT_SCHEMA_VERSION`] | [`Setpoint`], [`Telemetry`] (with [`TelemetryCounters`], [`TelemetryTimings`], [`SetpointAnswer`]), [`Rejection`] codes, `TELEMETRY_FLAG_*` |
+//!
+//! **The rule.** A change of the layout or the meaning of anything in a
+//! part's row bumps that part's version, and only that part's: a new
+//! telemetry field bumps [`CLIENT_SCHEMA_VERSION`] and every driver keeps
+//! working unchanged; a new state flag bumps [`DRIVER_SCHEMA_VERSION`] and
+//! clients keep working. [`Header`] is in both parts: a change of its
+//! layout bumps both. The version sits in every header
+//! (`header.schema_version`, checked by [`check_schema`]) and, as
+//! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client3`), so
+//! iceoryx2 itself refuses to connect peers of different versions of one
+//! part when a service is opened (`IncompatibleTypes`; size and alignment
+//! are compared too). Both parts started at 3, the single schema they were
+//! split from (schema 3 defined their present contents), so no number was
+//! ever used for two meanings.
+//!
+//! iceoryx2's own version must match exactly between peers as well: every
+//! service records the iceoryx2 version that created it, and opening it from
+//! another version fails (`VersionMismatch`). Build all peers of one robot
+//! against the same iceoryx2 version.
 //!
 //! ## Commanding a running controller
 //!
@@ -117,11 +137,12 @@
 //! the controller checks the rest against its law and model. Every setpoint
 //! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
 //! numbers) in [`Telemetry::setpoint_answers`]; that extension of
-//! the telemetry layout is schema 2. Schema 3 adds the setpoint's
+//! the telemetry layout was schema 2. Schema 3 added the setpoint's
 //! application point ([`Setpoint::apply_at_state_seq`]: the controller keeps
 //! the setpoint until the cycle of that joint-state sequence number, which
 //! makes scheduled setpoints over IPC exact) and per-client counts of
-//! rejected and late setpoints in [`SetpointAnswer`].
+//! rejected and late setpoints in [`SetpointAnswer`] (both now the
+//! client-facing part, [`CLIENT_SCHEMA_VERSION`]).
 //!
 //! ## Real-time use
 //!
@@ -158,13 +179,52 @@ pub use types::{
     TorqueCommand,
 };
 
-/// Version of this message schema. Bump it on any change of a type's layout
-/// or meaning, together with the `@schema<N>` suffix of every `type_name`
-/// (a unit test checks they agree). Schema 2: [`Telemetry`] answers
-/// setpoints (active goals and gains, transition progress, per-client answers).
-/// Schema 3: [`Setpoint::apply_at_state_seq`], [`SetpointAnswer::rejected`]
-/// and [`SetpointAnswer::late`], [`STATE_FLAG_DRIVER_POLLS_COMMANDS`].
-pub const SCHEMA_VERSION: u32 = 3;
+/// Version of the driver-facing part of the contract: [`JointState`],
+/// [`TorqueCommand`], their events, flags, status and mode codes (see the
+/// crate docs, "Versions"). Bump it on any change of their layout or
+/// meaning, together with the `@driver<N>` suffix of their `type_name`s (a
+/// unit test checks they agree); nothing client-facing bumps it.
+/// History (of the single schema it was split from): schema 3 added
+/// [`STATE_FLAG_DRIVER_POLLS_COMMANDS`].
+pub const DRIVER_SCHEMA_VERSION: u32 = 3;
+
+/// Version of the client-facing part of the contract: [`Setpoint`],
+/// [`Telemetry`] and the types inside it, the rejection codes (see the crate
+/// docs, "Versions"). Bump it on any change of their layout or meaning,
+/// together with the `@client<N>` suffix of their `type_name`s; nothing
+/// driver-facing bumps it. History (of the single schema it was split from):
+/// schema 2: [`Telemetry`] answers setpoints (active goals and gains,
+/// transition progress, per-client answers); schema 3:
+/// [`Setpoint::apply_at_state_seq`], [`SetpointAnswer::rejected`] and
+/// [`SetpointAnswer::late`].
+pub const CLIENT_SCHEMA_VERSION: u32 = 3;
+
+/// The two parts of the contract, each with its own version.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SchemaPart {
+    /// Joint state, torque command and their events: what a driver reads and writes.
+    Driver,
+    /// Setpoints and telemetry: what clients and tools read and write.
+    Client,
+}
+
+impl SchemaPart {
+    /// The part's version ([`DRIVER_SCHEMA_VERSION`] or [`CLIENT_SCHEMA_VERSION`]).
+    pub const fn version(self) -> u32 {
+        match self {
+            SchemaPart::Driver => DRIVER_SCHEMA_VERSION,
+            SchemaPart::Client => CLIENT_SCHEMA_VERSION,
+        }
+    }
+
+    /// `"driver"` or `"client"`, as in the type-name suffix `@driver<N>`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SchemaPart::Driver => "driver",
+            SchemaPart::Client => "client",
+        }
+    }
+}
 
 /// Joint capacity. 32 covers single and dual 7-DOF arms, mobile manipulators
 /// and humanoid upper bodies, and keeps [`JointState`] (816 B) and
@@ -178,15 +238,16 @@ pub const MAX_LEVELS: usize = 8;
 /// [`MAX_JOINTS`] because a joint-space (posture) task has dimension n.
 pub const MAX_TASK_DIM: usize = MAX_JOINTS;
 
-/// Checks a received schema version against [`SCHEMA_VERSION`].
-pub const fn check_schema(msg: &'static str, found: u32) -> Result<(), MsgError> {
-    if found == SCHEMA_VERSION {
+/// Checks a received schema version against the version of `part`.
+pub const fn check_schema(part: SchemaPart, msg: &'static str, found: u32) -> Result<(), MsgError> {
+    if found == part.version() {
         Ok(())
     } else {
         Err(MsgError::SchemaMismatch {
             msg,
+            part: part.name(),
             found,
-            expected: SCHEMA_VERSION,
+            expected: part.version(),
         })
     }
 }

@@ -24,7 +24,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::types::Header;
-use crate::{MAX_LEVELS, MAX_TASK_DIM, SCHEMA_VERSION};
+use crate::{CLIENT_SCHEMA_VERSION, MAX_LEVELS, MAX_TASK_DIM};
 
 /// Name of [`Setpoint`] in error messages.
 pub const SETPOINT: &str = "setpoint";
@@ -88,7 +88,7 @@ pub const ANSWER_ACCEPTED: u32 = 0;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum Rejection {
-    /// `header.schema_version` differs from [`SCHEMA_VERSION`].
+    /// `header.schema_version` differs from [`CLIENT_SCHEMA_VERSION`].
     SchemaMismatch = 1,
     /// `fields` has bits this schema does not define.
     UnknownFields = 2,
@@ -266,7 +266,7 @@ pub const fn answer_code(result: Result<(), Rejection>) -> u32 {
 /// `fields`, `dim` and `gain_layout` select are ignored (writers keep them
 /// zero).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Setpoint@schema3")]
+#[type_name("hcc_msgs::Setpoint@client3")]
 #[repr(C)]
 pub struct Setpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.
@@ -304,7 +304,7 @@ impl Setpoint {
     /// An all-zero setpoint with the current schema (sets nothing).
     pub const fn zeroed() -> Self {
         Self {
-            header: Header::new(),
+            header: Header::client(),
             client_id: 0,
             level: 0,
             fields: 0,
@@ -467,7 +467,7 @@ impl Setpoint {
     /// symmetry and positive definiteness of K and D. Allocation-free (the
     /// Cholesky factorisation works in a stack buffer).
     pub fn validate(&self) -> Result<(), Rejection> {
-        if self.header.schema_version != SCHEMA_VERSION {
+        if self.header.schema_version != CLIENT_SCHEMA_VERSION {
             return Err(Rejection::SchemaMismatch);
         }
         if self.fields & !SETPOINT_FIELDS_KNOWN != 0 {
@@ -660,7 +660,7 @@ mod tests {
     #[test]
     fn header_fields_and_capacities_are_checked() {
         let mut s = goal(0, &[1.0]);
-        s.header.schema_version = SCHEMA_VERSION + 1;
+        s.header.schema_version = CLIENT_SCHEMA_VERSION + 1;
         assert_eq!(s.validate(), Err(Rejection::SchemaMismatch));
         let mut s = goal(0, &[1.0]);
         s.fields |= 1 << 7;

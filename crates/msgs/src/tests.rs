@@ -67,45 +67,98 @@ fn layout_has_no_hidden_padding() {
 }
 
 #[test]
-fn schema_version_is_encoded_in_every_type_name() {
-    let suffix = format!("@schema{SCHEMA_VERSION}");
+fn each_part_s_version_is_encoded_in_its_type_names() {
     // SAFETY: type_name only returns a static string.
     let names = unsafe {
         [
-            <Header as ZeroCopySend>::type_name(),
-            <JointState as ZeroCopySend>::type_name(),
-            <TorqueCommand as ZeroCopySend>::type_name(),
-            <Telemetry as ZeroCopySend>::type_name(),
-            <TelemetryCounters as ZeroCopySend>::type_name(),
-            <TelemetryTimings as ZeroCopySend>::type_name(),
-            <Setpoint as ZeroCopySend>::type_name(),
-            <SetpointAnswer as ZeroCopySend>::type_name(),
+            (
+                SchemaPart::Driver,
+                <JointState as ZeroCopySend>::type_name(),
+            ),
+            (
+                SchemaPart::Driver,
+                <TorqueCommand as ZeroCopySend>::type_name(),
+            ),
+            (SchemaPart::Client, <Telemetry as ZeroCopySend>::type_name()),
+            (
+                SchemaPart::Client,
+                <TelemetryCounters as ZeroCopySend>::type_name(),
+            ),
+            (
+                SchemaPart::Client,
+                <TelemetryTimings as ZeroCopySend>::type_name(),
+            ),
+            (SchemaPart::Client, <Setpoint as ZeroCopySend>::type_name()),
+            (
+                SchemaPart::Client,
+                <SetpointAnswer as ZeroCopySend>::type_name(),
+            ),
         ]
     };
-    for name in names {
+    for (part, name) in names {
+        let suffix = format!("@{}{}", part.name(), part.version());
         assert!(name.starts_with("hcc_msgs::"), "{name}");
         assert!(name.ends_with(&suffix), "{name} lacks {suffix}");
+        assert_eq!(name.matches('@').count(), 1, "{name}: one part only");
     }
+    // The header is in both parts: its name carries both versions.
+    // SAFETY: as above.
+    let header = unsafe { <Header as ZeroCopySend>::type_name() };
+    assert_eq!(
+        header,
+        format!("hcc_msgs::Header@driver{DRIVER_SCHEMA_VERSION}@client{CLIENT_SCHEMA_VERSION}")
+    );
+}
+
+#[test]
+fn zeroed_messages_carry_their_part_s_version() {
+    assert_eq!(
+        JointState::zeroed().header.schema_version,
+        DRIVER_SCHEMA_VERSION
+    );
+    assert_eq!(
+        TorqueCommand::zeroed().header.schema_version,
+        DRIVER_SCHEMA_VERSION
+    );
+    assert_eq!(
+        Telemetry::zeroed().header.schema_version,
+        CLIENT_SCHEMA_VERSION
+    );
+    assert_eq!(
+        Setpoint::zeroed().header.schema_version,
+        CLIENT_SCHEMA_VERSION
+    );
+    assert_eq!(Header::new(), Header::driver());
 }
 
 #[test]
 fn schema_check() {
-    assert_eq!(check_schema(JOINT_STATE, SCHEMA_VERSION), Ok(()));
-    let e = check_schema(JOINT_STATE, SCHEMA_VERSION + 1).unwrap_err();
+    let d = SchemaPart::Driver;
+    assert_eq!(check_schema(d, JOINT_STATE, DRIVER_SCHEMA_VERSION), Ok(()));
+    let e = check_schema(d, JOINT_STATE, DRIVER_SCHEMA_VERSION + 1).unwrap_err();
     assert_eq!(
         e,
         MsgError::SchemaMismatch {
             msg: JOINT_STATE,
-            found: SCHEMA_VERSION + 1,
-            expected: SCHEMA_VERSION
+            part: "driver",
+            found: DRIVER_SCHEMA_VERSION + 1,
+            expected: DRIVER_SCHEMA_VERSION
         }
     );
     assert!(e.to_string().contains("joint_state.header.schema_version"));
+    assert!(e.to_string().contains("driver schema"), "{e}");
     let mut s = valid_state(7);
     s.header.schema_version = 0;
     assert!(matches!(
         s.validate(7),
         Err(MsgError::SchemaMismatch { found: 0, .. })
+    ));
+    // Each message is checked against its own part.
+    let mut t = Telemetry::zeroed();
+    t.header.schema_version = CLIENT_SCHEMA_VERSION + 1;
+    assert!(matches!(
+        t.validate(0),
+        Err(MsgError::SchemaMismatch { part: "client", .. })
     ));
 }
 
@@ -121,7 +174,7 @@ fn valid_state(n: usize) -> JointState {
 #[test]
 fn zeroed_messages_are_valid_and_empty() {
     let s = JointState::zeroed();
-    assert_eq!(s.header.schema_version, SCHEMA_VERSION);
+    assert_eq!(s.header.schema_version, DRIVER_SCHEMA_VERSION);
     assert_eq!(s.q().len(), 0);
     assert_eq!(s.validate(0), Ok(()));
     assert_eq!(TorqueCommand::zeroed().validate(0), Ok(()));

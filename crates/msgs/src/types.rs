@@ -2,8 +2,10 @@
 //!
 //! All types are `#[repr(C)]`, `Copy`, contain no pointers and derive
 //! iceoryx2's `ZeroCopySend`, so they live directly in shared memory. Their
-//! iceoryx2 type names carry the schema version (`…@schema<N>`), which makes
-//! iceoryx2 refuse to connect peers built against different schemas.
+//! iceoryx2 type names carry the version of their part of the contract
+//! (`…@driver<N>` for the joint state and the torque command, `…@client<N>`
+//! for the telemetry; see the crate docs, "Versions"), which makes iceoryx2
+//! refuse to connect peers built against different versions of that part.
 //!
 //! Status and mode fields are raw `u32` codes, not Rust enums: a peer (possibly
 //! written in another language) may put any bit pattern there, and reading an
@@ -16,7 +18,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::error::MsgError;
-use crate::{MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM, SCHEMA_VERSION};
+use crate::{MAX_JOINTS, MAX_LEVELS, MAX_TASK_DIM, SchemaPart};
 
 /// Name of [`JointState`] in error messages.
 pub const JOINT_STATE: &str = "joint_state";
@@ -50,12 +52,14 @@ pub const COMMAND_FLAGS_KNOWN: u32 = COMMAND_FLAG_GRAVITY_INCLUDED;
 /// in every sample until states come back. Never set in a command.
 pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
 
-/// Header shared by all messages.
+/// Header shared by all messages. It belongs to both parts of the contract:
+/// a change of its layout bumps both versions (its type name carries both).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@schema3")]
+#[type_name("hcc_msgs::Header@driver3@client3")]
 #[repr(C)]
 pub struct Header {
-    /// [`SCHEMA_VERSION`] of the writer.
+    /// The writer's version of the message's part of the contract
+    /// ([`crate::DRIVER_SCHEMA_VERSION`] or [`crate::CLIENT_SCHEMA_VERSION`]).
     pub schema_version: u32,
     /// Number of valid joints `n` (≤ [`MAX_JOINTS`]).
     pub n_joints: u32,
@@ -67,20 +71,43 @@ pub struct Header {
 }
 
 impl Header {
-    /// A header with the current schema, `n = 0`, `seq = 0`, `stamp_ns = 0`.
-    pub const fn new() -> Self {
+    /// A header of `part` (its current version), `n = 0`, `seq = 0`, `stamp_ns = 0`.
+    pub const fn of(part: SchemaPart) -> Self {
         Self {
-            schema_version: SCHEMA_VERSION,
+            schema_version: part.version(),
             n_joints: 0,
             seq: 0,
             stamp_ns: 0,
         }
     }
 
-    /// Checks the schema version and that `n_joints` fits the capacity and
-    /// equals `expected_n` (the robot model's joint count).
-    pub fn check(&self, msg: &'static str, expected_n: usize) -> Result<usize, MsgError> {
-        crate::check_schema(msg, self.schema_version)?;
+    /// A header of the driver-facing part ([`JointState`], [`TorqueCommand`]):
+    /// [`crate::DRIVER_SCHEMA_VERSION`].
+    pub const fn driver() -> Self {
+        Self::of(SchemaPart::Driver)
+    }
+
+    /// A header of the client-facing part ([`crate::Setpoint`], [`Telemetry`]):
+    /// [`crate::CLIENT_SCHEMA_VERSION`].
+    pub const fn client() -> Self {
+        Self::of(SchemaPart::Client)
+    }
+
+    /// [`Header::driver`]: the header drivers build their states with (the
+    /// name it had before the contract was versioned in two parts).
+    pub const fn new() -> Self {
+        Self::driver()
+    }
+
+    /// Checks the schema version against `part` and that `n_joints` fits the
+    /// capacity and equals `expected_n` (the robot model's joint count).
+    pub fn check(
+        &self,
+        part: SchemaPart,
+        msg: &'static str,
+        expected_n: usize,
+    ) -> Result<usize, MsgError> {
+        crate::check_schema(part, msg, self.schema_version)?;
         let n = self.n_joints as usize;
         if n > MAX_JOINTS {
             return Err(MsgError::TooManyJoints {
@@ -266,7 +293,7 @@ fn set_n(
 /// Units: q in rad (prismatic: m), q̇ in rad/s (m/s), τ in N·m (N).
 /// Joint order: the URDF chain order from root to tip (actuated joints only).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::JointState@schema3")]
+#[type_name("hcc_msgs::JointState@driver3")]
 #[repr(C)]
 pub struct JointState {
     /// `seq`: state counter (+1 per cycle); `stamp_ns`: sampling instant.
@@ -288,10 +315,10 @@ pub struct JointState {
 }
 
 impl JointState {
-    /// All-zero state with the current schema, `n = 0` and status Ok.
+    /// All-zero state with the current driver schema, `n = 0` and status Ok.
     pub const fn zeroed() -> Self {
         Self {
-            header: Header::new(),
+            header: Header::driver(),
             status: DriverStatus::Ok as u32,
             flags: 0,
             missed_commands: 0,
@@ -385,7 +412,9 @@ impl JointState {
     /// Full receiver-side check: schema, `n` within capacity and equal to
     /// `expected_n`, known status and flags, all n entries of q, q̇, τ finite.
     pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
-        let n = self.header.check(JOINT_STATE, expected_n)?;
+        let n = self
+            .header
+            .check(SchemaPart::Driver, JOINT_STATE, expected_n)?;
         self.status()?;
         if self.flags & !STATE_FLAGS_KNOWN != 0 {
             return Err(MsgError::UnknownCode {
@@ -413,7 +442,7 @@ impl Default for JointState {
 
 /// Torque command, published by the controller once per received state.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::TorqueCommand@schema3")]
+#[type_name("hcc_msgs::TorqueCommand@driver3")]
 #[repr(C)]
 pub struct TorqueCommand {
     /// `seq`: command counter (+1 per command); `stamp_ns`: when τ was computed.
@@ -431,10 +460,10 @@ pub struct TorqueCommand {
 }
 
 impl TorqueCommand {
-    /// All-zero command with the current schema, `n = 0` and mode Normal.
+    /// All-zero command with the current driver schema, `n = 0` and mode Normal.
     pub const fn zeroed() -> Self {
         Self {
-            header: Header::new(),
+            header: Header::driver(),
             state_seq: 0,
             state_stamp_ns: 0,
             mode: CommandMode::Normal as u32,
@@ -484,7 +513,9 @@ impl TorqueCommand {
 
     /// Full receiver-side check: schema, `n`, known mode and flags, τ finite.
     pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
-        let n = self.header.check(TORQUE_COMMAND, expected_n)?;
+        let n = self
+            .header
+            .check(SchemaPart::Driver, TORQUE_COMMAND, expected_n)?;
         self.mode()?;
         if self.flags & !COMMAND_FLAGS_KNOWN != 0 {
             return Err(MsgError::UnknownCode {
@@ -571,7 +602,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@schema3")]
+    #[type_name("hcc_msgs::TelemetryCounters@client3")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -601,7 +632,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@schema3")]
+#[type_name("hcc_msgs::TelemetryTimings@client3")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -621,7 +652,7 @@ pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
 /// The controller's answer to the last setpoint of one client.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@schema3")]
+#[type_name("hcc_msgs::SetpointAnswer@client3")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -650,7 +681,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@schema3")]
+#[type_name("hcc_msgs::Telemetry@client3")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -704,10 +735,10 @@ pub struct Telemetry {
 }
 
 impl Telemetry {
-    /// All-zero telemetry with the current schema.
+    /// All-zero telemetry with the current client schema.
     pub const fn zeroed() -> Self {
         Self {
-            header: Header::new(),
+            header: Header::client(),
             state_seq: 0,
             command_seq: 0,
             mode: CommandMode::Normal as u32,
@@ -873,7 +904,8 @@ impl Telemetry {
     /// Receiver-side check of the shape fields (schema, n, r, m_i, mode);
     /// values are diagnostics and may legitimately be non-finite.
     pub fn validate(&self, expected_n: usize) -> Result<(), MsgError> {
-        self.header.check(TELEMETRY, expected_n)?;
+        self.header
+            .check(SchemaPart::Client, TELEMETRY, expected_n)?;
         let r = self.n_levels as usize;
         if r > MAX_LEVELS {
             return Err(MsgError::CapacityExceeded {

@@ -1,5 +1,5 @@
 //! The contract types work through iceoryx2, and iceoryx2 refuses a peer whose
-//! payload type carries a different schema version. Uses process-local
+//! payload type carries a different version of its part of the contract. Uses process-local
 //! services, so no shared-memory files are created.
 
 use hcc_msgs::{JointState, MAX_JOINTS, Namespace, SequenceChecker, ServiceNames, TorqueCommand};
@@ -8,7 +8,7 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 
 /// A peer built against an older schema: same layout, older type name.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("hcc_msgs::JointState@schema0")]
+#[type_name("hcc_msgs::JointState@driver0")]
 #[repr(C)]
 struct OldJointState {
     bytes: [u8; core::mem::size_of::<JointState>()],

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..msgs import (
-    SCHEMA_VERSION,
+    DRIVER_SCHEMA_VERSION,
     STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
     CommandMode,
     DriverStatus,
@@ -112,7 +112,7 @@ class MujocoDriver:
     def write_state(self, msg: JointState, stamp_ns: int) -> None:
         """Writes state k (exact plant values) into ``msg``, stamped ``stamp_ns``."""
         n = self.n
-        msg.header = Header(schema_version=SCHEMA_VERSION, n_joints=n, seq=self.k, stamp_ns=stamp_ns)
+        msg.header = Header(schema_version=DRIVER_SCHEMA_VERSION, n_joints=n, seq=self.k, stamp_ns=stamp_ns)
         msg.status = int(self.status)
         msg.flags = self.state_flags
         msg.missed_commands = self.counters.missed_commands
