@@ -210,3 +210,40 @@ impl RosPublisher {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_is_rmw_zenohs_session() {
+        let c = zenoh_config(None).unwrap();
+        let json = |key: &str| c.get_json(key).unwrap();
+        assert_eq!(json("mode"), r#""peer""#);
+        assert_eq!(json("connect/endpoints"), r#"["tcp/localhost:7447"]"#);
+        assert_eq!(json("scouting/multicast/enabled"), "false");
+    }
+
+    #[test]
+    fn the_documented_tls_example_is_a_valid_configuration() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/bridge-zenoh-tls.json5");
+        let c = zenoh_config(Some(&path)).unwrap();
+        assert_eq!(
+            c.get_json("connect/endpoints").unwrap(),
+            r#"["tls/robot-host:7447"]"#
+        );
+        assert_eq!(
+            c.get_json("transport/auth/usrpwd/user").unwrap(),
+            r#""hcc-bridge""#
+        );
+        assert_eq!(
+            c.get_json("transport/link/tls/enable_mtls").unwrap(),
+            "true"
+        );
+        let bad = std::env::temp_dir().join(format!("hcc-bridge-bad-{}.json5", std::process::id()));
+        std::fs::write(&bad, "{ mode: 42 }").unwrap();
+        let err = zenoh_config(Some(&bad)).unwrap_err().to_string();
+        std::fs::remove_file(&bad).unwrap();
+        assert!(err.contains("--zenoh-config"), "{err}");
+    }
+}

@@ -61,6 +61,9 @@ enum Command {
     Gains(command_cmd::GainsArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
     Monitor(command_cmd::MonitorArgs),
+    /// Publish a running namespace on Zenoh for ROS 2 nodes (rmw_zenoh wire format):
+    /// joint states, torque commands, telemetry; remote goals with --allow-setpoints.
+    Bridge(hcc_bridge::Args),
 }
 
 fn main() -> ExitCode {
@@ -78,6 +81,7 @@ fn main() -> ExitCode {
         Command::Goal(args) => command_cmd::goal(args),
         Command::Gains(args) => command_cmd::gains(args),
         Command::Monitor(args) => command_cmd::monitor(args),
+        Command::Bridge(args) => hcc_bridge::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
