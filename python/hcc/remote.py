@@ -558,17 +558,23 @@ class Client:
         return self._publishers[level]
 
     def _goal_type(self, topic: str, timeout: float) -> tuple[str, str]:
-        """The goal type the bridge subscribes ``topic`` with (its liveliness token)."""
+        """The goal type the bridge subscribes ``topic`` with (its liveliness
+        token; asked again until ``timeout``, as tokens travel apart from data)."""
         mangled = topic.replace("/", "%")
-        for reply in self._session.liveliness().get(f"@ros2_lv/{self.domain}/**", timeout=timeout):
-            if reply.ok is None:
-                continue
-            parts = str(reply.ok.key_expr).split("/")
-            if len(parts) == 13 and parts[5] == "MS" and parts[9] == mangled:
-                for ty in GOAL_TYPES:
-                    if parts[10] == dds_name(ty[0]) and parts[11] == ty[1]:
-                        return ty
-        raise TimeoutError(f"no bridge subscribes {topic} (is hcc bridge running?)")
+        deadline = time.monotonic() + timeout
+        while True:
+            left = max(0.1, deadline - time.monotonic())
+            for reply in self._session.liveliness().get(f"@ros2_lv/{self.domain}/**", timeout=left):
+                if reply.ok is None:
+                    continue
+                parts = str(reply.ok.key_expr).split("/")
+                if len(parts) == 13 and parts[5] == "MS" and parts[9] == mangled:
+                    for ty in GOAL_TYPES:
+                        if parts[10] == dds_name(ty[0]) and parts[11] == ty[1]:
+                            return ty
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f"no bridge subscribes {topic} (is hcc bridge running?)")
+            time.sleep(0.05)
 
     def send_values(self, level: int, values: Sequence[float], timeout: float = 2.0) -> int:
         """Sends ``values`` to ``level``'s goal topic as its message type

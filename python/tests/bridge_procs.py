@@ -6,14 +6,14 @@ from __future__ import annotations
 import contextlib
 import os
 import pathlib
-import signal
 import socket
 import subprocess
 import sys
 import time
 from typing import Iterator
 
-from conftest import ROOT, binary
+from conftest import binary
+from procs import started
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -29,22 +29,10 @@ def free_port() -> int:
 def router(tmp: pathlib.Path) -> Iterator[int]:
     """A Zenoh router process on a free loopback port; yields the port."""
     port = free_port()
-    log = open(tmp / "router.log", "w")
-    p = subprocess.Popen([sys.executable, str(HERE / "zenoh_router.py"), str(port)],
-                         stdout=subprocess.PIPE, stderr=log, text=True)
-    try:
-        assert p.stdout is not None
-        line = p.stdout.readline()
-        assert line.strip() == "ready", f"router did not start: {(tmp / 'router.log').read_text()}"
+    log = tmp / "router.log"
+    with started([sys.executable, str(HERE / "zenoh_router.py"), str(port)], dict(os.environ), log):
+        wait_for(lambda: "ready" in log.read_text(), 30.0, f"the Zenoh router on port {port}")
         yield port
-    finally:
-        p.send_signal(signal.SIGTERM)
-        try:
-            p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-        log.close()
 
 
 def zenoh_config(tmp: pathlib.Path, port: int) -> pathlib.Path:
@@ -72,20 +60,8 @@ def bridge(ns: str, prefix: str, scenario: pathlib.Path, config: pathlib.Path,
            log: pathlib.Path, *extra: str) -> Iterator[subprocess.Popen]:
     """``hcc bridge`` on ``ns``; stopped with SIGTERM (then SIGKILL) on exit."""
     env = dict(os.environ, HCC_IPC_FILE_PREFIX=prefix)
-    out = open(log, "w")
-    p = subprocess.Popen(bridge_cmd(ns, scenario, config, *extra), cwd=ROOT, env=env,
-                         stdout=out, stderr=subprocess.STDOUT)
-    try:
+    with started(bridge_cmd(ns, scenario, config, *extra), env, log) as p:
         yield p
-    finally:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        out.close()
 
 
 def wait_for(predicate, timeout: float, what: str) -> None:  # type: ignore[no-untyped-def]

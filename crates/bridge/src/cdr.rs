@@ -141,28 +141,25 @@ impl CdrWriter {
         self.u32(n as u32)
     }
 
-    /// A `float64[]`.
-    pub fn seq_f64(&mut self, v: &[f64]) -> &mut Self {
-        self.seq_len(v.len());
-        if !v.is_empty() {
+    /// A sequence of 8-byte elements: the count, the alignment (only when
+    /// there are elements), the elements' little-endian bytes.
+    fn seq_8(&mut self, n: usize, bytes: impl Iterator<Item = [u8; 8]>) -> &mut Self {
+        self.seq_len(n);
+        if n > 0 {
             self.align(8);
-            for x in v {
-                self.buf.extend_from_slice(&x.to_le_bytes());
-            }
+            bytes.for_each(|b| self.buf.extend_from_slice(&b));
         }
         self
     }
 
+    /// A `float64[]`.
+    pub fn seq_f64(&mut self, v: &[f64]) -> &mut Self {
+        self.seq_8(v.len(), v.iter().map(|x| x.to_le_bytes()))
+    }
+
     /// A `uint64[]`.
     pub fn seq_u64(&mut self, v: &[u64]) -> &mut Self {
-        self.seq_len(v.len());
-        if !v.is_empty() {
-            self.align(8);
-            for x in v {
-                self.buf.extend_from_slice(&x.to_le_bytes());
-            }
-        }
-        self
+        self.seq_8(v.len(), v.iter().map(|x| x.to_le_bytes()))
     }
 
     /// A `string[]`.
@@ -257,6 +254,16 @@ impl<'a> CdrReader<'a> {
     /// An `int32`.
     pub fn i32(&mut self, field: &'static str) -> Result<i32, CdrError> {
         Ok(i32::from_le_bytes(self.array(field)?))
+    }
+
+    /// A `uint64`.
+    pub fn u64(&mut self, field: &'static str) -> Result<u64, CdrError> {
+        Ok(u64::from_le_bytes(self.array(field)?))
+    }
+
+    /// An `int64`.
+    pub fn i64(&mut self, field: &'static str) -> Result<i64, CdrError> {
+        Ok(i64::from_le_bytes(self.array(field)?))
     }
 
     /// A `float64`.

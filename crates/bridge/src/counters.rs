@@ -25,12 +25,8 @@ macro_rules! bridge_counters {
 }
 
 bridge_counters! {
-    /// Joint states read from iceoryx2.
-    states_received,
-    /// Torque commands read from iceoryx2.
-    commands_received,
-    /// Telemetry samples read from iceoryx2.
-    telemetry_received,
+    /// Samples read from iceoryx2 (joint states, torque commands, telemetry).
+    received,
     /// Samples lost in the iceoryx2 queues before the bridge read them
     /// (sequence gaps; the publishers never wait for the bridge).
     ipc_lost,

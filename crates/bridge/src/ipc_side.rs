@@ -13,8 +13,13 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
-use hcc_msgs::{JointState, SeqEvent, SequenceChecker, ServiceNames, Telemetry, TorqueCommand};
+use hcc_msgs::{
+    Header, JointState, SeqEvent, SequenceChecker, ServiceNames, Telemetry, TorqueCommand,
+};
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::SignalHandlingMode;
+use iceoryx2::prelude::ZeroCopySend;
+use std::fmt::Debug;
 
 use crate::counters::{Counters, add, bump};
 use crate::rate::Decimator;
@@ -81,54 +86,57 @@ struct Drain {
 }
 
 impl Drain {
-    fn forward(&self, s: Sample) {
-        if let Err(mpsc::TrySendError::Full(_)) = self.tx.try_send(s) {
-            bump(&self.counters.dropped_behind);
-        }
-    }
-
     /// Empties every queue once; returns how many samples were read.
     fn drain(&mut self) -> Result<usize, String> {
-        let c = self.counters.clone();
-        let mut k = 0;
-        while let Some(s) = self
-            .ports
-            .states
-            .receive()
-            .map_err(|e| format!("joint_state: {e:?}"))?
-        {
-            k += 1;
-            bump(&c.states_received);
-            if self.streams[0].admit(s.header.seq, s.header.stamp_ns, &c) {
-                self.forward(Sample::State(Box::new(*s)));
-            }
-        }
-        while let Some(s) = self
-            .ports
-            .commands
-            .receive()
-            .map_err(|e| format!("torque_command: {e:?}"))?
-        {
-            k += 1;
-            bump(&c.commands_received);
-            if self.streams[1].admit(s.header.seq, s.header.stamp_ns, &c) {
-                self.forward(Sample::Command(Box::new(*s)));
-            }
-        }
-        while let Some(s) = self
-            .ports
-            .telemetry
-            .receive()
-            .map_err(|e| format!("telemetry: {e:?}"))?
-        {
-            k += 1;
-            bump(&c.telemetry_received);
-            if self.streams[2].admit(s.header.seq, s.header.stamp_ns, &c) {
-                self.forward(Sample::Telemetry(Box::new(*s)));
-            }
-        }
-        Ok(k)
+        let (p, [s, c, t]) = (&self.ports, &mut self.streams);
+        let out = (&self.tx, &*self.counters);
+        Ok(drain_port(
+            &p.states,
+            "joint_state",
+            s,
+            out,
+            |x| &x.header,
+            Sample::State,
+        )? + drain_port(
+            &p.commands,
+            "torque_command",
+            c,
+            out,
+            |x| &x.header,
+            Sample::Command,
+        )? + drain_port(
+            &p.telemetry,
+            "telemetry",
+            t,
+            out,
+            |x| &x.header,
+            Sample::Telemetry,
+        )?)
     }
+}
+
+/// Empties one queue: counts every sample, checks its sequence, and hands
+/// those that pass the decimation on (a full channel drops and counts).
+fn drain_port<T: Debug + ZeroCopySend + Copy>(
+    port: &Subscriber<ipc::Ipc, T, ()>,
+    name: &str,
+    stream: &mut Stream,
+    (tx, counters): (&mpsc::SyncSender<Sample>, &Counters),
+    header: impl Fn(&T) -> &Header,
+    wrap: impl Fn(Box<T>) -> Sample,
+) -> Result<usize, String> {
+    let mut k = 0;
+    while let Some(sample) = port.receive().map_err(|e| format!("{name}: {e:?}"))? {
+        k += 1;
+        bump(&counters.received);
+        let h = header(&sample);
+        if stream.admit(h.seq, h.stamp_ns, counters)
+            && let Err(mpsc::TrySendError::Full(_)) = tx.try_send(wrap(Box::new(*sample)))
+        {
+            bump(&counters.dropped_behind);
+        }
+    }
+    Ok(k)
 }
 
 /// The running reader.

@@ -315,6 +315,7 @@ pub fn read_goal(ty: &RosType, payload: &[u8]) -> Result<GoalMsg, CdrError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hcc_msgs::TelemetryCounters;
 
     #[test]
     fn ros_time_splits_and_saturates() {
@@ -369,6 +370,100 @@ mod tests {
         assert!(v.is_empty());
         r.seq_f64("effort", &mut v).unwrap();
         assert_eq!(v, [3.0, 4.0]);
+        assert_eq!(r.remaining(), 0);
+    }
+
+    #[test]
+    fn telemetry_layout_follows_the_msg_definition() {
+        let mut t = Telemetry::zeroed();
+        t.set_shape(2, &[1, 2]).unwrap();
+        t.header.seq = 11;
+        t.header.stamp_ns = 99;
+        t.state_seq = 10;
+        t.tau[..2].copy_from_slice(&[1.5, -2.5]);
+        t.p_mu = 1e-12;
+        t.task_error[1][..2].copy_from_slice(&[0.25, 0.5]);
+        t.singular_levels = 0b10;
+        t.setpoint_answers[3] = hcc_msgs::SetpointAnswer {
+            client_id: 7,
+            seq: 4,
+            answered: 4,
+            code: Rejection::OutsideWorkspace.code(),
+            level: 1,
+            duration_s: 0.0,
+            rejected: 2,
+            late: 0,
+        };
+        let names = vec!["a".to_string(), "b".to_string()];
+        let remote = [RemoteAnswer {
+            source_gid: [9; 16],
+            source_seq: -3,
+            level: 1,
+            code: REFUSED_RATE,
+            reason: "rate".into(),
+            duration_s: 0.5,
+        }];
+        let extras = TelemetryExtras {
+            level_names: &names,
+            bridge_counters: &[("bridge_x", 5)],
+            bridge_client_id: 42,
+            remote_answers: &remote,
+        };
+        let mut w = CdrWriter::new();
+        write_telemetry(&mut w, &t, RosTime { sec: 1, nanosec: 2 }, &extras);
+        let mut r = CdrReader::new(w.bytes()).unwrap();
+        let mut v = Vec::new();
+        assert_eq!((r.i32("s").unwrap(), r.u32("n").unwrap()), (1, 2));
+        assert_eq!(r.string("frame").unwrap(), "");
+        let seqs: [u64; 4] = std::array::from_fn(|_| r.u64("seq").unwrap());
+        assert_eq!(seqs, [11, 10, 0, 99]);
+        assert_eq!((r.u32("mode").unwrap(), r.u32("flags").unwrap()), (0, 0));
+        r.seq_f64("tau", &mut v).unwrap();
+        assert_eq!(v, [1.5, -2.5]);
+        assert_eq!(r.f64("p_mu").unwrap(), 1e-12);
+        assert_eq!(r.seq_len("levels").unwrap(), 2);
+        for (i, m) in [(0usize, 1usize), (1, 2)] {
+            assert_eq!(r.string("name").unwrap(), names[i]);
+            assert_eq!(r.u32("dim").unwrap() as usize, m);
+            r.seq_f64("error", &mut v).unwrap();
+            assert_eq!(v, t.task_error[i][..m]);
+            for _ in 0..3 {
+                r.seq_f64("goal/gains", &mut v).unwrap();
+                assert_eq!(v.len(), m);
+            }
+            for _ in 0..3 {
+                r.f64("scalars").unwrap();
+            }
+            assert_eq!(r.bool("singular").unwrap(), i == 1);
+        }
+        let n = TelemetryCounters::COUNT + 1;
+        assert_eq!(r.seq_len("counter_names").unwrap(), n);
+        let names: Vec<String> = (0..n).map(|_| r.string("c").unwrap().to_owned()).collect();
+        assert_eq!(names[0], "cycles");
+        assert_eq!(names[n - 1], "bridge_x");
+        assert_eq!(r.seq_len("counter_values").unwrap(), n);
+        for _ in 0..n - 1 {
+            r.u64("v").unwrap();
+        }
+        assert_eq!(r.u64("v").unwrap(), 5);
+        assert_eq!(r.seq_len("answers").unwrap(), 1, "empty slots are left out");
+        let ids: [u64; 3] = std::array::from_fn(|_| r.u64("a").unwrap());
+        assert_eq!(ids, [7, 4, 4]);
+        assert_eq!(r.u32("code").unwrap(), 16);
+        assert_eq!(r.string("reason").unwrap(), "outside_workspace");
+        assert_eq!(r.u32("level").unwrap(), 1);
+        r.f64("duration").unwrap();
+        assert_eq!((r.u32("rej").unwrap(), r.u32("late").unwrap()), (2, 0));
+        assert_eq!(r.u64("bridge id").unwrap(), 42);
+        assert_eq!(r.seq_len("remote").unwrap(), 1);
+        assert!((0..16).all(|_| r.u8("gid").unwrap() == 9));
+        assert_eq!(r.i64("seq").unwrap(), -3);
+        assert_eq!(
+            (r.u32("l").unwrap(), r.u32("c").unwrap()),
+            (1, REFUSED_RATE)
+        );
+        assert_eq!(r.string("reason").unwrap(), "rate");
+        assert_eq!(r.f64("d").unwrap(), 0.5);
         assert_eq!(r.remaining(), 0);
     }
 
