@@ -13,6 +13,7 @@ equal to the bit, except the decimation to the bridge's rate.
 
 from __future__ import annotations
 
+import math
 import pathlib
 import statistics
 import threading
@@ -231,3 +232,31 @@ def test_bridge_speaks_rmw_zenoh(tmp_path: pathlib.Path) -> None:
     print(f"bridge wire: {n} samples on {len(keys)} keys, decoded by rosbags, equal to iceoryx2's")
     summary = (tmp_path / "bridge.log").read_text()
     assert '"bridge_published"' in summary, summary
+
+
+def test_remote_goal_messages_are_ros_messages() -> None:
+    """hcc.remote's goal messages decode with rosbags as ROS 2 would."""
+    from hcc import remote
+
+    ts = typestore()
+    stamp = 1_700_000_000_123_456_789
+    m = ts.deserialize_cdr(remote.encode_goal(remote.POSE_STAMPED, [0.5, 0.1, 0.4, 3.0, -0.2, 1.0], stamp),
+                           "geometry_msgs/msg/PoseStamped")
+    assert (m.header.stamp.sec, m.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert (m.pose.position.x, m.pose.position.y, m.pose.position.z) == (0.5, 0.1, 0.4)
+    q = (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
+    assert q == remote.rpy_to_quaternion(3.0, -0.2, 1.0)
+    assert abs(sum(x * x for x in q) - 1.0) < 1e-15
+    m = ts.deserialize_cdr(remote.encode_goal(remote.POINT_STAMPED, [1.0, 2.0, 3.0]), "geometry_msgs/msg/PointStamped")
+    assert (m.point.x, m.point.y, m.point.z) == (1.0, 2.0, 3.0)
+    m = ts.deserialize_cdr(remote.encode_goal(remote.QUATERNION_STAMPED, [0.0, 0.0, 0.5]),
+                           "geometry_msgs/msg/QuaternionStamped")
+    assert m.quaternion.z == math.sin(0.25) and m.quaternion.w == math.cos(0.25)
+    m = ts.deserialize_cdr(remote.encode_goal(remote.FLOAT64_MULTI_ARRAY, [0.1, -0.2, 0.3]),
+                           "std_msgs/msg/Float64MultiArray")
+    assert m.data.tolist() == [0.1, -0.2, 0.3] and m.layout.data_offset == 0
+    # Types and hashes of hcc.remote are ROS 2's.
+    for ty in (*remote.GOAL_TYPES, remote.JOINT_STATE, remote.TELEMETRY):
+        assert ts.hash_rihs01(ty[0]) == ty[1], ty[0]
+    att = remote.attachment(5, stamp, bytes(range(16)))
+    assert remote.read_attachment(att) == (5, stamp, bytes(range(16))) and len(att) == 33

@@ -2,7 +2,7 @@
 //! commands and telemetry of a namespace as a pure subscriber (like
 //! `hcc record`), drains the queues every [`POLL`], counts what the queues
 //! lost before it read them (sequence gaps), decimates each stream to the
-//! bridge's rate ([`Decimator`]) and hands the rest to the Zenoh side
+//! bridge's rate by sequence number ([`Decimator`]) and hands the rest to the Zenoh side
 //! through a bounded channel of [`BACKLOG`] samples. A full channel drops
 //! the sample and counts it: nothing here ever waits for Zenoh, and the
 //! daemons' publishers never wait for this thread (safe overflow).
@@ -49,21 +49,21 @@ struct Stream {
 }
 
 impl Stream {
-    fn new(rate_hz: f64) -> Stream {
+    fn new(source_hz: f64, rate_hz: f64) -> Stream {
         Stream {
             checker: SequenceChecker::default(),
-            decimator: Decimator::new(rate_hz),
+            decimator: Decimator::new(source_hz, rate_hz),
         }
     }
 
     /// Counts gaps; whether the sample passes the decimation.
-    fn admit(&mut self, seq: u64, stamp_ns: u64, counters: &Counters) -> bool {
+    fn admit(&mut self, seq: u64, counters: &Counters) -> bool {
         match self.checker.observe(seq) {
             SeqEvent::Gap { missed } => add(&counters.ipc_lost, missed),
             SeqEvent::Backwards { .. } => self.checker = SequenceChecker::default(),
             _ => {}
         }
-        let pass = self.decimator.pass(stamp_ns);
+        let pass = self.decimator.pass(seq);
         if !pass {
             bump(&counters.decimated);
         }
@@ -130,7 +130,7 @@ fn drain_port<T: Debug + ZeroCopySend + Copy>(
         k += 1;
         bump(&counters.received);
         let h = header(&sample);
-        if stream.admit(h.seq, h.stamp_ns, counters)
+        if stream.admit(h.seq, counters)
             && let Err(mpsc::TrySendError::Full(_)) = tx.try_send(wrap(Box::new(*sample)))
         {
             bump(&counters.dropped_behind);
@@ -154,7 +154,7 @@ impl IpcReader {
         node_name: &str,
         file_prefix: Option<String>,
         names: ServiceNames,
-        rate_hz: f64,
+        (source_hz, rate_hz): (f64, f64),
         counters: Arc<Counters>,
     ) -> anyhow::Result<IpcReader> {
         let (tx, rx) = mpsc::sync_channel(BACKLOG);
@@ -189,11 +189,7 @@ impl IpcReader {
                 let _ = ready_tx.send(Ok(()));
                 let mut drain = Drain {
                     ports,
-                    streams: [
-                        Stream::new(rate_hz),
-                        Stream::new(rate_hz),
-                        Stream::new(rate_hz),
-                    ],
+                    streams: std::array::from_fn(|_| Stream::new(source_hz, rate_hz)),
                     tx,
                     counters,
                 };

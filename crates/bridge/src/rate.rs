@@ -1,55 +1,50 @@
 //! Rates: the decimation of a stream to the bridge's `--rate`, and the cap
 //! on remote setpoints.
 
-/// Passes one sample per period of a stream, judged by the samples' own
-/// stamps (so the decimated stream keeps the source's timing whatever the
-/// bridge's scheduling): the first sample passes, then the first sample
-/// stamped at or after each due time, the due times one period apart
-/// (kept on their grid, so the source's jitter does not accumulate; a
-/// sample up to [`Decimator::SLACK_NS`] early counts as on time). A 1 kHz
-/// stream decimated to 100 Hz passes every tenth sample; decimated to
-/// 1 kHz, every sample. After a gap longer than a period the grid restarts
-/// at the next sample, and a stamp that goes backwards (a restarted
-/// source) passes and restarts it too.
+/// Passes every k-th sample of a stream by its sequence number (+1 per
+/// control cycle in every stream of the contract), k = the control rate
+/// over the bridge's rate, rounded ([`Decimator::every`]): exact whatever
+/// the jitter of the stamps or of the bridge's own scheduling. A 1 kHz
+/// stream decimated to 100 Hz passes every tenth sample, to 1 kHz every
+/// sample. A sample lost before the bridge read it moves the next one
+/// passed to the first sample after it; a repeated sequence number does
+/// not pass; one that goes backwards (a restarted source) passes and starts again.
 #[derive(Debug, Clone)]
 pub struct Decimator {
-    period_ns: u64,
-    slack_ns: u64,
-    /// (last stamp seen, next due time).
+    every: u64,
+    /// (last sequence number seen, next one due).
     state: Option<(u64, u64)>,
 }
 
 impl Decimator {
-    /// How early a sample may be and still count as due: half a period of
-    /// a 1 kHz source, so its jitter neither skips nor doubles a sample.
-    pub const SLACK_NS: u64 = 500_000;
-
-    /// A decimator to `rate_hz` (> 0).
-    pub fn new(rate_hz: f64) -> Decimator {
-        let period_ns = (1e9 / rate_hz) as u64;
+    /// A decimator of a `source_hz` stream to `rate_hz` (both > 0).
+    pub fn new(source_hz: f64, rate_hz: f64) -> Decimator {
         Decimator {
-            period_ns,
-            slack_ns: Self::SLACK_NS.min(period_ns / 2),
+            every: Self::every(source_hz, rate_hz),
             state: None,
         }
     }
 
-    /// Whether the sample stamped `stamp_ns` passes.
-    pub fn pass(&mut self, stamp_ns: u64) -> bool {
+    /// k: every k-th sample passes (at least 1).
+    pub fn every(source_hz: f64, rate_hz: f64) -> u64 {
+        (source_hz / rate_hz).round().max(1.0) as u64
+    }
+
+    /// Whether the sample numbered `seq` passes.
+    pub fn pass(&mut self, seq: u64) -> bool {
         let (pass, next) = match self.state {
-            Some((last, due)) if stamp_ns >= last => {
-                if stamp_ns + self.slack_ns < due {
+            Some((last, due)) if seq == last => (false, due),
+            Some((last, due)) if seq > last => {
+                if seq < due {
                     (false, due)
-                } else if stamp_ns >= due + self.period_ns {
-                    (true, stamp_ns + self.period_ns)
                 } else {
-                    (true, due + self.period_ns)
+                    (true, seq + self.every)
                 }
             }
             // The first sample, or a source that started again.
-            _ => (true, stamp_ns + self.period_ns),
+            _ => (true, seq + self.every),
         };
-        self.state = Some((stamp_ns, next));
+        self.state = Some((seq, next));
         pass
     }
 }
@@ -99,41 +94,41 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn passed(rate: f64, stamps: impl Iterator<Item = u64>) -> Vec<u64> {
-        let mut d = Decimator::new(rate);
-        stamps.filter(|&s| d.pass(s)).collect()
+    fn passed(rate: f64, seqs: impl Iterator<Item = u64>) -> Vec<u64> {
+        let mut d = Decimator::new(1000.0, rate);
+        seqs.filter(|&s| d.pass(s)).collect()
     }
 
     #[test]
     fn a_1khz_stream_decimated_to_100hz_passes_every_tenth() {
-        let out = passed(100.0, (0..1000).map(|k| 5 * MS + k * MS));
+        let out = passed(100.0, 5..1005);
         assert_eq!(out.len(), 100);
-        assert!(out.windows(2).all(|w| w[1] - w[0] == 10 * MS));
+        assert!(out.windows(2).all(|w| w[1] - w[0] == 10));
+        assert_eq!(Decimator::every(1000.0, 300.0), 3);
+        assert_eq!(Decimator::every(1000.0, 5000.0), 1);
     }
 
     #[test]
-    fn jitter_does_not_change_the_count() {
-        // ±0.3 ms of jitter on a 1 kHz stream.
-        let jitter = [0i64, 300_000, -300_000, 150_000, -50_000];
-        let stamps =
-            (0..2000u64).map(|k| (10 * MS + k * MS).wrapping_add_signed(jitter[k as usize % 5]));
-        let out = passed(100.0, stamps);
-        assert!((199..=201).contains(&out.len()), "{}", out.len());
+    fn lost_samples_shift_the_next_one() {
+        // Samples 12..=17 lost in the queue: 20 is due, 21 comes first.
+        let seqs = (0..12).chain(21..45);
+        assert_eq!(passed(100.0, seqs), [0, 10, 21, 31, 41]);
     }
 
     #[test]
     fn at_the_source_rate_everything_passes() {
-        assert_eq!(passed(1000.0, (0..500).map(|k| k * MS)).len(), 500);
+        assert_eq!(passed(1000.0, 0..500).len(), 500);
     }
 
     #[test]
     fn a_restarted_source_passes_at_once() {
-        let mut d = Decimator::new(100.0);
-        assert!(d.pass(100 * MS));
-        assert!(!d.pass(101 * MS));
-        assert!(d.pass(3 * MS), "backwards: a new source");
-        assert!(!d.pass(4 * MS));
-        assert!(d.pass(13 * MS));
+        let mut d = Decimator::new(1000.0, 100.0);
+        assert!(d.pass(100));
+        assert!(!d.pass(101));
+        assert!(d.pass(3), "backwards: a new source");
+        assert!(!d.pass(4));
+        assert!(d.pass(13));
+        assert!(!d.pass(13), "a duplicate is not due");
     }
 
     #[test]

@@ -55,7 +55,8 @@ pub struct Args {
     /// router on tcp/localhost:7447).
     #[arg(long)]
     pub zenoh_config: Option<PathBuf>,
-    /// Samples per second forwarded per stream (decimation), at most 1000.
+    /// Samples per second forwarded per stream, at most 1000: every k-th
+    /// sample, k = the scenario's control rate / HZ, rounded.
     #[arg(long, default_value_t = 100.0)]
     pub rate: f64,
     /// Forward remote goals to the controller (default: read-only).
@@ -178,7 +179,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &counters,
     )?;
     let node = format!("hcc-bridge-{}", std::process::id());
-    let reader = IpcReader::start(&node, file_prefix, names, args.rate, counters.clone())?;
+    let rates = (scenario.simulation.control_rate_hz, args.rate);
+    let reader = IpcReader::start(&node, file_prefix, names, rates, counters.clone())?;
     if !args.quiet {
         eprintln!(
             "hcc bridge: namespace {} on Zenoh {} (domain {domain}, zid {}), {} Hz, {}",
