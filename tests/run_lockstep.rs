@@ -1,9 +1,12 @@
 //! `hcc run --lockstep`: the two daemons (hcc-sim, hcc-controller) as real
 //! processes over iceoryx2, the simulator waiting for every command, give
 //! the same trajectory as the in-process `hcc simulate` — every column of
-//! every row, to 1e-12. With a `[[setpoint]]` schedule too: `hcc run` sends
-//! it through the setpoint service (each entry applied at its cycle), `hcc
-//! simulate` applies it in-process.
+//! every row, bit for bit: both run the same driver and the same control
+//! cycle. With a `[[setpoint]]` schedule (`hcc run` sends it through the
+//! setpoint service, each entry applied at its cycle; `hcc simulate` hands
+//! it to the cycle with the state of its cycle), with the torque filter on,
+//! and for a robot that adds gravity itself. `hcc replay` of the in-process
+//! run's recording is bit-identical too.
 
 use hcc_system_tests::*;
 use std::path::Path;
@@ -14,12 +17,22 @@ use std::time::Duration;
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Runs `config` (for `duration` s, if given) with `hcc simulate` and with
-/// `hcc run --lockstep`, asserts that the trajectories agree to 1e-12 and
+/// `hcc run --lockstep`, asserts that the trajectories are bit-identical and
 /// that the recorder lost nothing; returns the rows and the run's `ipc`
 /// figures.
 fn compare(test: &str, config: &Path, duration: Option<f64>) -> (usize, serde_json::Value) {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = TempDir::new(test);
+    compare_in(&dir, test, config, duration)
+}
+
+/// [`compare`], writing into `dir`.
+fn compare_in(
+    dir: &TempDir,
+    test: &str,
+    config: &Path,
+    duration: Option<f64>,
+) -> (usize, serde_json::Value) {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let namespace = unique_namespace(test);
     let prefix = unique_file_prefix();
     let duration_args: Vec<String> = duration
@@ -73,7 +86,7 @@ fn compare(test: &str, config: &Path, duration: Option<f64>) -> (usize, serde_js
         a.0.len()
     );
     assert!(
-        worst <= 1e-12,
+        worst == 0.0,
         "hcc run --lockstep differs from hcc simulate by {worst:e} in column {column} at row {row}"
     );
 
@@ -164,4 +177,66 @@ fn a_rejected_scheduled_setpoint_fails_the_run() {
     assert_eq!(s["rejected"], 1, "{s}");
     assert_eq!(s["answered"], 2, "{s}");
     assert_clean(&namespace, &prefix);
+}
+
+/// `[torque_filter]` on (rate limit and low-pass): the in-process run and the
+/// lockstep run filter the same torques; the in-process recording replays.
+#[test]
+fn lockstep_run_with_the_torque_filter_is_bit_identical_to_hcc_simulate() {
+    let dir = TempDir::new("run_lockstep_filter");
+    let config = scenario_copy(
+        "paper-sim1.toml",
+        dir.path(),
+        "\n[torque_filter]\ntorque_rate_limit = 1500.0\nlow_pass_hz = 80.0\n",
+    );
+    let (rows, _) = compare_in(&dir, "run_lockstep_filter", &config, Some(1.0));
+    assert_eq!(rows, 1001);
+    let metrics = read_json(&dir.path().join("simulate/metrics.json"));
+    let limited = &metrics["run"]["settings"]["rate_limited_cycles"];
+    assert!(
+        limited.as_u64().is_some_and(|n| n > 0),
+        "the filter acted: {limited}"
+    );
+    let replay = run_with_timeout(
+        Command::new(bin("hcc"))
+            .current_dir(repo_root())
+            .arg("replay")
+            .arg(dir.path().join("simulate/run.mcap"))
+            .arg("--config")
+            .arg(&config),
+        dir.path(),
+        "replay",
+        Duration::from_secs(120),
+    );
+    assert!(replay.status.success(), "{}", replay.log());
+    assert!(
+        replay.stdout.contains("replayed 1001 cycles") && replay.stdout.contains("bit-identical"),
+        "{}",
+        replay.log()
+    );
+}
+
+/// A robot that compensates gravity itself (`[robot] gravity_compensation =
+/// false`): its driver adds g(q), in process as over IPC, and the arm holds.
+#[test]
+fn lockstep_run_of_a_robot_that_adds_gravity_is_bit_identical_to_hcc_simulate() {
+    let dir = TempDir::new("run_lockstep_gravity");
+    let config = scenario_copy("paper-sim1.toml", dir.path(), "");
+    let text = std::fs::read_to_string(&config).unwrap();
+    assert!(text.contains("gravity_compensation = true"));
+    std::fs::write(
+        &config,
+        text.replace(
+            "gravity_compensation = true",
+            "gravity_compensation = false",
+        ),
+    )
+    .unwrap();
+    compare_in(&dir, "run_lockstep_gravity", &config, Some(1.0));
+    let metrics = read_json(&dir.path().join("simulate/metrics.json"));
+    let final_error = metrics["levels"][0]["final_error_norm"].as_f64().unwrap();
+    assert!(
+        final_error < 1e-3,
+        "the TCP did not reach its goal: {metrics}"
+    );
 }

@@ -455,6 +455,9 @@ pub fn stats_line(m: &RecorderMsg) -> String {
     )
 }
 
+/// File name of the recording in a results directory (`hcc run`, `hcc simulate`).
+pub const RECORDING_FILE: &str = "run.mcap";
+
 /// The run metadata common to every recorder: versions, the recorder, the
 /// namespace, the start time.
 pub fn run_metadata(

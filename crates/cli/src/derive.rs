@@ -1,80 +1,47 @@
 //! The results of a recorded run, derived from its MCAP file: the rows of
 //! `trajectory.csv` in exactly the column layout of `hcc simulate` (see
-//! `hcc_plant::closed_loop`), the metrics and the IPC figures. `hcc run`
-//! derives its outputs from its `run.mcap` with this code after the run,
-//! `hcc plot FILE.mcap` and `hcc export` do the same with any recording.
+//! `hcc_simulation`), the metrics and the IPC figures. `hcc run` derives its
+//! outputs from its `run.mcap` with this code after the run, `hcc plot
+//! FILE.mcap` and `hcc export` do the same with any recording.
 //!
 //! # Where each column comes from
 //!
 //! A row joins the controller's `/telemetry` of one cycle with the
-//! `/joint_state` it consumed (`telemetry.state_seq`):
+//! `/joint_state` it consumed (`telemetry.state_seq`), exactly as `hcc
+//! simulate` builds its rows from the in-process cycle:
 //! - `t` = k · T for the state of sequence number k (T = 1 / control rate:
-//!   the simulator numbers its states k = 0, 1, … per control period),
-//! - `q`, `qd` from the state; `tau` (τ of eq. 19, gravity included when
-//!   configured), `e<i>_<k>`, `S<i>` (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>`
-//!   (eqs. 20, 21) and `tau_mu_<k>` (eq. 22) from the telemetry,
+//!   the drivers number their states k = 0, 1, … per control period),
+//! - `q`, `qd` from the state; `tau` (τ as commanded), `e<i>_<k>`, `S<i>`
+//!   (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>` (eqs. 20, 21) and `tau_mu_<k>`
+//!   (eq. 22) from the telemetry,
 //! - the derived columns are computed here, never on the real-time path, by
-//!   the recorder `hcc simulate` uses (hcc-record), from the recorded state
-//!   and the telemetry's torques: `acc<i>_<j>` = ‖J_i M⁻¹ τ_j‖, `accv<i>_<j>`
-//!   = ‖J̄_i M⁻¹ τ_j‖ and the split of S_i into `S<i>_kin` / `S<i>_pot`, with
-//!   J_i, J̄ (eq. 4) and V_i (eq. 28) of a shadow copy of the controller
-//!   (hcc-control) fed with the same states, and `E_kin`, `E_pot` from the
-//!   plant model. The shadow's τ is compared with the telemetry's τ as a
-//!   consistency check (reported, not used); where the shadow fails, the
-//!   columns that need it are NaN.
+//!   the recorder `hcc simulate` uses (hcc-record): `acc<i>_<j>` = ‖J_i M⁻¹
+//!   τ_j‖, `accv<i>_<j>` = ‖J̄_i M⁻¹ τ_j‖ and the split of S_i into
+//!   `S<i>_kin` / `S<i>_pot`, with J_i, J̄ (eq. 4) and V_i (eq. 28) of the
+//!   control cycle replayed on the recorded states and setpoints
+//!   ([`crate::replay`]), and `E_kin`, `E_pot` from the plant model. The
+//!   replayed τ is compared with the recorded one as a consistency check
+//!   (reported); where a cycle could not be replayed (its state lost before
+//!   the file), the columns that need the law are NaN.
 //!
 //! Every stream goes through a [`SequenceChecker`] here as it did in the
 //! recorder, so samples lost before the file are counted and reported.
 
 use anyhow::{Context, anyhow, bail};
 use hcc_config::Scenario;
+use hcc_cycle::Answer;
 use hcc_msgs::{CommandMode, JointState, SeqEvent, SequenceChecker, Telemetry, TorqueCommand};
-use hcc_plant::closed_loop::{self, ControlLaw, HierarchicalLaw, Sampled, describe};
 use hcc_record::mcap_log::{self, Entry, META_RUN, META_SCENARIO, ReadSummary};
-use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder, RowSink};
+use hcc_record::{Cycle, LawTerms, Recorder, RowSink};
 use hcc_report::{RunDescription, RunWriter};
-use nalgebra::DVector;
-use std::collections::{BTreeMap, VecDeque};
+use hcc_simulation::describe;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// The part of a joint state the rows need.
-#[derive(Clone, Debug)]
-struct StateRecord {
-    seq: u64,
-    q: Vec<f64>,
-    qd: Vec<f64>,
-}
+use crate::replay::{Replay, Replayed};
 
-/// The controller's telemetry of one cycle, as the recorder reads it.
-struct TelemetryCycle<'a> {
-    tel: &'a Telemetry,
-    n: usize,
-}
-
-impl CycleOutput for TelemetryCycle<'_> {
-    fn tau(&self) -> &[f64] {
-        self.tel.tau()
-    }
-    fn level_torque(&self, i: usize) -> &[f64] {
-        self.tel.tau_level(i)
-    }
-    fn tau_mu(&self) -> &[f64] {
-        &self.tel.tau_mu[..self.n]
-    }
-    fn task_error(&self, i: usize) -> &[f64] {
-        self.tel.task_error(i)
-    }
-    fn level_energy(&self, i: usize) -> f64 {
-        self.tel.storage[i]
-    }
-    fn p_mu(&self) -> f64 {
-        self.tel.p_mu
-    }
-}
-
-/// Builds the rows of `hcc simulate`'s layout from states and telemetry: the
-/// telemetry gives the law's output, a shadow controller fed with the same
-/// states the terms of the derived columns (J_i, J̄, V_i).
+/// Builds the rows of `hcc simulate`'s layout from the replayed cycles: the
+/// recorded state and telemetry, and the law's terms of the replay.
 pub struct RowBuilder<'a> {
     scenario: &'a Scenario,
     n: usize,
@@ -83,28 +50,23 @@ pub struct RowBuilder<'a> {
     recorder: Recorder,
     /// Rows built so far.
     pub rows: usize,
-    shadow: HierarchicalLaw,
-    pub shadow_failures: u64,
-    pub shadow_tau_diff: f64,
-    q: DVector<f64>,
-    qd: DVector<f64>,
+    /// Rows whose state the replayed law did not run on (law columns NaN).
+    pub rows_without_law: u64,
+    /// The largest |τ replayed − τ recorded| over the rows.
+    pub replay_tau_diff: f64,
 }
 
 impl<'a> RowBuilder<'a> {
     fn new(scenario: &'a Scenario) -> anyhow::Result<RowBuilder<'a>> {
-        let n = scenario.model.nq();
         Ok(RowBuilder {
             scenario,
-            n,
+            n: scenario.model.nq(),
             dims: scenario.task_dims(),
             period: 1.0 / scenario.simulation.control_rate_hz,
             rows: 0,
-            recorder: closed_loop::recorder(scenario, true)?,
-            shadow: crate::simulate_cmd::scheduled_law(scenario)?,
-            shadow_failures: 0,
-            shadow_tau_diff: 0.0,
-            q: DVector::zeros(n),
-            qd: DVector::zeros(n),
+            rows_without_law: 0,
+            recorder: hcc_simulation::recorder(scenario)?,
+            replay_tau_diff: 0.0,
         })
     }
 
@@ -125,53 +87,57 @@ impl<'a> RowBuilder<'a> {
         Ok(())
     }
 
-    /// Runs the shadow controller on the state (a check of the telemetry's
-    /// τ); whether it succeeded.
-    fn step_shadow(&mut self, state: &StateRecord, tel: &Telemetry) -> bool {
-        self.q.as_mut_slice().copy_from_slice(&state.q);
-        self.qd.as_mut_slice().copy_from_slice(&state.qd);
-        // The schedule's cycle k is the state's sequence number.
-        self.shadow.set_next_cycle(state.seq);
-        if self.shadow.compute(&self.q, &self.qd).is_err() {
-            self.shadow_failures += 1;
-            return false;
+    /// The row of a replayed cycle into `sink`; its telemetry, when it has
+    /// a row, becomes the last one (`last`). Always goes on.
+    fn take(
+        &mut self,
+        r: &Replayed<'_>,
+        last: &mut Option<Box<Telemetry>>,
+        sink: &mut dyn RowSink,
+    ) -> anyhow::Result<bool> {
+        self.push(r, sink)?;
+        if r.state.is_some() {
+            *last = Some(Box::new(*r.telemetry));
         }
-        let d = self
-            .shadow
-            .tau()
-            .iter()
-            .zip(tel.tau())
-            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-        self.shadow_tau_diff = self.shadow_tau_diff.max(d);
-        true
+        Ok(true)
     }
 
-    /// Pushes the row of one controller cycle into `sink`: `tel` answered `state`.
-    fn push(
-        &mut self,
-        state: &StateRecord,
-        tel: &Telemetry,
-        sink: &mut dyn RowSink,
-    ) -> anyhow::Result<()> {
+    /// Pushes the row of one replayed cycle into `sink` (nothing for a cycle
+    /// whose state the recording does not hold).
+    fn push(&mut self, r: &Replayed<'_>, sink: &mut dyn RowSink) -> anyhow::Result<()> {
+        let Some(state) = r.state else {
+            return Ok(());
+        };
+        let tel = r.telemetry;
         self.check_shape(tel)?;
-        if state.q.len() != self.n || state.qd.len() != self.n {
+        if state.n() != self.n {
             bail!(
                 "joint state {} has {} joints, the scenario {}",
-                state.seq,
-                state.q.len(),
+                state.header.seq,
+                state.n(),
                 self.n
             );
         }
-        let shadow_ok = self.step_shadow(state, tel);
-        let output = TelemetryCycle { tel, n: self.n };
-        let shadow = Sampled(&self.shadow);
+        let law_ran = matches!(r.answer, Some(Answer::Command(m)) if m != CommandMode::SafeHold);
+        if law_ran {
+            let d = r
+                .cycle
+                .command()
+                .tau()
+                .iter()
+                .zip(tel.tau())
+                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+            self.replay_tau_diff = self.replay_tau_diff.max(d);
+        } else {
+            self.rows_without_law += 1;
+        }
         let cycle = Cycle {
-            // hcc-sim numbers its states k = 0, 1, … (t_k = k T), as run_zoh does.
-            t: state.seq as f64 * self.period,
-            q: &state.q,
-            qd: &state.qd,
-            output: &output,
-            law: shadow_ok.then_some(&shadow as &dyn LawTerms),
+            // The drivers number their states k = 0, 1, … (t_k = k T).
+            t: state.header.seq as f64 * self.period,
+            q: state.q(),
+            qd: state.qd(),
+            output: tel,
+            law: law_ran.then_some(r.cycle.controller() as &dyn LawTerms),
         };
         self.recorder.record(&cycle, sink)?;
         self.rows += 1;
@@ -199,21 +165,8 @@ pub struct Recording {
     commands: Stream,
     telemetry: Stream,
     setpoints: u64,
-    /// Received states not yet joined with telemetry (seq ascending).
-    pending_states: VecDeque<StateRecord>,
-    /// Received telemetry not yet joined (its state may still be in flight).
-    pending_telemetry: VecDeque<Box<Telemetry>>,
-    last_state_seq: Option<u64>,
     pub last_state: Option<JointState>,
     pub last_telemetry: Option<Box<Telemetry>>,
-    /// Controller cycles whose state the recording does not have.
-    unmatched_telemetry: u64,
-    /// Telemetry of cycles without a new state (stale events of the controller).
-    stale_telemetry: u64,
-    /// State seq of the last row.
-    last_joined_seq: Option<u64>,
-    /// States the controller did not answer (it skips to the newest state when late).
-    unanswered_states: u64,
     latencies_ns: Vec<u64>,
     /// Commands per mode (Normal, SafeHold, Singular, Stop, unknown).
     modes: [u64; 5],
@@ -226,15 +179,8 @@ impl Recording {
             commands: Stream::default(),
             telemetry: Stream::default(),
             setpoints: 0,
-            pending_states: VecDeque::new(),
-            pending_telemetry: VecDeque::new(),
-            last_state_seq: None,
             last_state: None,
             last_telemetry: None,
-            unmatched_telemetry: 0,
-            stale_telemetry: 0,
-            last_joined_seq: None,
-            unanswered_states: 0,
             latencies_ns: Vec::new(),
             modes: [0; 5],
         }
@@ -247,17 +193,13 @@ impl Recording {
             + self.telemetry.checker.missed()
     }
 
-    fn on_state(&mut self, s: &JointState) {
+    /// Whether the state continues its stream (else it is not replayed).
+    fn on_state(&mut self, s: &JointState) -> bool {
         if !self.states.observe(s.header.seq).is_accepted() {
-            return;
+            return false;
         }
-        self.last_state_seq = Some(s.header.seq);
-        self.pending_states.push_back(StateRecord {
-            seq: s.header.seq,
-            q: s.q().to_vec(),
-            qd: s.qd().to_vec(),
-        });
         self.last_state = Some(*s);
+        true
     }
 
     fn on_command(&mut self, c: &TorqueCommand) {
@@ -276,60 +218,9 @@ impl Recording {
         self.modes[k] += 1;
     }
 
-    fn on_telemetry(&mut self, t: Box<Telemetry>) {
-        if !self.telemetry.observe(t.header.seq).is_accepted() {
-            return;
-        }
-        self.pending_telemetry.push_back(t);
-    }
-
-    /// Joins pending telemetry with its states and pushes the rows into
-    /// `sink`. With `flush`, telemetry whose state never arrived is given up.
-    fn join(
-        &mut self,
-        rows: &mut RowBuilder,
-        sink: &mut dyn RowSink,
-        flush: bool,
-    ) -> anyhow::Result<()> {
-        while let Some(tel) = self.pending_telemetry.front() {
-            let want = tel.state_seq;
-            if self.last_joined_seq.is_some_and(|last| want <= last) {
-                // Telemetry of a cycle without a new state (the controller's
-                // stale-state event): no row.
-                self.pending_telemetry.pop_front();
-                self.stale_telemetry += 1;
-                continue;
-            }
-            if !flush && self.last_state_seq.is_none_or(|last| want > last) {
-                break; // its state comes later in the file
-            }
-            while let Some(s) = self.pending_states.front() {
-                if s.seq < want {
-                    self.pending_states.pop_front();
-                    self.unanswered_states += 1;
-                } else {
-                    break;
-                }
-            }
-            let Some(tel) = self.pending_telemetry.pop_front() else {
-                break;
-            };
-            match self.pending_states.front() {
-                Some(s) if s.seq == want => {
-                    if let Some(s) = self.pending_states.pop_front() {
-                        rows.push(&s, &tel, sink)?;
-                    }
-                    self.last_joined_seq = Some(want);
-                    self.last_telemetry = Some(tel);
-                }
-                _ => self.unmatched_telemetry += 1,
-            }
-        }
-        if flush {
-            self.unanswered_states += self.pending_states.len() as u64;
-            self.pending_states.clear();
-        }
-        Ok(())
+    /// Whether the sample continues its stream (else it is not replayed).
+    fn on_telemetry(&mut self, t: &Telemetry) -> bool {
+        self.telemetry.observe(t.header.seq).is_accepted()
     }
 }
 
@@ -346,6 +237,8 @@ pub fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
 pub struct Derived<'a> {
     pub rows: RowBuilder<'a>,
     pub rec: Recording,
+    /// What the replay of the recording counted.
+    pub replayed: crate::replay::ReplayCounts,
     pub description: RunDescription,
     pub read: ReadSummary,
     /// State → command latencies, sorted.
@@ -400,7 +293,7 @@ pub fn results_writer(
 ) -> anyhow::Result<RunWriter> {
     Ok(RunWriter::new(
         out,
-        closed_loop::column_names(scenario, true),
+        hcc_simulation::column_names(scenario, true),
         &describe(scenario),
         !no_plots,
     )?)
@@ -416,22 +309,45 @@ pub fn derive<'a>(
 ) -> anyhow::Result<Derived<'a>> {
     let mut rows = RowBuilder::new(scenario)?;
     let mut rec = Recording::new();
+    let mut replay = Replay::new(scenario)?;
     let mut metadata = BTreeMap::new();
     let bad = |e: String| anyhow!("{}: {e}", path.display());
     let read = mcap_log::read::<anyhow::Error>(path, |_, entry| {
         match entry {
-            Entry::JointState(s) => rec.on_state(&s.to_msg().map_err(bad)?),
-            Entry::TorqueCommand(c) => rec.on_command(&c.to_msg().map_err(bad)?),
-            Entry::Telemetry(t) => rec.on_telemetry(t.to_msg().map_err(bad)?),
-            Entry::Setpoint(_) => rec.setpoints += 1,
+            Entry::JointState(s) => {
+                let s = s.to_msg().map_err(bad)?;
+                if rec.on_state(&s) {
+                    replay.on_state(s);
+                }
+            }
+            Entry::TorqueCommand(c) => {
+                let c = c.to_msg().map_err(bad)?;
+                rec.on_command(&c);
+                replay.on_command(c);
+            }
+            Entry::Telemetry(t) => {
+                let t = t.to_msg().map_err(bad)?;
+                if rec.on_telemetry(&t) {
+                    replay.on_telemetry(t);
+                }
+            }
+            Entry::Setpoint(s) => {
+                rec.setpoints += 1;
+                replay.on_setpoint(s.to_msg().map_err(bad)?);
+            }
             Entry::Recorder(_) => {}
             Entry::Metadata(name, map) => {
                 metadata.insert(name, map);
             }
         }
-        rec.join(&mut rows, sink, false)
+        let last = &mut rec.last_telemetry;
+        replay
+            .advance(false, &mut |r| rows.take(r, last, sink))
+            .map(|_| ())
     })?;
-    rec.join(&mut rows, sink, true)?;
+    let last = &mut rec.last_telemetry;
+    replay.advance(true, &mut |r| rows.take(r, last, sink))?;
+    let replayed = replay.counts();
     if let Some(reason) = &read.truncated {
         tracing::warn!(
             "{} is truncated ({reason}): read up to its last complete chunk",
@@ -452,6 +368,7 @@ pub fn derive<'a>(
     let mut d = Derived {
         rows,
         rec,
+        replayed,
         description: describe(scenario),
         read,
         latencies_ns,
@@ -495,9 +412,9 @@ impl Derived<'_> {
                 "torque_command": rec.commands.checker.missed(),
                 "telemetry": rec.telemetry.checker.missed(),
             },
-            "telemetry_without_state": rec.unmatched_telemetry,
-            "stale_telemetry": rec.stale_telemetry,
-            "states_not_answered_by_the_controller": rec.unanswered_states,
+            "telemetry_without_state": self.replayed.states_missing,
+            "stale_telemetry": self.replayed.stale,
+            "states_not_answered_by_the_controller": self.replayed.states_skipped,
             "driver_missed_commands": last_state.map(|s| s.missed_commands),
             "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
             "controller_missed_states": last_tel.map(|t| t.counters.missed_states),
@@ -513,8 +430,9 @@ impl Derived<'_> {
                 "p50": self.us(50.0), "p99": self.us(99.0), "max": self.us(100.0),
                 "samples": self.latencies_ns.len(),
             },
-            "shadow_controller_max_tau_difference": self.rows.shadow_tau_diff,
-            "shadow_controller_failures": self.rows.shadow_failures,
+            "replay_max_tau_difference": self.rows.replay_tau_diff,
+            "rows_without_the_law": self.rows.rows_without_law,
+            "setpoints_missing_from_the_recording": self.replayed.setpoints_missing,
         })
     }
 
@@ -546,16 +464,22 @@ impl Derived<'_> {
             rec.states.checker.missed(),
             rec.commands.checker.missed(),
             rec.telemetry.checker.missed(),
-            rec.unmatched_telemetry,
-            rec.unanswered_states
+            self.replayed.states_missing,
+            self.replayed.states_skipped
         );
         if rec.setpoints > 0 {
             println!("  setpoints recorded: {}", rec.setpoints);
         }
-        if self.rows.shadow_failures > 0 {
+        if self.rows.rows_without_law > 0 {
             println!(
-                "  warning: the shadow controller failed on {} states (acc, accv and S_kin/S_pot are NaN there)",
-                self.rows.shadow_failures
+                "  note: the law did not run on {} recorded states (the safe command): acc, accv and S_kin/S_pot are NaN there",
+                self.rows.rows_without_law
+            );
+        }
+        if self.rows.replay_tau_diff > 0.0 {
+            println!(
+                "  warning: the replayed control cycle differs from the recorded torques by up to {:e} N·m (another build or scenario?)",
+                self.rows.replay_tau_diff
             );
         }
     }

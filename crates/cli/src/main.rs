@@ -9,17 +9,20 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod capture;
-mod command_cmd;
 mod daemons;
 mod derive;
-mod jitter_cmd;
+mod jitter;
 mod model_cmd;
+mod monitor_cmd;
 mod plot_cmd;
 mod record_cmd;
+mod replay;
 mod replay_cmd;
 mod run_cmd;
 mod run_schedule;
+mod setpoint_cmd;
 mod simulate_cmd;
+mod view_child;
 
 #[derive(Parser)]
 #[command(
@@ -41,7 +44,7 @@ enum Command {
     Simulate(simulate_cmd::SimulateArgs),
     /// Measure the timing of the daemons on two cores (simulator on one, controller on the
     /// other) against the machine's own floor; table, jitter.json and jitter.png.
-    Jitter(jitter_cmd::JitterArgs),
+    Jitter(jitter::JitterArgs),
     /// Print the dynamics of a URDF chain (M, C, g, ...) at given states, as JSON.
     Model(model_cmd::ModelArgs),
     /// Derive trajectory.csv, metrics.json and the plots from a recording (FILE.mcap), or
@@ -56,11 +59,14 @@ enum Command {
     /// check that every torque command is bit-identical.
     Replay(replay_cmd::ReplayArgs),
     /// Set a level's goal on a running controller (exit 0 once it accepted it).
-    Goal(command_cmd::GoalArgs),
+    Goal(setpoint_cmd::GoalArgs),
     /// Set a level's stiffness and/or damping on a running controller.
-    Gains(command_cmd::GainsArgs),
+    Gains(setpoint_cmd::GainsArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
-    Monitor(command_cmd::MonitorArgs),
+    Monitor(monitor_cmd::MonitorArgs),
+    /// Serve a running namespace (or a recording, FILE.mcap) live to Foxglove over
+    /// WebSocket: the recording's channels, the chain's transforms, the URDF.
+    View(hcc_view::Args),
     /// Publish a running namespace on Zenoh for ROS 2 nodes (rmw_zenoh wire format):
     /// joint states, torque commands, telemetry; remote goals with --allow-setpoints.
     Bridge(hcc_bridge::Args),
@@ -72,15 +78,16 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run_cmd::run(args),
         Command::Simulate(args) => simulate_cmd::run(args),
-        Command::Jitter(args) => jitter_cmd::run(args),
+        Command::Jitter(args) => jitter::run(args),
         Command::Model(args) => model_cmd::run(args),
         Command::Plot(args) => plot_cmd::run(args),
         Command::Record(args) => record_cmd::run(args),
         Command::Export(args) => plot_cmd::export(args),
         Command::Replay(args) => replay_cmd::run(args),
-        Command::Goal(args) => command_cmd::goal(args),
-        Command::Gains(args) => command_cmd::gains(args),
-        Command::Monitor(args) => command_cmd::monitor(args),
+        Command::Goal(args) => setpoint_cmd::goal(args),
+        Command::Gains(args) => setpoint_cmd::gains(args),
+        Command::Monitor(args) => monitor_cmd::monitor(args),
+        Command::View(args) => hcc_view::run(args),
         Command::Bridge(args) => hcc_bridge::run(args),
     };
     match result {

@@ -50,12 +50,10 @@ use crate::daemons::{
     wait_until_controller_listens,
 };
 use crate::run_schedule::Scheduler;
+use crate::view_child::ViewChild;
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
 pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";
-
-/// File name of the recording in a run directory.
-pub const RECORDING_FILE: &str = "run.mcap";
 
 /// The simulator's timing report of a real-time run (`hcc-sim --stats`), in
 /// the output directory.
@@ -133,6 +131,17 @@ pub struct RunArgs {
     /// A daemon that may not have them says so and runs normally.
     #[arg(long)]
     pub no_rt: bool,
+    /// Start `hcc view` beside the daemons: the run served live to Foxglove
+    /// over WebSocket on 127.0.0.1 (`--view-port`).
+    #[arg(long)]
+    pub view: bool,
+    /// Port of `--view` (0: any free port; the address is printed).
+    #[arg(long, default_value_t = 8765)]
+    pub view_port: u16,
+    /// Joint states `--view` publishes per second, with their commands and
+    /// telemetry (0: every sample).
+    #[arg(long, default_value_t = 100.0)]
+    pub view_rate: f64,
 }
 
 /// SCHED_FIFO priority of the daemons of a real-time `hcc run`.
@@ -353,7 +362,13 @@ impl Launch {
     /// at t = 0: in real time the plant does not wait), starts the scheduler
     /// of the scenario's `[[setpoint]]`s (if any; its first entries reach the
     /// controller before the first state), then the simulator.
-    fn spawn(&self, scenario: &Scenario) -> anyhow::Result<(Daemon, Daemon, Option<Scheduler>)> {
+    /// `other_subscribers`: the launcher's own joint-state subscribers (the
+    /// recorder, and `hcc view` with `--view`).
+    fn spawn(
+        &self,
+        scenario: &Scenario,
+        other_subscribers: usize,
+    ) -> anyhow::Result<(Daemon, Daemon, Option<Scheduler>)> {
         let node = ipc::create_node(
             "hcc-run-probe",
             SignalHandlingMode::Disabled,
@@ -365,7 +380,7 @@ impl Launch {
             &self.controller_args,
             self.file_prefix.as_deref(),
         )?;
-        wait_until_controller_listens(&mut controller, &node, &self.names, 1)?;
+        wait_until_controller_listens(&mut controller, &node, &self.names, other_subscribers)?;
         drop(node);
         let scheduler = if scenario.setpoints.is_empty() {
             None
@@ -614,7 +629,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .with_context(|| format!("--duration {d}"))?;
     }
     let launch = Launch::new(&args, &scenario)?;
-    let recording = launch.out.join(RECORDING_FILE);
+    let recording = launch.out.join(capture::RECORDING_FILE);
 
     // Subscribe before the children start, so that no sample is missed.
     let receiver = start_receiver(&args, &launch)?;
@@ -638,7 +653,23 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             recording.display()
         );
     }
-    let (controller, sim, scheduler) = launch.spawn(&scenario)?;
+    // Dropped (and so stopped) on every way out of this function.
+    let view = args
+        .view
+        .then(|| {
+            ViewChild::start(
+                launch.namespace.as_str(),
+                launch.file_prefix.as_deref(),
+                &args.config,
+                args.view_port,
+                args.view_rate,
+            )
+        })
+        .transpose()?;
+    if let Some(v) = &view {
+        eprintln!("{}", v.line);
+    }
+    let (controller, sim, scheduler) = launch.spawn(&scenario, 1 + usize::from(view.is_some()))?;
     let mut children = Children { controller, sim };
     let started = Instant::now();
     let period = 1.0 / scenario.simulation.control_rate_hz;

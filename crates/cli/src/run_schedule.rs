@@ -8,8 +8,8 @@
 //! numbers its states k = 0, 1, …). The controller keeps an entry that
 //! arrives ahead of its state in its queue of waiting setpoints and takes it
 //! in the cycle of state k, before that cycle's transitions advance and its
-//! law steps — the order of `hcc_controller::schedule::Schedule` — so a
-//! lockstep run equals `hcc simulate` exactly, and a real-time run applies
+//! law steps — where `hcc simulate` hands it to the same control cycle
+//! (`hcc_cycle::Schedule`) — so a lockstep run equals `hcc simulate` exactly, and a real-time run applies
 //! every entry that arrived ahead at its exact cycle too.
 //!
 //! The thread sends the first [`WINDOW`] entries before the simulator starts
@@ -117,20 +117,6 @@ impl ScheduleReport {
     }
 }
 
-/// The entries of `scenario` due within its run, as messages with their
-/// application point (`apply_at_state_seq` = cycle k).
-pub fn messages(scenario: &Scenario) -> Vec<Setpoint> {
-    let s = &scenario.simulation;
-    let last_cycle = (s.duration_s * s.control_rate_hz).round() as u64;
-    scenario
-        .setpoints
-        .iter()
-        .map(|e| (e.cycle(s.control_rate_hz), e.setpoint))
-        .filter(|(k, _)| *k <= last_cycle)
-        .map(|(k, sp)| sp.with_apply_at(k))
-        .collect()
-}
-
 /// The running scheduler thread.
 pub struct Scheduler {
     handle: Option<std::thread::JoinHandle<ScheduleReport>>,
@@ -146,7 +132,7 @@ impl Scheduler {
         file_prefix: Option<String>,
         scenario: &Scenario,
     ) -> anyhow::Result<Scheduler> {
-        let entries = messages(scenario);
+        let entries = scenario.scheduled_messages();
         let total = scenario.setpoints.len();
         let namespace = namespace.to_string();
         let stop = Arc::new(AtomicBool::new(false));

@@ -1,28 +1,22 @@
-//! `hcc simulate CONFIG --out DIR`: the closed loop in one process (controller
-//! sampled at the control rate, torque held, plant integrated with RK4), then
-//! trajectory.csv, metrics.json and plots in DIR and a short summary on stdout.
-//! The scenario's `[[setpoint]]` entries are applied at their cycles.
+//! `hcc simulate CONFIG --out DIR`: hcc in one process — the simulated
+//! robot's driver and the control cycle the controller daemon runs,
+//! exchanging their messages by function call (`hcc_simulation`): the same
+//! torques as a lockstep `hcc run` of the scenario, by construction. Then
+//! trajectory.csv, metrics.json and plots in DIR and a short summary on
+//! stdout. The scenario's `[[setpoint]]` entries reach the cycle with the
+//! state of their cycle, as a client's do.
 //!
-//! Each cycle is also written into `DIR/run.mcap` in the layout of `hcc run`
-//! and `hcc record` (a joint state numbered k and stamped t_k = k T, the
-//! command and the telemetry of the law), so that one reader (`hcc plot
-//! FILE.mcap`, `hcc export`, Foxglove, PlotJuggler) handles simulated and
-//! recorded runs alike. The tables of `hcc simulate` are computed in process,
-//! as the reference the derivation from a recording is tested against.
+//! Each cycle's messages — the joint state numbered k and stamped t_k = k T,
+//! the command and the telemetry — are written into `DIR/run.mcap` in the
+//! layout of `hcc run` and `hcc record`, so that one reader (`hcc plot
+//! FILE.mcap`, `hcc export`, `hcc replay`, Foxglove, PlotJuggler) handles
+//! simulated and recorded runs alike.
 
 use anyhow::Context;
 use hcc_config::Scenario;
-use hcc_control::Controller;
-use hcc_controller::schedule::Schedule;
-use hcc_msgs::{
-    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, DriverStatus, JointState, MAX_LEVELS, MAX_TASK_DIM,
-    Telemetry, TorqueCommand,
-};
-use hcc_plant::SimError;
-use hcc_plant::closed_loop::{self, Commands, ControlLaw, HierarchicalLaw};
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
 use hcc_report::{Metrics, RunDescription, RunWriter, Trajectory};
-use nalgebra::DVector;
+use hcc_simulation::{CycleView, SimError};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -57,28 +51,33 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     if args.no_coriolis_cancellation {
         scenario.set_coriolis_cancellation(false)?;
     }
-    let recording = args.out.join(crate::run_cmd::RECORDING_FILE);
+    let recording = args.out.join(crate::capture::RECORDING_FILE);
     let mut log = SimLog::create(&recording, &scenario)?;
-    let result = closed_loop::simulate_law_observed(
-        &scenario,
-        scheduled_law(&scenario)?,
-        &mut |k, _t, q, qd, law| {
-            log.cycle(k, q, qd, law)
-                .map_err(|e| SimError::Invalid(format!("{}: {e:#}", recording.display())))
-        },
-    );
+    let result = hcc_simulation::simulate_observed(&scenario, &mut |cycle| {
+        log.cycle(cycle)
+            .map_err(|e| SimError::Invalid(format!("{}: {e:#}", recording.display())))
+    });
     let run = result.with_context(|| format!("simulation of {} failed", args.config.display()))?;
     log.finish()?;
     let metrics = write_results(&args.out, &run.trajectory, &run.description, args.no_plots)?;
     print!("{}", metrics.summary());
-    if let Some(n) = run
-        .description
-        .settings
-        .get("saturated_cycles")
-        .and_then(|v| v.as_u64())
-        && n > 0
-    {
+    let counted = |key: &str| {
+        run.description
+            .settings
+            .get(key)
+            .and_then(|v| v.as_u64())
+            .filter(|n| *n > 0)
+    };
+    if let Some(n) = counted("saturated_cycles") {
         println!("  torque saturated to the limits in {n} cycles");
+    }
+    if let Some(n) = counted("rate_limited_cycles") {
+        println!("  torque rate-limited in {n} cycles");
+    }
+    if let Some(n) = counted("numerical_failures") {
+        println!(
+            "  warning: the law failed numerically in {n} cycles (answered with the safe command)"
+        );
     }
     println!("results in {}", args.out.display());
     Ok(())
@@ -99,40 +98,11 @@ fn write_results(
     Ok(w.finish(description)?.metrics)
 }
 
-/// The scenario's `[[setpoint]]` schedule as [`Commands`] of the in-process law.
-struct ScheduledCommands(Schedule);
-
-impl Commands for ScheduledCommands {
-    fn before_step(&mut self, k: u64, controller: &mut Controller) -> Result<(), SimError> {
-        self.0.before_step(k, controller).map_err(SimError::Invalid)
-    }
-}
-
-/// The in-process law of `scenario`, its `[[setpoint]]` entries (if any)
-/// applied through the controller daemon's commander
-/// ([`hcc_controller::schedule::Schedule`]).
-pub(crate) fn scheduled_law(scenario: &Scenario) -> anyhow::Result<HierarchicalLaw> {
-    let law = HierarchicalLaw::new(scenario)?;
-    if scenario.setpoints.is_empty() {
-        return Ok(law);
-    }
-    let schedule = Schedule::new(law.controller(), scenario)?;
-    Ok(law.with_commands(Box::new(ScheduledCommands(schedule))))
-}
-
-/// The recording of an in-process run: the messages the daemons would have
-/// exchanged, cycle by cycle.
+/// The recording of an in-process run: the messages the driver and the
+/// control cycle exchanged, cycle by cycle.
 struct SimLog {
     writer: Option<McapWriter>,
-    period_ns: u64,
     cycles: u64,
-    n: usize,
-    dims: Vec<usize>,
-    gravity: bool,
-    last_k: usize,
-    state: JointState,
-    command: TorqueCommand,
-    telemetry: Box<Telemetry>,
 }
 
 impl SimLog {
@@ -151,111 +121,21 @@ impl SimLog {
         };
         // Stamps are simulated time (t_k = k T from 0), shown from the start's Unix time.
         let writer = McapWriter::create(path, &info, (unix, 0))?;
-        let n = scenario.model.nq();
-        let dims = scenario.task_dims();
-        let mut telemetry = Box::new(Telemetry::zeroed());
-        telemetry.set_shape(n, &dims)?;
-        let mut state = JointState::zeroed();
-        state.set_n_joints(n)?;
-        let mut command = TorqueCommand::zeroed();
-        command.set_n_joints(n)?;
-        let gravity = scenario.spec.gravity_compensation;
-        if gravity {
-            command.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
-        }
-        telemetry.flags = command.flags;
         Ok(SimLog {
             writer: Some(writer),
-            period_ns: (1e9 / s.control_rate_hz).round() as u64,
-            cycles: (s.duration_s * s.control_rate_hz).round() as u64,
-            n,
-            dims,
-            gravity,
-            last_k: 0,
-            state,
-            command,
-            telemetry,
+            cycles: 0,
         })
     }
 
-    /// Records cycle `k`: its state, and the law's command and telemetry.
-    fn cycle(
-        &mut self,
-        k: usize,
-        q: &DVector<f64>,
-        qd: &DVector<f64>,
-        law: &HierarchicalLaw,
-    ) -> anyhow::Result<()> {
+    /// Records one cycle: its state, command and telemetry.
+    fn cycle(&mut self, view: &CycleView<'_>) -> anyhow::Result<()> {
         let Some(w) = self.writer.as_mut() else {
             return Ok(());
         };
-        self.last_k = k;
-        let stamp = k as u64 * self.period_ns;
-        let (s, c, t) = (&mut self.state, &mut self.command, &mut *self.telemetry);
-        s.header.seq = k as u64;
-        s.header.stamp_ns = stamp;
-        s.status = if k as u64 == self.cycles {
-            DriverStatus::Stopped.code()
-        } else {
-            DriverStatus::Ok.code()
-        };
-        s.set_q(q.as_slice())?;
-        s.set_qd(qd.as_slice())?;
-        if !self.gravity {
-            s.flags = hcc_msgs::STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
-        }
-        w.joint_state(s)?;
-
-        let out = law.controller().output();
-        let mode = if out.any_singular {
-            CommandMode::Singular
-        } else {
-            CommandMode::Normal
-        };
-        c.header.seq = k as u64 + 1;
-        c.header.stamp_ns = stamp;
-        c.state_seq = k as u64;
-        c.state_stamp_ns = stamp;
-        c.mode = mode.code();
-        c.set_tau(law.tau().as_slice())?;
-        w.torque_command(c)?;
-
-        let n = self.n;
-        t.header.seq = k as u64 + 1;
-        t.header.stamp_ns = stamp;
-        t.state_seq = k as u64;
-        t.command_seq = c.header.seq;
-        t.mode = mode.code();
-        t.tau[..n].copy_from_slice(law.tau().as_slice());
-        t.tau_mu[..n].copy_from_slice(law.tau_mu().as_slice());
-        if self.gravity {
-            t.tau_gravity[..n].copy_from_slice(out.gravity.as_slice());
-        }
-        t.p_mu = law.p_mu();
-        t.singular_levels = 0;
-        for (i, &m) in self.dims.iter().enumerate().take(MAX_LEVELS) {
-            t.tau_level[i][..n].copy_from_slice(law.level_torque(i).as_slice());
-            t.task_error[i][..m].copy_from_slice(law.task_error(i).as_slice());
-            t.storage[i] = law.level_energy(i);
-            t.min_singular_value[i] = out
-                .conditioning
-                .get(i)
-                .map_or(f64::NAN, |c| c.max(0.0).sqrt());
-            if out.singular.get(i).copied().unwrap_or(false) {
-                t.singular_levels |= 1 << i;
-            }
-            if let Some(target) = law.controller().level_target(i) {
-                let m = m.min(MAX_TASK_DIM);
-                t.goal[i][..m].copy_from_slice(&target.goal[..m]);
-                for a in 0..m {
-                    t.stiffness_diag[i][a] = target.stiffness[(a, a)];
-                    t.damping_diag[i][a] = target.damping[(a, a)];
-                }
-                t.transition_progress[i] = 1.0;
-            }
-        }
-        t.counters.cycles = k as u64 + 1;
-        w.telemetry(t)?;
+        w.joint_state(view.state)?;
+        w.torque_command(view.cycle.command())?;
+        w.telemetry(view.cycle.telemetry())?;
+        self.cycles += 1;
         Ok(())
     }
 
@@ -263,15 +143,14 @@ impl SimLog {
         let Some(w) = self.writer.take() else {
             return Ok(());
         };
-        let cycles = self.last_k as u64 + 1;
         let mut stats = RecorderMsg::default();
         for s in [
             &mut stats.joint_state,
             &mut stats.torque_command,
             &mut stats.telemetry,
         ] {
-            s.received = cycles;
-            s.recorded = cycles;
+            s.received = self.cycles;
+            s.recorded = self.cycles;
         }
         let mut end = BTreeMap::new();
         end.insert("end".into(), "finished".into());

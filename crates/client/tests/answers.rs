@@ -9,7 +9,7 @@ use std::time::Duration;
 use hcc_client::{Client, ClientError};
 use hcc_config::Scenario;
 use hcc_control::Controller;
-use hcc_controller::{CycleSettings, Decider};
+use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::ipc::{self, Services};
 use hcc_msgs::{JointState, Namespace, Rejection, ServiceNames};
 use iceoryx2::prelude::SignalHandlingMode;
@@ -29,7 +29,7 @@ fn answers_reach_the_client() {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
     let sc = Scenario::load(&path).unwrap();
     let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
-    let mut d = Decider::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
     let n = sc.model.nq();
     let mut state = JointState::zeroed();
     state
@@ -45,9 +45,9 @@ fn answers_reach_the_client() {
     assert!(e.to_string().contains("no controller answered"), "{e}");
 
     // The stand-in answers one cycle.
-    let mut cycle = |d: &mut Decider, k: u64| {
+    let mut cycle = |d: &mut ControlCycle, k: u64| {
         while let Ok(Some(sp)) = setpoints.receive() {
-            d.take_setpoint(&sp);
+            d.take_setpoint_now(&sp);
         }
         state.header.seq = k;
         d.decide(&state, k * 1_000_000);

@@ -20,10 +20,10 @@
 
 use std::path::Path;
 
+use hcc_control::LevelSpec;
 use hcc_msgs::{Rejection, Setpoint};
 use serde::Deserialize;
 
-use crate::LevelSpec;
 use crate::error::{ConfigError, invalid};
 
 /// The client id scheduled setpoints carry (in-process and over IPC alike).
@@ -171,5 +171,12 @@ impl ScheduledSetpoint {
         let period_ns = ((1e9 / control_rate_hz).round() as u64).max(1);
         let t_ns = (self.t_s * 1e9).round() as u64;
         t_ns.div_ceil(period_ns)
+    }
+
+    /// The message as a client sends it: applied at the state of its cycle
+    /// ([`hcc_msgs::Setpoint::apply_at_state_seq`] = [`ScheduledSetpoint::cycle`];
+    /// the drivers number their states k = 0, 1, … per period).
+    pub fn message(&self, control_rate_hz: f64) -> Setpoint {
+        self.setpoint.with_apply_at(self.cycle(control_rate_hz))
     }
 }

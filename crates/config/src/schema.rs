@@ -31,12 +31,18 @@ pub struct ScenarioFile {
     /// `[safety]`: the controller's safety layer (every field optional).
     #[serde(default)]
     pub safety: SafetySection,
-    /// `[commanding]`: limits of setpoints sent while the controller runs.
+    /// `[setpoint_limits]`: limits of setpoints sent while the controller runs.
     #[serde(default)]
-    pub commanding: crate::commanding::CommandingSection,
-    /// `[output]`: the torque output pipeline after the law.
+    pub setpoint_limits: crate::setpoint_limits::SetpointLimitsSection,
+    /// `[torque_filter]`: the torque-rate limit and low-pass after the law.
     #[serde(default)]
-    pub output: crate::output::OutputSection,
+    pub torque_filter: crate::torque_filter::TorqueFilterSection,
+    /// The former names of `[setpoint_limits]` and `[torque_filter]`: read
+    /// only to refuse them with the new name.
+    #[serde(default)]
+    pub commanding: Option<toml::Value>,
+    #[serde(default)]
+    pub output: Option<toml::Value>,
     /// `[[setpoint]]`: setpoints scheduled in time.
     #[serde(default, rename = "setpoint")]
     pub setpoints: Vec<crate::schedule::SetpointSection>,

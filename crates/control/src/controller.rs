@@ -1,32 +1,17 @@
 //! The controller: workspace, construction checks and the per-cycle law.
 
 use crate::ControlError;
-use crate::dense::{
-    AlignWork, Conditioning, SpdWork, copy, damped_spd_inverse, gemm, gemm_leading, gemm_nt,
-    gemm_nt_leading, gemm_sym, gemm_tn, gemv, gemv_slices, gemv_t, gemv_t_slices, null_space_basis,
-    orthonormalize_polar, procrustes_align, transpose_cols_into, transpose_into,
-};
+use crate::fade::fade_factor;
 use crate::spec::{ControllerSpec, Form, LevelSpec};
 use crate::task::{FrameWork, PotentialWork};
+use hcc_linalg::basis::{AlignWork, null_space_basis, orthonormalize_polar, procrustes_align};
+use hcc_linalg::products::{
+    copy, gemm, gemm_leading, gemm_nt, gemm_nt_leading, gemm_sym, gemm_tn, gemv, gemv_slices,
+    gemv_t, gemv_t_slices, transpose_cols_into, transpose_into,
+};
+use hcc_linalg::spd::{Conditioning, SpdWork, damped_spd_inverse};
 use hcc_model::{Data, Model};
 use nalgebra::{DMatrix, DVector};
-
-/// The lower levels' torques and τ_μ fade out between `FADE_RANGE × singular_ratio`
-/// and `singular_ratio` of a level's eigenvalue ratio (see the crate docs, "Singularities").
-pub const FADE_RANGE: f64 = crate::dense::EXACT_RATIO_FACTOR;
-
-/// Smoothstep on the log scale: 0 at or below `eps`, 1 at or above `FADE_RANGE × eps`.
-pub(crate) fn fade_factor(ratio: f64, eps: f64) -> f64 {
-    if ratio.is_nan() || ratio <= eps {
-        return 0.0;
-    }
-    let hi = FADE_RANGE * eps;
-    if ratio >= hi {
-        return 1.0;
-    }
-    let t = (ratio / eps).ln() / FADE_RANGE.ln();
-    t * t * (3.0 - 2.0 * t)
-}
 
 /// Smallest eigenvalue that counts as "not vanished" for a Gram matrix.
 const GRAM_FLOOR: f64 = 1e-12;
@@ -38,7 +23,7 @@ const MIN_OVERLAP: f64 = 0.5;
 
 /// What one control cycle produced (all preallocated; valid after [`Controller::step`]).
 #[derive(Clone, Debug)]
-pub struct Output {
+pub struct StepOutput {
     /// τ = Σ τ_i + τ_μ + g (eq. 19); g only with gravity compensation.
     pub tau: DVector<f64>,
     /// τ_i of each level (eqs. 20, 21).
@@ -76,10 +61,10 @@ pub struct Output {
     pub safety: crate::safety::SafetyOutput,
 }
 
-impl Output {
-    fn new(n: usize, dims: &[usize], v_dims: &[usize]) -> Output {
+impl StepOutput {
+    fn new(n: usize, dims: &[usize], v_dims: &[usize]) -> StepOutput {
         let r = dims.len();
-        Output {
+        StepOutput {
             tau: DVector::zeros(n),
             tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
             tau_mu: DVector::zeros(n),
@@ -399,7 +384,7 @@ pub struct Controller {
     mu: MuWork,
     /// Safety layer workspace and memory (crate::safety).
     safety: crate::safety::Safety,
-    out: Output,
+    out: StepOutput,
 }
 
 impl Controller {
@@ -440,7 +425,7 @@ impl Controller {
         let kd = if middle { ktop } else { 0 };
         let kmid = levels.iter().map(|l| l.proj.k).max().unwrap_or(0);
         let v_dims: Vec<usize> = levels.iter().map(|l| l.d).collect();
-        let out = Output::new(n, &dims, &v_dims);
+        let out = StepOutput::new(n, &dims, &v_dims);
         // Safety layer (crate::safety): limits from the model, workspace.
         let safety = crate::safety::Safety::new(model, &spec, &dims, ktop)?;
         let mut c = Controller {
@@ -602,7 +587,7 @@ impl Controller {
     }
 
     /// Result of the last cycle.
-    pub fn output(&self) -> &Output {
+    pub fn output(&self) -> &StepOutput {
         &self.out
     }
 
@@ -697,10 +682,10 @@ impl Controller {
     }
 
     /// One control cycle: from the measured (q, q̇) to the torque command in
-    /// [`Output::tau`]. Allocation-free. On non-finite input it returns an error and
+    /// [`StepOutput::tau`]. Allocation-free. On non-finite input it returns an error and
     /// leaves the previous output untouched; a numerical failure (which the damping
     /// should prevent) returns an error with τ set to g (or 0 without gravity compensation).
-    pub fn step(&mut self, q: &[f64], qd: &[f64]) -> Result<&Output, ControlError> {
+    pub fn step(&mut self, q: &[f64], qd: &[f64]) -> Result<&StepOutput, ControlError> {
         if q.len() != self.n || qd.len() != self.n {
             return Err(ControlError::BadInput(
                 "state has the wrong number of joints",
@@ -735,8 +720,7 @@ impl Controller {
         hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
         // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
         copy(&mut self.chol, &self.data.m);
-        let n = self.n;
-        hcc_model::linalg::cholesky_in_place_slice(self.chol.as_mut_slice(), n)
+        hcc_model::linalg::cholesky_factor(&mut self.chol)
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         sym_sum_transpose(&mut self.mdot, &self.data.c);
         copy(&mut self.out.gravity, &self.data.g);

@@ -48,7 +48,7 @@
 //! λ_min/λ_max falls below
 //! `singular_ratio` (damped least squares on the Gram matrix). Away from
 //! singularities the law is exact; near one the torques stay finite and bounded and
-//! [`Output::singular`] flags the level. The strict hierarchy and the zero power of τ_μ
+//! [`StepOutput::singular`] flags the level. The strict hierarchy and the zero power of τ_μ
 //! are then only approximate, and the damped null-space projections of the lower
 //! levels are no longer passive: near a singularity they can feed energy into the
 //! self-motion (an arm pulled straight whips round). So the lower levels' torques and
@@ -57,7 +57,7 @@
 //! the levels above it — the inversion its projection depends on — and τ_μ by the
 //! product of β over every level's ratio, where β rises smoothly (a smoothstep on the
 //! log scale) from 0 at `singular_ratio` to 1 at [`FADE_RANGE`] × `singular_ratio`
-//! ([`Output::fade`], [`Output::fade_mu`]). In the singular region the robot is
+//! ([`StepOutput::fade`], [`StepOutput::fade_mu`]). In the singular region the robot is
 //! then held by level 1, τ_1 = −J_1ᵀ F_1, which involves no inversion and is passive
 //! (with gravity compensation the energy ½ q̇ᵀ M q̇ + V_1 cannot grow), and the lower
 //! tasks resume as it is left. Away from singularities every β_j is exactly 1 and the
@@ -69,14 +69,15 @@
 //! formed: it is applied by Cholesky solves.
 
 pub mod controller;
-pub mod dense;
+mod fade;
 pub mod safety;
 pub mod saturation;
 pub mod spec;
 pub mod task;
 pub mod transition;
 
-pub use controller::{Controller, Diagnostics, FADE_RANGE, LevelTarget, Output};
+pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
+pub use fade::FADE_RANGE;
 pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};

@@ -18,7 +18,7 @@
 //!
 //! **Conflict fade.** A level i ≥ 2 whose goal is unreachable given the levels
 //! above it (an algorithmic conflict: Λ_i = Z_i M Z_iᵀ of eq. 18 becomes singular,
-//! its conditioning r_i = `Output::conditioning` falls, while the levels above stay
+//! its conditioning r_i = `StepOutput::conditioning` falls, while the levels above stay
 //! regular) keeps pulling in the direction it lost through the damped inverse: the
 //! arm creeps along the self-motion that makes the conflict worse (e.g. a wrist
 //! centre pulled beyond reach by the orientation level stretches the elbow). With
@@ -45,7 +45,7 @@
 //!
 //! (eq. 8; N_i = I − M⁻¹ J_augᵀ G⁻¹ J_aug), with c_i = (1 − min(β_i, β(r_i))) ·
 //! `null_space_damping`, where β(r_i) is the fade function of the level's own
-//! conditioning r_i (`Output::conditioning`): a level in an algorithmic singularity
+//! conditioning r_i (`StepOutput::conditioning`): a level in an algorithmic singularity
 //! (Λ_i = Z_i M Z_iᵀ singular) keeps its torque but no longer controls the
 //! direction it lost, which is damped in its place.
 //! J_aug M⁻¹ τ_N,i = 0: the levels above are not disturbed, and its power
@@ -107,7 +107,8 @@
 //! Allocation-free after `Safety::new`.
 
 use crate::ControlError;
-use crate::dense::{SpdWork, damped_spd_inverse_only};
+use hcc_linalg::products::gemv;
+use hcc_linalg::spd::{SpdWork, damped_spd_inverse_only};
 use hcc_model::Model;
 use nalgebra::{DMatrix, DVector};
 
@@ -220,7 +221,7 @@ impl SafetySpec {
     }
 }
 
-/// What the safety layer did in the last cycle (part of [`crate::Output`]).
+/// What the safety layer did in the last cycle (part of [`crate::StepOutput`]).
 #[derive(Clone, Debug)]
 pub struct SafetyOutput {
     /// τ_safety: null-space damping + joint-limit guard + velocity damping, added to τ.
@@ -300,7 +301,7 @@ pub(crate) struct CycleTerms<'a> {
     pub w: &'a DMatrix<f64>,
     /// The effective fade β_i per level.
     pub fade: &'a [f64],
-    /// The smallest eigenvalue ratio of each level's inversions (`Output::conditioning`).
+    /// The smallest eigenvalue ratio of each level's inversions (`StepOutput::conditioning`).
     pub conditioning: &'a [f64],
     /// V_i per level.
     pub potential: &'a [f64],
@@ -536,7 +537,7 @@ impl Safety {
             // The conflict fade: a level whose own Λ_i (eq. 18) is near-singular has
             // lost a direction to the levels above; its spring fades with r_i.
             for i in 1..fade.len() {
-                let own = crate::controller::fade_factor(conditioning[i], eps_c);
+                let own = crate::fade::fade_factor(conditioning[i], eps_c);
                 if own < fade[i] {
                     fade[i] = own;
                     out.conflict_fade_active = true;
@@ -594,7 +595,7 @@ impl Safety {
         out.guard_potential = 0.0;
         out.power = 0.0;
         self.fill_power = 0.0;
-        crate::dense::gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
+        gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
         let kinetic = 0.5 * c.qd.dot(&self.mqd);
         let mut potential = c.potential.first().copied().unwrap_or(0.0);
         for i in 1..c.potential.len() {
@@ -625,13 +626,13 @@ impl Safety {
         let mut xdot_done = false;
         for i in 1..c.fade.len() {
             // Faded, or singular itself (Λ_i, eq. 18): the motion it no longer controls.
-            let own = crate::controller::fade_factor(c.conditioning[i], c.singular_ratio);
+            let own = crate::fade::fade_factor(c.conditioning[i], c.singular_ratio);
             let beta = c.fade[i].min(own);
             if beta >= 1.0 {
                 continue;
             }
             if !xdot_done {
-                crate::dense::gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+                gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
                 xdot_done = true;
             }
             let k = self.k_above[i].min(ktop);

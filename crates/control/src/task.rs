@@ -2,8 +2,8 @@
 //! error x̃_i, the potential V_i and its gradient. [`jacobian`] is the one place a
 //! task Jacobian is assembled (the controller, the recorders and the checks use it).
 
-use crate::dense::gemv;
 use crate::spec::TaskSpec;
+use hcc_linalg::products::gemv;
 use hcc_model::{Data, FrameId, Model};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
@@ -200,67 +200,17 @@ pub(crate) fn potential(
     for (t, task) in tasks.iter().enumerate() {
         let placement: Option<Isometry3<f64>> =
             task.frame().map(|f| frames.placement(model, data, f));
-        match task {
-            TaskSpec::Position { axes, .. } => {
-                let p = placement.expect("frame task").translation.vector;
-                for (a, &ax) in axes.iter().enumerate() {
-                    err[o + a] = p[ax] - goal[o + a];
-                }
-            }
-            TaskSpec::Pose { .. } => {
-                let p = placement.expect("frame task").translation.vector;
-                for a in 0..3 {
-                    err[o + a] = p[a] - goal[o + a];
-                }
-            }
-            TaskSpec::PlanarOrientation { axis, .. } => {
-                let rot = placement.expect("frame task").rotation.to_rotation_matrix();
-                let m = rot.matrix();
-                let angle = match axis {
-                    0 => m[(2, 1)].atan2(m[(1, 1)]),
-                    1 => m[(0, 2)].atan2(m[(2, 2)]),
-                    _ => m[(1, 0)].atan2(m[(0, 0)]),
-                };
-                err[o] = wrap_angle(angle - goal[o]);
-            }
-            TaskSpec::Joints { indices } => {
-                for (a, &ix) in indices.iter().enumerate() {
-                    err[o + a] = q[ix] - goal[o + a];
-                }
-            }
-            TaskSpec::JointCombination { weights } => {
-                let m = weights.nrows();
-                for a in 0..m {
-                    let mut s = 0.0;
-                    for b in 0..n {
-                        s += weights[(a, b)] * q[b];
-                    }
-                    err[o + a] = s - goal[o + a];
-                }
-            }
-            TaskSpec::Posture => {
-                for a in 0..n {
-                    err[o + a] = q[a] - goal[o + a];
-                }
-            }
-            TaskSpec::Orientation { .. } => {}
-        }
+        let m = task.dim(n);
+        let (goal, err) = (
+            &goal.as_slice()[o..o + m],
+            &mut err.as_mut_slice()[o..o + m],
+        );
+        task_error(task, placement.as_ref(), q, goal, err);
         if let Some(qr) = task.quaternion_rows() {
             let rot = placement.expect("frame task").rotation.to_rotation_matrix();
-            let re = w.goal_rotation[t].inverse() * rot;
-            let quat = UnitQuaternion::from_rotation_matrix(&re);
-            let (mut eta, mut eps) = (quat.w, quat.imag());
-            if eta < 0.0 {
-                eta = -eta;
-                eps = -eps;
-            }
-            w.quat[t] = (eta, eps);
-            let e: Vector3<f64> = w.goal_rotation[t] * (2.0 * eps);
-            for a in 0..3 {
-                err[o + qr + a] = e[a];
-            }
+            w.quat[t] = quaternion_error(&w.goal_rotation[t], &rot, &mut err[qr..qr + 3]);
         }
-        o += task.dim(n);
+        o += m;
     }
     if let [TaskSpec::Orientation { .. }] = tasks {
         // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
@@ -280,6 +230,82 @@ pub(crate) fn potential(
         return 0.5 * err.dot(grad);
     }
     stacked_quaternion_potential(tasks, n, stiffness, w, err, grad)
+}
+
+/// The error rows x̃ = x − x_d of one task (`goal`, `err`: its rows) at the
+/// state (frame `placement`, joint positions `q`); a quaternion task's
+/// rotation rows are left to [`quaternion_error`]. Allocation-free.
+fn task_error(
+    task: &TaskSpec,
+    placement: Option<&Isometry3<f64>>,
+    q: &DVector<f64>,
+    goal: &[f64],
+    err: &mut [f64],
+) {
+    let n = q.len();
+    match task {
+        TaskSpec::Position { axes, .. } => {
+            let p = placement.expect("frame task").translation.vector;
+            for (a, &ax) in axes.iter().enumerate() {
+                err[a] = p[ax] - goal[a];
+            }
+        }
+        TaskSpec::Pose { .. } => {
+            let p = placement.expect("frame task").translation.vector;
+            for a in 0..3 {
+                err[a] = p[a] - goal[a];
+            }
+        }
+        TaskSpec::PlanarOrientation { axis, .. } => {
+            let rot = placement.expect("frame task").rotation.to_rotation_matrix();
+            let m = rot.matrix();
+            let angle = match axis {
+                0 => m[(2, 1)].atan2(m[(1, 1)]),
+                1 => m[(0, 2)].atan2(m[(2, 2)]),
+                _ => m[(1, 0)].atan2(m[(0, 0)]),
+            };
+            err[0] = wrap_angle(angle - goal[0]);
+        }
+        TaskSpec::Joints { indices } => {
+            for (a, &ix) in indices.iter().enumerate() {
+                err[a] = q[ix] - goal[a];
+            }
+        }
+        TaskSpec::JointCombination { weights } => {
+            let m = weights.nrows();
+            for a in 0..m {
+                let mut s = 0.0;
+                for b in 0..n {
+                    s += weights[(a, b)] * q[b];
+                }
+                err[a] = s - goal[a];
+            }
+        }
+        TaskSpec::Posture => {
+            for a in 0..n {
+                err[a] = q[a] - goal[a];
+            }
+        }
+        TaskSpec::Orientation { .. } => {}
+    }
+}
+
+/// The rotation rows e = 2 R_d ε (≈ the rotation vector, world axes) of the
+/// error R_dᵀ R (shortest way: η ≥ 0) into `rows`; returns (η, ε).
+fn quaternion_error(
+    goal: &Rotation3<f64>,
+    rot: &Rotation3<f64>,
+    rows: &mut [f64],
+) -> (f64, Vector3<f64>) {
+    let quat = UnitQuaternion::from_rotation_matrix(&(goal.inverse() * rot));
+    let (mut eta, mut eps) = (quat.w, quat.imag());
+    if eta < 0.0 {
+        eta = -eta;
+        eps = -eps;
+    }
+    let e: Vector3<f64> = goal * (2.0 * eps);
+    rows.copy_from_slice(e.as_slice());
+    (eta, eps)
 }
 
 /// V = ½ eᵀ K e of a level with quaternion rows (e = 2ε there, x̃ elsewhere) and its

@@ -15,8 +15,10 @@
 
 pub mod algorithms;
 pub mod error;
-pub mod linalg;
 pub mod urdf;
+
+/// The dense linear algebra (Cholesky and the rest), from its one home `hcc-linalg`.
+pub use hcc_linalg as linalg;
 
 pub use algorithms::*;
 pub use error::ModelError;

@@ -581,28 +581,18 @@ fn check_spd(values: &[f64], full: bool, m: usize) -> Result<(), Rejection> {
 }
 
 /// Whether the symmetric m×m matrix with lower-triangle entries `a(j, k)`
-/// (j ≥ k) is positive definite: the Cholesky factorisation A = L Lᵀ, in a
-/// stack buffer, finds every pivot > 0. Allocation-free.
+/// (j ≥ k) is positive definite: its Cholesky factorisation A = L Lᵀ
+/// (`hcc_linalg`, in a stack buffer) finds every pivot > 0 and finite.
+/// Allocation-free.
 fn cholesky_ok(a: impl Fn(usize, usize) -> f64, m: usize) -> bool {
     let mut l = [0.0_f64; MAX_GAIN_ENTRIES];
-    for j in 0..m {
-        for k in 0..=j {
-            let mut s = a(j, k);
-            for p in 0..k {
-                s -= l[j * m + p] * l[k * m + p];
-            }
-            if j == k {
-                // A NaN pivot comes from overflowing sums: not SPD either.
-                if s.is_nan() || s <= 0.0 {
-                    return false;
-                }
-                l[j * m + j] = s.sqrt();
-            } else {
-                l[j * m + k] = s / l[k * m + k];
-            }
+    // Column-major, lower triangle (the factorisation reads only that).
+    for k in 0..m {
+        for j in k..m {
+            l[k * m + j] = a(j, k);
         }
     }
-    true
+    hcc_linalg::cholesky_in_place_slice(&mut l[..m * m], m).is_ok()
 }
 
 #[cfg(test)]

@@ -1,14 +1,19 @@
-//! Plant simulator for the hierarchical compliance controller of Dietrich, Ott
-//! & Albu-Schäffer (IROS 2013): the robot dynamics of the paper's eq. (1)
-//! integrated with RK4 ([`Plant`]), and the in-process closed loop with the
-//! controller sampled at the control rate and its torque held between samples
-//! ([`closed_loop`]).
+//! The simulated robot of hcc: the robot dynamics of the paper's eq. (1)
+//! integrated with RK4 ([`Plant`], with end stops and external wrenches), the
+//! zero-order-hold period step ([`PeriodStep`], [`run_zoh`]) and the
+//! simulated driver ([`SimDriver`]: the plant behind the driver side of the
+//! message contract). The `hcc-sim` daemon runs the driver over iceoryx2;
+//! `hcc simulate` (crate `hcc-simulation`) runs it in process against the
+//! control cycle.
 
-pub mod closed_loop;
+pub mod driver;
 pub mod end_stops;
 pub mod plant;
 pub mod zoh;
 
+use hcc_config::Scenario;
+
+pub use driver::{Applied, DriverCounters, SimDriver};
 pub use end_stops::EndStops;
 pub use plant::{ExternalWrench, Plant, PlantEnergy};
 pub use zoh::{LoopTiming, PeriodStep, run_zoh};
@@ -30,4 +35,28 @@ pub enum SimError {
     Diverged { t: f64 },
     #[error("model: {0}")]
     Model(#[from] hcc_model::ModelError),
+}
+
+/// Builds the plant of a scenario (model, initial state, friction, wrenches).
+pub fn plant_for(scenario: &Scenario) -> Result<Plant, SimError> {
+    let s = &scenario.simulation;
+    let mut plant = Plant::new(
+        scenario.model.clone(),
+        &scenario.q0,
+        &scenario.qd0,
+        &s.joint_friction,
+    )?;
+    plant.set_wrenches(
+        s.wrenches
+            .iter()
+            .map(|w| ExternalWrench {
+                start_s: w.start_s,
+                duration_s: w.duration_s,
+                frame: w.frame_id,
+                force: w.force,
+                torque: w.torque,
+            })
+            .collect(),
+    )?;
+    Ok(plant)
 }

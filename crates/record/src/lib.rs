@@ -41,6 +41,7 @@
 //! # Ok(()) }
 //! ```
 
+mod adapters;
 mod layout;
 pub mod mcap_log;
 mod recorder;

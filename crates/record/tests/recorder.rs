@@ -8,32 +8,10 @@ use hcc_record::{
 use nalgebra::{DMatrix, DVector};
 use std::path::PathBuf;
 
-const SCENARIO: &str = r#"
-[robot]
-urdf = "planar4.urdf"
-tip_link = "tcp"
-gravity = [0.0, -9.81, 0.0]
-
-[[level]]
-task = "joint"
-joints = ["joint1"]
-stiffness = 200.0
-damping = 30.0
-goal = [0.2]
-
-[[level]]
-task = "joint"
-stiffness = 50.0
-damping = 8.0
-goal = [0.2, -0.4, -1.5, 0.3]
-
-[initial]
-q0 = [0.4, -0.5, -1.6, 0.4]
-"#;
-
 fn scenario() -> Scenario {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/test-recorder.toml");
-    Scenario::from_toml_str(SCENARIO, &path).unwrap()
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/planar-joint-pd.toml");
+    Scenario::load(&path).unwrap()
 }
 
 /// A cycle's output with fixed values.

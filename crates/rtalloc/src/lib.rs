@@ -69,6 +69,7 @@
 //! (a thread-local that allocates on first access would recurse into the
 //! allocator), and [`page_faults`] is per thread only on Linux.
 
+mod audit;
 mod memory;
 mod pool;
 
@@ -76,6 +77,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+pub use audit::{LoopAudit, LoopReport};
 pub use memory::{PageFaults, lock_memory, page_faults, prefault_stack, unlock_memory};
 pub use pool::{BLOCK_ALIGN, BLOCK_COUNT, BLOCK_SIZE, POOL_BYTES, is_pool_ptr};
 

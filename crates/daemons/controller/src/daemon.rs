@@ -4,7 +4,7 @@
 //! Start-up builds the robot model, the controller and every buffer from the
 //! scenario TOML, opens the iceoryx2 services ([`hcc_msgs::ipc`]), prepares
 //! the thread ([`hcc_rt`]) and waits for the first joint state. The loop
-//! then runs [`Cycle::run_once`] inside an [`hcc_rtalloc::RtSection`] until
+//! then runs [`ControlLoop::run_once`] inside an [`hcc_rtalloc::RtSection`] until
 //! SIGINT/SIGTERM. A second, non-real-time thread logs the loop's counters
 //! every 100 ms when they change.
 //!
@@ -29,8 +29,9 @@ use hcc_msgs::ipc::{self, IpcNode, Services};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 use tracing::{error, info, warn};
 
-use crate::cycle::{Cycle, CycleSettings, Outcome, Ports};
-use crate::status::{LoopCounters, Status};
+use crate::control_loop::{ControlLoop, LoopSettings, Outcome, Ports};
+use crate::status::LoopStatus;
+use hcc_cycle::CycleCounters;
 use hcc_rt::{self as rt, RtReport, RtSettings};
 
 /// Cycles after which the allocator counters are taken as the baseline.
@@ -100,7 +101,7 @@ struct Setup {
     scenario: Scenario,
     names: ServiceNames,
     file_prefix: Option<String>,
-    settings: CycleSettings,
+    settings: LoopSettings,
 }
 
 fn load(args: &Args) -> Result<Setup> {
@@ -109,7 +110,7 @@ fn load(args: &Args) -> Result<Setup> {
     let names =
         ServiceNames::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("--namespace")?;
     let file_prefix = args.ipc.file_prefix();
-    let mut settings = CycleSettings::from_scenario(&scenario);
+    let mut settings = LoopSettings::from_scenario(&scenario);
     if let Some(w) = args.wait {
         settings.wait = w;
     }
@@ -157,7 +158,7 @@ pub fn run(args: Args) -> Result<()> {
     let scenario = &setup.scenario;
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
         .map_err(|e| anyhow::anyhow!("{}: controller: {e}", scenario.path.display()))?;
-    let mut cycle = Cycle::new(controller, setup.settings.clone())?;
+    let mut control = ControlLoop::new(controller, setup.settings.clone())?;
     rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     set_log_level_from_env_or(LogLevel::Warn);
     let ipc = Ipc::open(&setup)?;
@@ -172,7 +173,7 @@ pub fn run(args: Args) -> Result<()> {
     let report = rt::prepare_rt_thread(&rt_settings);
     log_start(&setup, &report);
 
-    let status = cycle.status();
+    let status = control.status();
     let baseline = Arc::new(AtomicU64::new(u64::MAX));
     let done = Arc::new(AtomicBool::new(false));
     let logger = {
@@ -183,7 +184,7 @@ pub fn run(args: Args) -> Result<()> {
             .context("starting the logging thread")?
     };
     let started = Instant::now();
-    control_loop(&mut cycle, &ipc.ports, &baseline);
+    control_loop(&mut control, &ipc.ports, &baseline);
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
     let baseline = baseline.load(Ordering::Relaxed);
@@ -194,7 +195,7 @@ pub fn run(args: Args) -> Result<()> {
             (baseline != u64::MAX).then(|| torque_path_allocs(&status).saturating_sub(baseline));
         write_stats(
             path,
-            &cycle,
+            &control,
             setup.settings.wait,
             rt,
             started.elapsed(),
@@ -202,26 +203,26 @@ pub fn run(args: Args) -> Result<()> {
         )?;
     }
     // The loop's loaned sample goes back before its publisher and node go.
-    drop(cycle);
+    drop(control);
     drop(ipc);
     Ok(())
 }
 
-/// The real-time loop: [`Cycle::run_once`] until a stop is requested, inside
+/// The real-time loop: [`ControlLoop::run_once`] until a stop is requested, inside
 /// an [`hcc_rtalloc::RtSection`]; after [`WARM_UP_CYCLES`] answers, the
 /// allocator's count of the torque path becomes the `baseline` of the
 /// logging thread.
-fn control_loop(cycle: &mut Cycle, ports: &Ports, baseline: &AtomicU64) {
+fn control_loop(control: &mut ControlLoop, ports: &Ports, baseline: &AtomicU64) {
     let _rt = hcc_rtalloc::RtSection::enter();
     let mut answered = 0u64;
     loop {
-        match cycle.run_once(ports) {
+        match control.run_once(ports) {
             Outcome::Stop => break,
             Outcome::Answered(_) => {
                 answered += 1;
                 if answered == WARM_UP_CYCLES {
                     baseline.store(
-                        torque_path_allocs(cycle.status().as_ref()),
+                        torque_path_allocs(control.status().as_ref()),
                         Ordering::Relaxed,
                     );
                 }
@@ -258,7 +259,7 @@ fn log_start(setup: &Setup, report: &RtReport) {
 
 /// System allocations of the real-time thread so far, less those of the
 /// connection upkeep (made while waiting, not on the torque path).
-fn torque_path_allocs(status: &Status) -> u64 {
+fn torque_path_allocs(status: &LoopStatus) -> u64 {
     hcc_rtalloc::stats()
         .rt_system_allocs
         .saturating_sub(status.upkeep_system_allocs.load(Ordering::Relaxed))
@@ -267,7 +268,7 @@ fn torque_path_allocs(status: &Status) -> u64 {
 /// The shutdown summary: every counter, the worst compute time, the
 /// real-time thread's system allocations on the torque path after warm-up
 /// and the connection upkeep.
-fn log_stop(status: &Status, baseline: u64) {
+fn log_stop(status: &LoopStatus, baseline: u64) {
     let c = status.loop_counters();
     let counters: Vec<String> = c
         .entries()
@@ -297,13 +298,13 @@ fn log_stop(status: &Status, baseline: u64) {
 /// real-time set-up obtained) as JSON.
 fn write_stats(
     path: &Path,
-    cycle: &Cycle,
+    control: &ControlLoop,
     wait: WaitStrategy,
     rt: hcc_timing::RtObtained,
     run: Duration,
     torque_path_allocs: Option<u64>,
 ) -> Result<()> {
-    let t = cycle.timings();
+    let t = control.timings();
     let mut stats = hcc_timing::DaemonTimings {
         daemon: "hcc-controller".into(),
         wait: wait.name().into(),
@@ -314,25 +315,26 @@ fn write_stats(
     for (name, histogram) in t.named() {
         stats.figures.insert(name.into(), histogram.into());
     }
-    for (name, _, value) in cycle.decider().counters().entries() {
+    for (name, _, value) in control.cycle().counters().entries() {
         stats.counters.insert(name.into(), value);
     }
     stats.counters.insert(
         "notifications_skipped".into(),
-        cycle.notifications_skipped(),
+        control.notifications_skipped(),
     );
-    stats.counters.insert("warm_ups".into(), cycle.warm_ups());
-    let overlaps = cycle.warm_up_overlaps();
+    stats.counters.insert("warm_ups".into(), control.warm_ups());
+    let overlaps = control.warm_up_overlaps();
     stats
         .counters
         .insert("warm_up_overlaps".into(), overlaps.count);
     stats
         .counters
         .insert("warm_up_overlap_max_ns".into(), overlaps.max_ns);
-    stats
-        .counters
-        .insert("warm_up_last_lead_ns".into(), cycle.last_warm_up_lead_ns());
-    let (preloaned, loan_failures) = cycle.preloaned_sends();
+    stats.counters.insert(
+        "warm_up_last_lead_ns".into(),
+        control.last_warm_up_lead_ns(),
+    );
+    let (preloaned, loan_failures) = control.preloaned_sends();
     stats
         .counters
         .insert("commands_in_preloaned_samples".into(), preloaned);
@@ -344,7 +346,7 @@ fn write_stats(
             .counters
             .insert("torque_path_system_allocs_after_warm_up".into(), allocs);
     }
-    let upkeep = cycle.upkeep();
+    let upkeep = control.upkeep();
     for (name, value) in [
         ("connection_updates", upkeep.updates),
         ("connection_update_system_allocs", upkeep.system_allocs),
@@ -359,7 +361,7 @@ fn write_stats(
 }
 
 /// The connection upkeep in words.
-fn upkeep_line(status: &Status) -> String {
+fn upkeep_line(status: &LoopStatus) -> String {
     format!(
         "peer connections made or dropped while waiting: {} (system allocations {}, longest {:.1} µs)",
         status.upkeep_updates.load(Ordering::Relaxed),
@@ -372,13 +374,13 @@ fn upkeep_line(status: &Status) -> String {
 struct Reported {
     connected: bool,
     peer_lost: bool,
-    counters: LoopCounters,
+    counters: CycleCounters,
     rt_allocs: u64,
     upkeep_updates: u64,
 }
 
 /// The logging thread: every 100 ms, report what changed.
-fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
+fn log_loop(status: &LoopStatus, baseline: &AtomicU64, done: &AtomicBool) {
     let mut reported = Reported {
         connected: false,
         peer_lost: false,
@@ -397,7 +399,7 @@ fn log_loop(status: &Status, baseline: &AtomicU64, done: &AtomicBool) {
 
 impl Reported {
     /// The first state, a peer lost, a peer back.
-    fn peer(&mut self, status: &Status) {
+    fn peer(&mut self, status: &LoopStatus) {
         if !self.connected && status.connected.load(Ordering::Relaxed) {
             self.connected = true;
             info!("receiving joint states; control running");
@@ -421,7 +423,7 @@ impl Reported {
     }
 
     /// Every counter that changed (but [`NOT_LOGGED`]): its total and the increase.
-    fn counters(&mut self, now: LoopCounters) {
+    fn counters(&mut self, now: CycleCounters) {
         let before = self.counters.values();
         for ((name, label, value), before) in now.entries().into_iter().zip(before) {
             if value != before && !NOT_LOGGED.contains(&name) {
@@ -433,7 +435,7 @@ impl Reported {
 
     /// System allocations of the real-time thread on the torque path after
     /// warm-up (`baseline`).
-    fn rt_allocations(&mut self, status: &Status, baseline: u64) {
+    fn rt_allocations(&mut self, status: &LoopStatus, baseline: u64) {
         if baseline == u64::MAX {
             return;
         }
@@ -447,7 +449,7 @@ impl Reported {
     }
 
     /// A peer connected or left (made while waiting, off the torque path).
-    fn upkeep(&mut self, status: &Status) {
+    fn upkeep(&mut self, status: &LoopStatus) {
         let updates = status.upkeep_updates.load(Ordering::Relaxed);
         if updates != self.upkeep_updates {
             info!("{}", upkeep_line(status));
@@ -462,7 +464,7 @@ mod tests {
 
     #[test]
     fn the_counters_left_out_of_the_log_exist() {
-        let names = LoopCounters::default().entries().map(|e| e.0);
+        let names = CycleCounters::default().entries().map(|e| e.0);
         for name in NOT_LOGGED {
             assert!(names.contains(&name), "{name} is not a counter: {names:?}");
         }

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::{Cycle, CycleSettings, Outcome, Ports};
+use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{
     self, CommandSubscriber, MAX_SUBSCRIBER_BUFFER, Services, StatePublisher, TelemetrySubscriber,
 };
@@ -36,7 +36,7 @@ fn cleanup(prefix: &str) {
 
 /// A controller loop and an in-test driver on one namespace.
 struct Rig {
-    cycle: Cycle,
+    cycle: ControlLoop,
     ports: Ports,
     state_pub: StatePublisher,
     commands: CommandSubscriber,
@@ -59,13 +59,13 @@ impl Rig {
         let ports = Ports::open(&services).unwrap();
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
         if let Some(l) = limits {
-            settings.torque_limits = vec![l; n];
+            settings.cycle.torque_limits = vec![l; n];
         }
         Rig {
-            cycle: Cycle::new(controller, settings).unwrap(),
+            cycle: ControlLoop::new(controller, settings).unwrap(),
             state_pub: services.joint_state_publisher().unwrap(),
             commands: services
                 .torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)
@@ -108,7 +108,7 @@ impl Rig {
     }
 
     fn counters(&self) -> TelemetryCounters {
-        self.cycle.counters()
+        self.cycle.cycle().counters().telemetry
     }
 }
 
@@ -124,6 +124,7 @@ fn every_kind_of_bad_joint_state_gets_the_safe_command_and_is_counted() {
         let c = rig.newest_command().unwrap();
         let gravity: Vec<f64> = rig
             .cycle
+            .cycle()
             .controller()
             .output()
             .gravity
@@ -270,7 +271,7 @@ fn a_silent_driver_is_declared_lost_after_the_timeout_not_before() {
     let prefix = format!("hcctst{}_", std::process::id());
     {
         let mut rig = Rig::new(&prefix, "stale_timing", None);
-        let timeout_ns = CycleSettings::from_scenario(&scenario()).stale_timeout_ns;
+        let timeout_ns = LoopSettings::from_scenario(&scenario()).stale_timeout_ns;
         assert_eq!(timeout_ns, 3_000_000, "three periods at 1 kHz");
         let mut waits = Vec::new();
         for _ in 0..10 {
@@ -419,7 +420,10 @@ fn torque_limits_default_to_the_urdf_effort_limits_and_saturation_shows_in_telem
         .copied()
         .collect();
     assert_eq!(limits, [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]);
-    assert_eq!(CycleSettings::from_scenario(&panda).torque_limits, limits);
+    assert_eq!(
+        LoopSettings::from_scenario(&panda).cycle.torque_limits,
+        limits
+    );
 
     let prefix = format!("hcctsa{}_", std::process::id());
     {

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::{Cycle, CycleSettings, Outcome, Ports};
+use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{self, CommandSubscriber, Services, StatePublisher};
 use hcc_msgs::{COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, Namespace, ServiceNames};
 use iceoryx2::prelude::SignalHandlingMode;
@@ -66,10 +66,10 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
         settings.stale_timeout_ns = 20_000_000;
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let mut cycle = ControlLoop::new(controller, settings).unwrap();
 
         // A second controller in the same namespace is refused.
         let second = Ports::open(&services)
@@ -96,6 +96,7 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
         assert_eq!(c.mode, CommandMode::Normal.code());
         assert_eq!(c.flags, COMMAND_FLAG_GRAVITY_INCLUDED);
         let gravity: Vec<f64> = cycle
+            .cycle()
             .controller()
             .output()
             .gravity
@@ -123,7 +124,7 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
             Outcome::Answered(CommandMode::SafeHold)
         );
         assert_eq!(newest(&commands).tau(), gravity.as_slice());
-        assert_eq!(cycle.counters().invalid_states, 2);
+        assert_eq!(cycle.cycle().counters().telemetry.invalid_states, 2);
 
         // Valid again; a duplicate is not answered; a backwards step is a SafeHold.
         send(&state_pub, 13, &q0, &zero);
@@ -138,13 +139,13 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
             cycle.run_once(&ports),
             Outcome::Answered(CommandMode::SafeHold)
         );
-        assert_eq!(cycle.counters().sequence_errors, 2);
+        assert_eq!(cycle.cycle().counters().telemetry.sequence_errors, 2);
         let _ = newest(&commands);
 
         // Silence: stale, peer lost, still waiting.
         assert_eq!(cycle.run_once(&ports), Outcome::Stale);
         assert_eq!(cycle.run_once(&ports), Outcome::Stale);
-        let counters = cycle.counters();
+        let counters = cycle.cycle().counters().telemetry;
         assert_eq!(counters.stale_events, 2);
         assert_eq!(counters.peer_lost_events, 1);
         assert!(
@@ -170,7 +171,7 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
                 .peer_lost
                 .load(std::sync::atomic::Ordering::Relaxed)
         );
-        assert_eq!(cycle.counters().peer_lost_events, 1);
+        assert_eq!(cycle.cycle().counters().telemetry.peer_lost_events, 1);
     }
     cleanup(&prefix);
 }
@@ -190,10 +191,10 @@ fn torque_limits_saturate_and_are_counted() {
         let commands = services.torque_command_subscriber(2).unwrap();
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        settings.torque_limits = vec![1.0; n];
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        settings.cycle.torque_limits = vec![1.0; n];
+        let mut cycle = ControlLoop::new(controller, settings).unwrap();
         let q0: Vec<f64> = scenario.q0.iter().copied().collect();
         send(&state_pub, 0, &q0, &vec![0.0; n]);
         assert_eq!(
@@ -203,7 +204,7 @@ fn torque_limits_saturate_and_are_counted() {
         let c = newest(&commands);
         assert!(c.tau().iter().all(|t| t.abs() <= 1.0), "{:?}", c.tau());
         assert!(c.tau().iter().any(|t| t.abs() == 1.0));
-        assert_eq!(cycle.counters().saturations, 1);
+        assert_eq!(cycle.cycle().counters().telemetry.saturations, 1);
     }
     cleanup(&prefix);
 }

@@ -5,18 +5,17 @@
 //!
 //! After warm-up the real-time thread makes no call into the system
 //! allocator, the pool occupancy is bounded and constant from cycle to cycle,
-//! and the thread takes no page fault. The decision step alone
-//! ([`Decider::decide`], valid and rejected states, stale timeouts) makes no
-//! allocation at all, not even from the pool.
+//! and the thread takes no page fault (`hcc_rtalloc::LoopAudit`). The cache
+//! warm-up's test is `warm_up.rs`, the control cycle's own is in `hcc-cycle`.
 
 use std::path::PathBuf;
 
 use hcc_config::{Scenario, WaitStrategy};
 use hcc_control::Controller;
-use hcc_controller::{Answer, Cycle, CycleSettings, Decider, Outcome, Ports};
+use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames, Setpoint};
-use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
+use hcc_rtalloc::{LoopAudit, RtAllocator, RtSection, thread_stats};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -32,12 +31,6 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 fn scenario() -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/paper-sim1.toml");
     Scenario::load(&path).unwrap()
-}
-
-/// Occupancy of the pool inside one cycle and after it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Occupancy {
-    after: u64,
 }
 
 #[test]
@@ -85,9 +78,9 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        let mut cycle = Cycle::new(controller, settings).unwrap();
+        let mut cycle = ControlLoop::new(controller, settings).unwrap();
 
         let q0: Vec<f64> = scenario.q0.iter().copied().collect();
         let mut q = [0.0; MAX_JOINTS];
@@ -95,7 +88,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         let zero = [0.0; MAX_JOINTS];
 
         // One driver period + one controller cycle; returns (ok, occupancy).
-        let mut one = |k: u64| -> (bool, Occupancy) {
+        let mut one = |k: u64| -> bool {
             let s = (k as f64 * 1e-3).sin();
             for j in 0..n {
                 q[j] = q0[j] + 0.05 * s;
@@ -110,7 +103,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                 cycle.prepare_send(&ports);
             }
             let Ok(sample) = state_pub.loan_uninit() else {
-                return (false, Occupancy { after: 0 });
+                return false;
             };
             let mut sample = sample.write_payload(JointState::zeroed());
             let st = sample.payload_mut();
@@ -141,52 +134,27 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
                     None => answer.is_none(),
                 };
             }
-            (
-                ok,
-                Occupancy {
-                    after: stats().pool_in_use,
-                },
-            )
+            ok
         };
 
-        // As the daemon does at start-up: lock memory when permitted, so that no
-        // page of the process can be paged out and read back (a major fault).
-        let locked = hcc_rtalloc::lock_memory()
-            .map_err(|e| println!("{e}: major page faults cannot be ruled out"))
-            .is_ok();
-        hcc_rtalloc::prefault();
-        hcc_rtalloc::prefault_stack(512 * 1024).unwrap();
-        let rt = RtSection::enter();
+        // As the daemon does at start-up: memory locked when permitted, pool
+        // and stack pre-faulted, the real-time section entered.
+        let mut audit = LoopAudit::prepare(512 * 1024);
         let mut failures = 0u64;
         for k in 0..WARM_UP {
-            failures += u64::from(!one(k).0);
+            failures += u64::from(!one(k));
         }
-        hcc_rtalloc::reset_high_water();
-        let baseline = stats();
-        let before = thread_stats();
-        let faults_before = page_faults().unwrap();
-        let (ok, first) = one(WARM_UP);
-        failures += u64::from(!ok);
-        let mut varying = 0u64;
-        for k in WARM_UP + 1..WARM_UP + CYCLES {
-            let (ok, occupancy) = one(k);
-            failures += u64::from(!ok);
-            varying += u64::from(occupancy != first);
+        audit.start();
+        for k in WARM_UP..WARM_UP + CYCLES {
+            failures += u64::from(!one(k));
+            audit.note();
         }
-        let faults = page_faults().unwrap().since(faults_before);
-        drop(rt);
-        let during = thread_stats().since(before);
-        let after = stats();
-        let counters = cycle.counters();
+        let report = audit.finish();
+        let counters = cycle.cycle().counters().telemetry;
 
         println!(
-            "controller loop, {CYCLES} cycles: {} pool allocs/cycle, {} system allocs, {} fallbacks, \
-             pool in use {} (high-water {}), page faults {faults:?}, counters {counters:?}",
-            during.pool_allocs as f64 / CYCLES as f64,
-            during.system_allocs,
-            during.fallbacks,
-            after.pool_in_use,
-            after.pool_high_water,
+            "{}; counters {counters:?}",
+            report.line("controller loop", CYCLES)
         );
         assert_eq!(failures, 0, "cycles that did not round-trip correctly");
         // Both ways of sending ran: in a sample loaned while waiting, and
@@ -201,24 +169,10 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
         assert_eq!(counters.invalid_states, 0);
         assert_eq!(counters.missed_states, 0);
         assert_eq!(counters.send_failures, 0);
-        assert_eq!(during.system_allocs, 0, "{during:?}");
-        assert_eq!(during.system_frees, 0, "{during:?}");
-        assert_eq!(during.fallbacks, 0, "{during:?}");
-        assert_eq!(after.rt_system_allocs, baseline.rt_system_allocs);
+        report.check().unwrap();
         assert!(
-            during.pool_allocs > 0,
+            report.during.pool_allocs > 0,
             "iceoryx2 loans are served by the pool"
-        );
-        assert_eq!(varying, 0, "pool occupancy constant from cycle to cycle");
-        assert_eq!(after.pool_in_use, baseline.pool_in_use);
-        assert!(
-            after.pool_high_water <= baseline.pool_in_use + 4,
-            "bounded pool occupancy: {after:?}"
-        );
-        assert_eq!(
-            faults.unexpected(locked),
-            0,
-            "{faults:?}, memory locked: {locked}"
         );
     }
     // Everything dropped: only the per-prefix global management segment remains.
@@ -228,111 +182,6 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
     }
     let rest: Vec<_> = files.iter().filter(|f| !f.global_mgmt).collect();
     assert!(rest.is_empty(), "shared-memory files left behind: {rest:?}");
-}
-
-#[test]
-fn the_decision_step_allocates_nothing() {
-    let scenario = scenario();
-    let n = scenario.model.nq();
-    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-    // With the whole output pipeline on (rate limit and low-pass).
-    let mut settings = CycleSettings::from_scenario(&scenario);
-    settings.output.torque_rate_limit = Some(10.0);
-    settings.output.low_pass_hz = Some(100.0);
-    // And the cache warm-up between decisions, as the hybrid wait runs it.
-    settings.warm_up = true;
-    let mut decider = Decider::new(controller, &settings).unwrap();
-    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
-    let mut states = Vec::new();
-    for k in 0..2 * WARM_UP {
-        let mut s = JointState::zeroed();
-        let q: Vec<f64> = q0
-            .iter()
-            .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
-            .collect();
-        s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
-        s.header.seq = k;
-        match k % 97 {
-            // A NaN, a duplicate, a step backwards: the safe command or no answer.
-            13 => s.q[0] = f64::NAN,
-            29 => s.header.seq = k - 1,
-            61 => s.header.seq = k / 2,
-            _ => {}
-        }
-        states.push(s);
-    }
-    // A setpoint every cycle (prepared beforehand): goals along a small
-    // circle, gain changes, full matrices, and rejected ones (NaN, not SPD,
-    // unknown level).
-    let setpoints: Vec<Setpoint> = (0..2 * WARM_UP)
-        .map(|k| {
-            let phase = k as f64 * 1e-3;
-            let goal = [0.90 + 0.02 * phase.sin(), 0.80 + 0.02 * phase.cos()];
-            let mut sp = Setpoint::for_level(k % 3 + 1, k, 0, 2)
-                .with_goal(&goal)
-                .unwrap()
-                .with_velocity(&[0.02 * phase.cos(), -0.02 * phase.sin()])
-                .unwrap()
-                .with_duration(0.01);
-            if k.is_multiple_of(5) {
-                // Due two states later: through the queue of waiting setpoints.
-                sp = sp.with_apply_at(k + 2);
-            }
-            match k % 7 {
-                1 => sp = sp.with_stiffness(&[1000.0, 10.0, 10.0, 900.0]).unwrap(),
-                2 => sp.goal[0] = f64::NAN,
-                3 => sp = sp.with_damping(&[40.0, -1.0]).unwrap(),
-                4 => sp.level = 6,
-                _ => {}
-            }
-            sp
-        })
-        .collect();
-    let decide = |decider: &mut Decider, k: u64| {
-        if k % 500 == 499 {
-            decider.stale(k * 1_000_000);
-        }
-        decider.apply_due_setpoints(k);
-        let code = decider
-            .receive_setpoint(&setpoints[k as usize], k)
-            .unwrap_or(0);
-        let answer = decider.decide(&states[k as usize], k * 1_000_000);
-        let warmed = decider.warm_up(&states[k as usize]);
-        (answer, code, warmed)
-    };
-    let rt = RtSection::enter();
-    for k in 0..WARM_UP {
-        decide(&mut decider, k);
-    }
-    let before = thread_stats();
-    let mut warm_ups = 0u64;
-    let mut answers = [0u64; 2];
-    let mut setpoint_answers = [0u64; 2];
-    for k in WARM_UP..2 * WARM_UP {
-        let (answer, code, warmed) = decide(&mut decider, k);
-        warm_ups += u64::from(warmed);
-        setpoint_answers[usize::from(code != 0)] += 1;
-        match answer {
-            Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
-            Answer::Command(_) => answers[0] += 1,
-            Answer::Duplicate => {}
-        }
-    }
-    let during = thread_stats().since(before);
-    drop(rt);
-    println!("decide, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
-    assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
-    assert!(warm_ups > 0, "the warm-up never ran");
-    let c = decider.counters().telemetry;
-    assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
-    // Setpoints accepted and rejected, every cycle.
-    assert!(
-        setpoint_answers[0] > 0 && setpoint_answers[1] > 0,
-        "{setpoint_answers:?}"
-    );
-    assert_eq!(during.pool_allocs, 0, "{during:?}");
-    assert_eq!(during.system_allocs, 0, "{during:?}");
-    assert_eq!(during.fallbacks, 0, "{during:?}");
 }
 
 /// The driver side of the in-test loop: publishes state `k`, runs one cycle
@@ -346,7 +195,7 @@ struct TestDriver {
 }
 
 impl TestDriver {
-    fn round_trip(&self, cycle: &mut Cycle, ports: &Ports, k: u64) -> bool {
+    fn round_trip(&self, cycle: &mut ControlLoop, ports: &Ports, k: u64) -> bool {
         let n = self.q.len();
         let q: Vec<f64> = self
             .q
@@ -372,7 +221,7 @@ struct Rig {
     services: Services,
     ports: Ports,
     driver: TestDriver,
-    cycle: Cycle,
+    cycle: ControlLoop,
     k: u64,
     failures: u64,
     _node: ipc::IpcNode,
@@ -394,9 +243,9 @@ impl Rig {
         };
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = CycleSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario);
         settings.wait = WaitStrategy::Event;
-        let cycle = Cycle::new(controller, settings).unwrap();
+        let cycle = ControlLoop::new(controller, settings).unwrap();
         Rig {
             services,
             ports,

@@ -5,7 +5,7 @@
 //! **Real-time mode.** At tick k+1 (`clock_nanosleep(CLOCK_MONOTONIC,
 //! TIMER_ABSTIME)` on t_0 + (k+1) T) the driver takes the newest command,
 //! integrates [t_k, t_{k+1}] with the command that answered state k (or holds /
-//! falls back, see [`crate::driver`]), then publishes state k+1 and notifies
+//! falls back, see [`hcc_plant::driver`]), then publishes state k+1 and notifies
 //! `state_ready`. A tick more than 10 periods late re-anchors the clock
 //! (counted as an overrun) instead of bursting. A late tick is caught up with
 //! ticks back to back; a state published in one of them has less than its
@@ -28,7 +28,7 @@
 //! The waits, sleeps, thread set-up and stop signal are those of `hcc-rt`
 //! (`--wait event|hybrid` is [`WaitStrategy`]). Logging goes through
 //! `tracing` to stderr (`RUST_LOG`, default `info`): the real-time thread only
-//! stores counters into atomics ([`Shared`]); a logging thread reports their
+//! stores counters into atomics ([`LoopStatus`]); a logging thread reports their
 //! changes every 100 ms, and the summary is logged after the loop.
 
 use std::ffi::OsString;
@@ -48,7 +48,7 @@ use hcc_msgs::{
 use hcc_rt::{self as rt, RtSettings, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
-use crate::driver::{Applied, SimDriver};
+use hcc_plant::{Applied, SimDriver};
 use hcc_timing::LatencyHistogram;
 
 /// Republish period of the current state while waiting for the first command (lockstep).
@@ -134,9 +134,9 @@ pub fn main_with_args(args: impl IntoIterator<Item = impl Into<OsString> + Clone
     hcc_rt::run_main(args, run, |e| tracing::error!("{e:#}"))
 }
 
-/// Counters shared with the logging thread.
+/// Counters and flags shared with the logging thread (all relaxed atomics).
 #[derive(Default)]
-pub struct Shared {
+pub struct LoopStatus {
     missed: AtomicU64,
     fallback_cycles: AtomicU64,
     in_fallback: AtomicBool,
@@ -171,7 +171,7 @@ pub struct SimLoop<'a> {
     ports: &'a Ports,
     newest: Option<TorqueCommand>,
     state: JointState,
-    shared: &'a Shared,
+    status: &'a LoopStatus,
     wait: WaitStrategy,
     /// Poll for answers only ([`Args::poll_commands`]).
     poll_commands: bool,
@@ -203,11 +203,11 @@ pub struct SimLoop<'a> {
 }
 
 impl<'a> SimLoop<'a> {
-    /// The loop around `driver` on `ports`, reporting to `shared`.
+    /// The loop around `driver` on `ports`, reporting to `status`.
     pub fn new(
         driver: SimDriver,
         ports: &'a Ports,
-        shared: &'a Shared,
+        status: &'a LoopStatus,
         wait: WaitStrategy,
     ) -> Self {
         let period_ns = driver.period_s() * 1e9;
@@ -218,7 +218,7 @@ impl<'a> SimLoop<'a> {
             ports,
             newest: None,
             state: JointState::zeroed(),
-            shared,
+            status,
             wait,
             lateness: LatencyHistogram::new(),
             state_to_command: LatencyHistogram::new(),
@@ -359,19 +359,19 @@ impl<'a> SimLoop<'a> {
             self.answer_stamp.record(rtt);
         }
         let c = self.driver.counters();
-        self.shared
+        self.status
             .missed
             .store(c.missed_commands, Ordering::Relaxed);
-        self.shared
+        self.status
             .fallback_cycles
             .store(c.fallback_cycles, Ordering::Relaxed);
-        self.shared
+        self.status
             .rejected
             .store(c.rejected_commands, Ordering::Relaxed);
-        self.shared
+        self.status
             .in_fallback
             .store(self.driver.in_fallback(), Ordering::Relaxed);
-        self.shared
+        self.status
             .has_command
             .store(self.driver.has_command(), Ordering::Relaxed);
         Ok(())
@@ -426,7 +426,7 @@ impl<'a> SimLoop<'a> {
             if now > next + 10 * period_ns {
                 next = now + period_ns;
                 self.overruns += 1;
-                self.shared.overruns.store(self.overruns, Ordering::Relaxed);
+                self.status.overruns.store(self.overruns, Ordering::Relaxed);
             }
         }
         Ok(())
@@ -483,17 +483,17 @@ impl<'a> SimLoop<'a> {
 }
 
 /// The logging thread: reports the loop's transitions and counters, read
-/// from `shared` every 100 ms, until `done`.
-fn log_loop(shared: &Shared, done: &AtomicBool) {
+/// from `status` every 100 ms, until `done`.
+fn log_loop(status: &LoopStatus, done: &AtomicBool) {
     let (mut missed, mut fallback, mut overruns, mut rejected) = (0, false, 0, 0);
     let mut connected = false;
     while !done.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
-        if !connected && shared.has_command.load(Ordering::Relaxed) {
+        if !connected && status.has_command.load(Ordering::Relaxed) {
             connected = true;
             tracing::info!("receiving torque commands");
         }
-        let f = shared.in_fallback.load(Ordering::Relaxed);
+        let f = status.in_fallback.load(Ordering::Relaxed);
         if f != fallback {
             fallback = f;
             if f {
@@ -504,17 +504,17 @@ fn log_loop(shared: &Shared, done: &AtomicBool) {
                 tracing::info!("torque commands are back; fallback ended");
             }
         }
-        let m = shared.missed.load(Ordering::Relaxed);
+        let m = status.missed.load(Ordering::Relaxed);
         if m != missed {
             tracing::warn!("missed commands: {m} (+{})", m - missed);
             missed = m;
         }
-        let o = shared.overruns.load(Ordering::Relaxed);
+        let o = status.overruns.load(Ordering::Relaxed);
         if o != overruns {
             tracing::warn!("clock overruns (re-anchored): {o}");
             overruns = o;
         }
-        let r = shared.rejected.load(Ordering::Relaxed);
+        let r = status.rejected.load(Ordering::Relaxed);
         if r != rejected {
             tracing::warn!("rejected commands (invalid or gravity conflict): {r}");
             rejected = r;
@@ -606,17 +606,17 @@ pub fn run(args: Args) -> Result<()> {
         names.joint_state(),
     );
 
-    let shared = Arc::new(Shared::default());
+    let status = Arc::new(LoopStatus::default());
     let done = Arc::new(AtomicBool::new(false));
     let logger = {
-        let (shared, done) = (shared.clone(), done.clone());
+        let (status, done) = (status.clone(), done.clone());
         std::thread::Builder::new()
             .name("hcc-sim-log".into())
-            .spawn(move || log_loop(&shared, &done))
+            .spawn(move || log_loop(&status, &done))
             .context("starting the logging thread")?
     };
 
-    let mut lp = SimLoop::new(driver, &ports, &shared, args.wait)
+    let mut lp = SimLoop::new(driver, &ports, &status, args.wait)
         // Lockstep blocks on `command_ready` (it has no deadline to spin to).
         .with_polling(args.poll_commands && mode == SimMode::Realtime);
     let started = std::time::Instant::now();

@@ -4,14 +4,14 @@
 //! services, so that the controller daemon can be run and tested against it
 //! exactly as against a real robot.
 //!
-//! * [`driver`]: the plant behind the driver side of the contract
-//!   (`hcc_msgs::driver`: command freshness, hold, fallback, status),
-//!   allocation-free per period.
+//! * [`hcc_plant::SimDriver`]: the plant behind the driver side of the
+//!   contract (`hcc_msgs::driver`: command freshness, hold, fallback,
+//!   status), allocation-free per period — the driver `hcc simulate` runs
+//!   in process as well.
 //! * [`daemon`]: the process — real-time (absolute 1 kHz clock) or lockstep
 //!   pacing on the runtime of `hcc-rt`, start-up, logging (`tracing`, from a
 //!   logging thread that reads the loop's atomics) and shutdown.
 
 pub mod daemon;
-pub mod driver;
 
-pub use driver::{Applied, DriverCounters, SimDriver};
+pub use hcc_plant::{Applied, DriverCounters, SimDriver};

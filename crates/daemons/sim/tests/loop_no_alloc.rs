@@ -22,9 +22,9 @@ use hcc_msgs::{
     monotonic_now_ns,
 };
 use hcc_rt::WaitStrategy;
-use hcc_rtalloc::{RtAllocator, RtSection, page_faults, stats, thread_stats};
+use hcc_rtalloc::{LoopAudit, RtAllocator};
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{Ports, Shared, SimLoop};
+use hcc_sim::daemon::{LoopStatus, Ports, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]
@@ -58,10 +58,10 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
         command.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
         command.mode = CommandMode::Normal.code();
 
-        let shared = Shared::default();
+        let status = LoopStatus::default();
         let mut driver = SimDriver::new(&scenario).unwrap();
         driver.set_duration(1e6).unwrap();
-        let mut lp = SimLoop::new(driver, &ports, &shared, WaitStrategy::Hybrid);
+        let mut lp = SimLoop::new(driver, &ports, &status, WaitStrategy::Hybrid);
 
         let mut seq = 0u64;
         // The controller answers the newest state; then the loop's period.
@@ -86,61 +86,32 @@ fn ten_thousand_periods_without_system_allocation_or_page_fault() {
             ok & lp.tick().unwrap_or(false)
         };
 
-        let locked = hcc_rtalloc::lock_memory()
-            .map_err(|e| println!("{e}: major page faults cannot be ruled out"))
-            .is_ok();
-        hcc_rtalloc::prefault();
-        hcc_rtalloc::prefault_stack(512 * 1024).unwrap();
-        let rt = RtSection::enter();
+        let mut audit = LoopAudit::prepare(512 * 1024);
         lp.publish();
         let mut failures = 0u64;
         for _ in 0..WARM_UP {
             failures += u64::from(!one(&mut lp));
         }
-        hcc_rtalloc::reset_high_water();
-        let baseline = stats();
-        let before = thread_stats();
-        let faults_before = page_faults().unwrap();
-        let mut varying = 0u64;
+        audit.start();
         for _ in 0..PERIODS {
             failures += u64::from(!one(&mut lp));
-            varying += u64::from(stats().pool_in_use != baseline.pool_in_use);
+            audit.note();
         }
-        let faults = page_faults().unwrap().since(faults_before);
-        drop(rt);
-        let during = thread_stats().since(before);
-        let after = stats();
+        let report = audit.finish();
         let counters = lp.driver().counters();
 
         println!(
-            "simulator loop, {PERIODS} periods: {} pool allocs/period, {} system allocs, {} fallbacks, \
-             pool in use {} (high-water {}), page faults {faults:?}, driver {counters:?}",
-            during.pool_allocs as f64 / PERIODS as f64,
-            during.system_allocs,
-            during.fallbacks,
-            after.pool_in_use,
-            after.pool_high_water,
+            "{}; driver {counters:?}",
+            report.line("simulator loop", PERIODS)
         );
         assert_eq!(failures, 0, "periods that did not round-trip");
         assert_eq!(counters.missed_commands, 0, "{counters:?}");
         assert_eq!(counters.applied_commands, WARM_UP + PERIODS, "{counters:?}");
         assert_eq!(lp.driver().k(), WARM_UP + PERIODS);
-        assert_eq!(during.system_allocs, 0, "{during:?}");
-        assert_eq!(during.system_frees, 0, "{during:?}");
-        assert_eq!(during.fallbacks, 0, "{during:?}");
+        report.check().unwrap();
         assert!(
-            during.pool_allocs > 0,
+            report.during.pool_allocs > 0,
             "iceoryx2 loans are served by the pool"
-        );
-        assert_eq!(varying, 0, "pool occupancy constant from period to period");
-        assert!(
-            after.pool_high_water <= baseline.pool_in_use + 4,
-            "bounded pool occupancy: {after:?}"
-        );
-        assert_eq!(
-            faults.unexpected(locked),
-            0,
-            "{faults:?}, memory locked: {locked}"
         );
         // The loop really closed: 12 s of the paper's simulation #1 converged.
         let e = controller.output().task_error[0].norm();

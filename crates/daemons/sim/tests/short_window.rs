@@ -19,7 +19,7 @@ use hcc_msgs::{
 };
 use hcc_rt::WaitStrategy;
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{Ports, Shared, SimLoop};
+use hcc_sim::daemon::{LoopStatus, Ports, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[test]
@@ -42,10 +42,10 @@ fn a_miss_after_a_late_tick_is_counted_apart_from_a_miss_with_the_full_window() 
         let states = services.joint_state_subscriber(2).unwrap();
         let commands = services.torque_command_publisher().unwrap();
 
-        let shared = Shared::default();
+        let status = LoopStatus::default();
         let mut driver = SimDriver::new(&scenario).unwrap();
         driver.set_duration(10.0).unwrap();
-        let mut lp = SimLoop::new(driver, &ports, &shared, WaitStrategy::Event).with_polling(true);
+        let mut lp = SimLoop::new(driver, &ports, &status, WaitStrategy::Event).with_polling(true);
 
         // State 0, answered (g-free zero torque): commands flow from here on.
         lp.publish();

@@ -35,12 +35,13 @@
 //! of the run's length for any practical run: ~100 B per flushed chunk).
 
 mod messages;
-mod schemas;
+pub mod schemas;
 
 pub use messages::{
     AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
     TimingsMsg, TorqueCommandMsg, mode_name, status_name,
 };
+pub use schemas::schema;
 
 use hcc_msgs::{JointState, Setpoint, Telemetry, TorqueCommand};
 use mcap::records::{MessageHeader, Metadata};

@@ -1,17 +1,21 @@
-//! The JSON Schema of each channel (what Foxglove and PlotJuggler show as
+//! The JSON Schema of each channel (and the helpers that build them, for
+//! the other JSON channels of hcc's tools) (what Foxglove and PlotJuggler show as
 //! the message's fields). Numbers may be `null` where the value was NaN or ±∞.
 
 use serde_json::{Value, json};
 
-fn number(description: &str) -> Value {
+/// A number (or `null` for NaN and ±∞) property.
+pub fn number(description: &str) -> Value {
     json!({"type": ["number", "null"], "description": description})
 }
 
-fn numbers(description: &str) -> Value {
+/// An array-of-numbers property.
+pub fn numbers(description: &str) -> Value {
     json!({"type": "array", "items": {"type": ["number", "null"]}, "description": description})
 }
 
-fn integer(description: &str) -> Value {
+/// An integer property.
+pub fn integer(description: &str) -> Value {
     json!({"type": "integer", "description": description})
 }
 
@@ -19,7 +23,8 @@ fn text(description: &str) -> Value {
     json!({"type": "string", "description": description})
 }
 
-fn object(title: &str, description: &str, properties: Value) -> Value {
+/// A message's JSON Schema: an object of `properties`, all required.
+pub fn object(title: &str, description: &str, properties: Value) -> Value {
     let required: Vec<String> = properties
         .as_object()
         .map(|o| o.keys().cloned().collect())
@@ -192,8 +197,9 @@ fn recorder() -> Value {
     )
 }
 
-/// Schema name and JSON Schema text of a topic's channel.
-pub(crate) fn schema(topic: &str) -> (&'static str, String) {
+/// Schema name and JSON Schema text of a topic's channel (the recording's,
+/// and `hcc view`'s live channels of the same topics).
+pub fn schema(topic: &str) -> (&'static str, String) {
     let (name, value) = match topic {
         super::TOPIC_JOINT_STATE => ("hcc.JointState", joint_state()),
         super::TOPIC_TORQUE_COMMAND => ("hcc.TorqueCommand", torque_command()),

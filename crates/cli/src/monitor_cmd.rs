@@ -1,0 +1,195 @@
+//! `hcc monitor`: a running controller's telemetry, watched through
+//! hcc-client — a table refreshed in place, or JSON lines.
+
+use std::io::{IsTerminal, Write};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use hcc_msgs::{Telemetry, TelemetryCounters};
+use hcc_record::mcap_log::mode_name;
+
+use crate::setpoint_cmd::{Target, connect, timeout};
+
+/// `hcc monitor`.
+#[derive(clap::Args, Debug)]
+pub struct MonitorArgs {
+    #[command(flatten)]
+    pub target: Target,
+    /// One JSON object per line instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop after this many samples.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Samples per second shown (table) or written (JSON).
+    #[arg(long, default_value_t = 4.0)]
+    pub rate: f64,
+    /// The controller's scenario TOML: names the levels as its `[[level]]`
+    /// tables do (telemetry carries numbers only; default "level N").
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
+}
+
+/// The name of level `i` (0-based): from the scenario, else "level N".
+fn level_name(names: &[String], i: usize) -> String {
+    names
+        .get(i)
+        .cloned()
+        .unwrap_or_else(|| format!("level {}", i + 1))
+}
+
+/// The level names and task dimensions of `--config` (the dimensions are
+/// checked against the telemetry's, see [`check_names`]).
+fn config_levels(config: Option<&std::path::Path>) -> anyhow::Result<(Vec<String>, Vec<usize>)> {
+    let Some(path) = config else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    let scenario = hcc_config::Scenario::load(path).context("--config")?;
+    let names = scenario.levels().iter().map(|l| l.name.clone()).collect();
+    Ok((names, scenario.task_dims()))
+}
+
+/// An error when the controller's levels are not those of `--config`.
+fn check_names(names: &[String], dims: &[usize], t: &Telemetry) -> anyhow::Result<()> {
+    let got: Vec<usize> = (0..t.levels()).map(|i| t.task_dims[i] as usize).collect();
+    if !names.is_empty() && got != dims {
+        bail!(
+            "--config: the controller runs levels of dimensions {got:?}, the scenario has {dims:?}"
+        );
+    }
+    Ok(())
+}
+
+/// One telemetry sample as the monitor's JSON object; `names` name the
+/// levels (missing ones: "level N").
+pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
+    let levels: Vec<_> = (0..t.levels())
+        .map(|i| {
+            let m = t.task_error(i).len();
+            let error = t.task_error(i);
+            serde_json::json!({
+                "level": i + 1,
+                "name": level_name(names, i),
+                "error": error,
+                "error_norm": error.iter().map(|x| x * x).sum::<f64>().sqrt(),
+                "goal": t.goal(i),
+                "stiffness": &t.stiffness_diag[i][..m],
+                "damping": &t.damping_diag[i][..m],
+                "storage": t.storage[i],
+                "singular": t.is_singular(i),
+                "transition_progress": t.transition_progress[i],
+            })
+        })
+        .collect();
+    let counters: serde_json::Map<_, _> = t
+        .counters
+        .entries()
+        .iter()
+        .map(|(k, v)| ((*k).to_owned(), serde_json::json!(v)))
+        .collect();
+    serde_json::json!({
+        "stamp_ns": t.header.stamp_ns,
+        "seq": t.header.seq,
+        "mode": mode_name(t.mode),
+        "levels": levels,
+        "tau": t.tau(),
+        "counters": counters,
+        "compute_ns": t.timings.compute_ns,
+        "wakeup_latency_ns": t.timings.wakeup_latency_ns,
+    })
+}
+
+fn table(t: &Telemetry, names: &[String]) -> String {
+    let mut s = format!(
+        "seq {}  mode {}  compute {:.1} µs  latency {:.1} µs\n",
+        t.header.seq,
+        mode_name(t.mode),
+        t.timings.compute_ns as f64 * 1e-3,
+        t.timings.wakeup_latency_ns as f64 * 1e-3
+    );
+    let width = (0..t.levels())
+        .map(|i| level_name(names, i).chars().count() + 4)
+        .max()
+        .unwrap_or(6)
+        .max(6);
+    s += &format!(
+        "{:<width$} |error|      storage      progress  singular  goal\n",
+        "level"
+    );
+    for i in 0..t.levels() {
+        let e = t.task_error(i);
+        let label = if names.get(i).is_some() {
+            format!("{} {}", i + 1, level_name(names, i))
+        } else {
+            (i + 1).to_string()
+        };
+        s += &format!(
+            "{:<width$} {:<12.3e} {:<12.3e} {:<9.2} {:<9} {:?}\n",
+            label,
+            e.iter().map(|x| x * x).sum::<f64>().sqrt(),
+            t.storage[i],
+            t.transition_progress[i],
+            t.is_singular(i),
+            t.goal(i)
+        );
+    }
+    let c: &TelemetryCounters = &t.counters;
+    s += &format!(
+        "cycles {}  saturated {}  rate-limited {}  singular {}  invalid {}  missed {}\n",
+        c.cycles,
+        c.saturations,
+        c.rate_limited,
+        c.singular_cycles,
+        c.invalid_states,
+        c.missed_states
+    );
+    s
+}
+
+/// `hcc monitor`: reads the controller's telemetry (never writes to it).
+pub fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        bail!("--rate must be positive");
+    }
+    let (names, dims) = config_levels(args.config.as_deref())?;
+    let mut client = connect(&args.target)?;
+    let wait = timeout(&args.target)?;
+    let every = Duration::from_secs_f64(1.0 / args.rate);
+    let clear = !args.json && std::io::stdout().is_terminal();
+    let mut out = std::io::stdout().lock();
+    let mut shown = 0u64;
+    let mut last_seq = None;
+    let mut heard = Instant::now();
+    while args.count.is_none_or(|k| shown < k) {
+        let sample = client.poll_telemetry().copied();
+        match sample.filter(|t| Some(t.header.seq) != last_seq) {
+            Some(t) => {
+                if last_seq.is_none() {
+                    check_names(&names, &dims, &t)?;
+                }
+                last_seq = Some(t.header.seq);
+                heard = Instant::now();
+                if args.json {
+                    writeln!(out, "{}", sample_json(&t, &names))?;
+                } else {
+                    if clear {
+                        write!(out, "\x1b[2J\x1b[H")?;
+                    }
+                    write!(out, "{}", table(&t, &names))?;
+                }
+                out.flush()?;
+                shown += 1;
+                std::thread::sleep(every);
+            }
+            None if heard.elapsed() > wait => {
+                bail!(
+                    "no telemetry from namespace {:?} within {:.1} s (is hcc-controller running?)",
+                    args.target.namespace,
+                    wait.as_secs_f64()
+                )
+            }
+            None => std::thread::sleep(Duration::from_millis(2)),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,170 @@
+//! The loading pipeline: the file parsed, every table resolved and checked in
+//! turn (against the robot model and by the controller), and the [`Scenario`]
+//! assembled.
+
+use std::path::Path;
+
+use hcc_control::{ControllerSpec, Form};
+use hcc_model::Model;
+use nalgebra::DVector;
+
+use crate::context::Ctx;
+use crate::daemons::{resolve_controller_daemon, resolve_sim_daemon};
+use crate::error::{ConfigError, from_toml};
+use crate::levels::{check_hierarchy, resolve_level};
+use crate::robot::{load_model, resolve_initial};
+use crate::safety::safety_spec;
+use crate::scenario::Scenario;
+use crate::schema::{self, ScenarioFile};
+use crate::simulation::resolve_simulation;
+use crate::{schedule, setpoint_limits, torque_filter};
+
+impl Scenario {
+    /// Loads, checks and resolves a scenario file; builds the robot model from its URDF.
+    pub fn load(path: impl AsRef<Path>) -> Result<Scenario, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Io {
+            file: path.to_path_buf(),
+            error,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Like [`Scenario::load`] for TOML text; `path` names the file in errors and is
+    /// the base for the relative URDF path.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Scenario, ConfigError> {
+        let file: ScenarioFile = toml::from_str(text).map_err(|e| from_toml(path, text, &e))?;
+        let cx = Ctx {
+            file: path,
+            text,
+            stacked: false,
+        };
+        let (model, urdf_path) = load_model(&cx, &file.robot)?;
+        let n = model.nq();
+
+        // [[level]]
+        if file.levels.is_empty() {
+            return Err(cx.err("level", "at least one [[level]] is required"));
+        }
+        let mut levels = Vec::with_capacity(file.levels.len());
+        for (i, l) in file.levels.iter().enumerate() {
+            levels.push(resolve_level(&cx, &model, i, l)?);
+        }
+        check_hierarchy(&cx, &levels, n)?;
+
+        // [controller]
+        let ratio = file.controller.singularity.singular_ratio;
+        if !(ratio > 0.0 && ratio < 1.0) {
+            return Err(cx.err(
+                "controller.singularity.singular_ratio",
+                format!("must be in (0, 1), got {ratio}"),
+            ));
+        }
+
+        let (q0, qd0) = resolve_initial(&cx, &model, &file.initial)?;
+        let simulation = resolve_simulation(&cx, &model, &file.simulation)?;
+        check_namespace(&cx, &file.ipc.namespace)?;
+
+        let spec = ControllerSpec {
+            levels,
+            gravity_compensation: file.robot.gravity_compensation,
+            coriolis_cancellation: file.controller.coriolis_cancellation,
+            form: file.controller.form,
+            singular_ratio: ratio,
+            safety: safety_spec(&cx, &file.safety, simulation.control_rate_hz)?,
+        };
+        check_with_controller(&cx, &model, &spec, &q0)?;
+
+        let controller_daemon = resolve_controller_daemon(
+            &cx,
+            &model,
+            &file.controller_daemon,
+            simulation.control_rate_hz,
+        )?;
+        let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
+        check_renamed_tables(&cx, &file)?;
+        let setpoint_limits =
+            setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
+        let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
+        let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
+
+        let name = file.name.clone().unwrap_or_else(|| {
+            path.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scenario".to_string())
+        });
+        Ok(Scenario {
+            path: path.to_path_buf(),
+            name,
+            urdf_path,
+            model,
+            spec,
+            q0,
+            qd0,
+            simulation,
+            ipc: file.ipc,
+            controller_daemon,
+            sim_daemon,
+            setpoint_limits,
+            torque_filter,
+            setpoints,
+        })
+    }
+}
+
+/// Tables that were renamed: refused with their new name.
+fn check_renamed_tables(cx: &Ctx, file: &schema::ScenarioFile) -> Result<(), ConfigError> {
+    for (old, present, new) in [
+        ("commanding", file.commanding.is_some(), "setpoint_limits"),
+        ("output", file.output.is_some(), "torque_filter"),
+    ] {
+        if present {
+            return Err(cx.err(
+                old,
+                format!("[{old}] is now called [{new}] (same fields): rename the table"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `[ipc] namespace`: non-empty, letters, digits, '_' and '-'.
+fn check_namespace(cx: &Ctx, ns: &str) -> Result<(), ConfigError> {
+    if ns.is_empty()
+        || !ns
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Err(cx.err(
+            "ipc.namespace",
+            format!("{ns:?} must be non-empty and use only letters, digits, '_' and '-'"),
+        ));
+    }
+    Ok(())
+}
+
+/// Lets the controller check the hierarchy as it will run it (ranks at q0).
+fn check_with_controller(
+    cx: &Ctx,
+    model: &Model,
+    spec: &ControllerSpec,
+    q0: &DVector<f64>,
+) -> Result<(), ConfigError> {
+    if let Err(e) = hcc_control::Controller::new(model, spec.clone(), q0) {
+        let field = match &e {
+            hcc_control::ControlError::Level { level, .. } => level
+                .split_whitespace()
+                .next()
+                .and_then(|k| k.parse::<usize>().ok())
+                .map(|k| format!("level[{}]", k.saturating_sub(1)))
+                .unwrap_or_else(|| "level".to_string()),
+            hcc_control::ControlError::Spec(_) if spec.form == Form::KinematicProjector => {
+                "controller.form".to_string()
+            }
+            hcc_control::ControlError::Spec(_) => "level".to_string(),
+            _ => "initial.q0".to_string(),
+        };
+        return Err(cx.err(&field, format!("rejected by the controller: {e}")));
+    }
+    Ok(())
+}

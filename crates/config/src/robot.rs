@@ -1,0 +1,69 @@
+//! `[robot]`: the robot model from its URDF; `[initial]`: its initial state.
+
+use std::path::{Path, PathBuf};
+
+use hcc_model::Model;
+use nalgebra::{DVector, Vector3};
+
+use crate::context::Ctx;
+use crate::error::{self, ConfigError};
+use crate::schema::{InitialSection, RobotSection};
+
+/// `[robot]`: the model from the URDF (path relative to the scenario file).
+pub(crate) fn load_model(cx: &Ctx, robot: &RobotSection) -> Result<(Model, PathBuf), ConfigError> {
+    let gravity = match &robot.gravity {
+        Some(g) => {
+            let v = cx.vector("robot.gravity", g, 3, "x, y, z")?;
+            Some(Vector3::new(v[0], v[1], v[2]))
+        }
+        None => None,
+    };
+    let base = cx.file.parent().unwrap_or(Path::new("."));
+    let urdf_path = base.join(&robot.urdf);
+    let model = Model::from_urdf_file(
+        &urdf_path,
+        robot.root_link.as_deref(),
+        &robot.tip_link,
+        gravity,
+    )
+    .map_err(|error| {
+        let field = match &error {
+            hcc_model::ModelError::UnknownLink { what, .. } if what == "root" => "robot.root_link",
+            hcc_model::ModelError::UnknownLink { what, .. } if what == "tip" => "robot.tip_link",
+            hcc_model::ModelError::TipNotBelowRoot { .. } => "robot.tip_link",
+            _ => "robot.urdf",
+        };
+        ConfigError::Model {
+            file: cx.file.to_path_buf(),
+            line: error::locate_path(cx.text, field),
+            error,
+        }
+    })?;
+    Ok((model, urdf_path))
+}
+
+/// `[initial]`: q0 (within the joint limits) and q̇0.
+pub(crate) fn resolve_initial(
+    cx: &Ctx,
+    model: &Model,
+    initial: &InitialSection,
+) -> Result<(DVector<f64>, DVector<f64>), ConfigError> {
+    let n = model.nq();
+    let q0 = cx.vector("initial.q0", &initial.q0, n, "one per joint")?;
+    let qd0 = match &initial.qd0 {
+        Some(v) => cx.vector("initial.qd0", v, n, "one per joint")?,
+        None => DVector::zeros(n),
+    };
+    for (k, j) in model.joints.iter().enumerate() {
+        if q0[k] < j.lower - 1e-9 || q0[k] > j.upper + 1e-9 {
+            return Err(cx.err(
+                &format!("initial.q0[{k}]"),
+                format!(
+                    "{} is outside the limits [{}, {}] of joint '{}'",
+                    q0[k], j.lower, j.upper, j.name
+                ),
+            ));
+        }
+    }
+    Ok((q0, qd0))
+}

@@ -1,0 +1,46 @@
+//! `[safety]`: the safety layer of the controller over its defaults.
+
+use crate::context::Ctx;
+use crate::error::ConfigError;
+use crate::schema;
+
+/// `[safety]` over the defaults of `hcc_control::SafetySpec`, the control period from
+/// the control rate.
+pub(crate) fn safety_spec(
+    cx: &Ctx,
+    s: &schema::SafetySection,
+    control_rate_hz: f64,
+) -> Result<hcc_control::SafetySpec, ConfigError> {
+    let d = hcc_control::SafetySpec::default();
+    let spec = hcc_control::SafetySpec {
+        enabled: s.enabled.unwrap_or(d.enabled),
+        joint_limit_margin: s.joint_limit_margin.unwrap_or(d.joint_limit_margin),
+        joint_limit_torque: s.joint_limit_torque.or(d.joint_limit_torque),
+        joint_limit_damping_ratio: s
+            .joint_limit_damping_ratio
+            .unwrap_or(d.joint_limit_damping_ratio),
+        velocity_limit_fraction: s
+            .velocity_limit_fraction
+            .unwrap_or(d.velocity_limit_fraction),
+        velocity_limit_full_fraction: s
+            .velocity_limit_full_fraction
+            .unwrap_or(d.velocity_limit_full_fraction),
+        spring_saturation: s.spring_saturation.unwrap_or(d.spring_saturation),
+        velocity_governor: s.velocity_governor.unwrap_or(d.velocity_governor),
+        velocity_damping: s.velocity_damping.unwrap_or(d.velocity_damping),
+        null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
+        conflict_fade_ratio: s.conflict_fade_ratio.unwrap_or(d.conflict_fade_ratio),
+        fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),
+        control_period_s: 1.0 / control_rate_hz,
+    };
+    spec.validate().map_err(|e| {
+        let msg = e.to_string();
+        let field = msg
+            .split_whitespace()
+            .next()
+            .unwrap_or("safety")
+            .to_string();
+        cx.err(&field, msg)
+    })?;
+    Ok(spec)
+}

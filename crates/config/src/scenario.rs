@@ -1,0 +1,141 @@
+//! The loaded and checked [`Scenario`], and its small methods.
+
+use std::path::PathBuf;
+
+use hcc_control::{ControllerSpec, LevelSpec};
+use hcc_model::Model;
+use nalgebra::DVector;
+
+use crate::daemons::{ControllerDaemon, SimDaemon};
+use crate::error::{ConfigError, invalid};
+use crate::schedule;
+use crate::schema::IpcSection;
+use crate::setpoint_limits;
+use crate::simulation::Simulation;
+use crate::torque_filter;
+
+/// A loaded and checked scenario. Every setting lives in one place: the hierarchy
+/// and the controller options (gravity compensation, τ_μ, form, singular ratio) in
+/// [`Scenario::spec`].
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    /// The scenario file.
+    pub path: PathBuf,
+    /// Name (from the file or its stem).
+    pub name: String,
+    /// Resolved URDF path.
+    pub urdf_path: PathBuf,
+    /// The robot model (chain root → tip, with the configured gravity).
+    pub model: Model,
+    /// The controller: the levels in priority order (`spec.levels`, each stacking its
+    /// tasks) and `[controller]`, `[robot] gravity_compensation` (checked by
+    /// `hcc_control::Controller::new` at load).
+    pub spec: ControllerSpec,
+    pub q0: DVector<f64>,
+    pub qd0: DVector<f64>,
+    pub simulation: Simulation,
+    pub ipc: IpcSection,
+    pub controller_daemon: ControllerDaemon,
+    pub sim_daemon: SimDaemon,
+    /// Resolved `[setpoint_limits]`.
+    pub setpoint_limits: setpoint_limits::SetpointLimits,
+    /// Resolved `[torque_filter]`.
+    pub torque_filter: torque_filter::TorqueFilterSpec,
+    /// The `[[setpoint]]` entries, checked and sorted by time.
+    pub setpoints: Vec<schedule::ScheduledSetpoint>,
+}
+
+impl Scenario {
+    /// Overrides the simulated duration (e.g. from the command line).
+    pub fn set_duration(&mut self, duration_s: f64) -> Result<(), ConfigError> {
+        let cycles = duration_s * self.simulation.control_rate_hz;
+        if !(duration_s.is_finite() && (1.0..=1e8).contains(&cycles)) {
+            return Err(ConfigError::Invalid {
+                file: self.path.clone(),
+                line: None,
+                path: "simulation.duration_s".into(),
+                message: format!(
+                    "override {duration_s} s must be finite and cover 1 to 1e8 control periods"
+                ),
+            });
+        }
+        self.simulation.duration_s = duration_s;
+        Ok(())
+    }
+
+    /// Checks a daemon's `cpu_core` (`section` is `"controller_daemon"` or
+    /// `"sim_daemon"`) against the cores this process may run on (`available`,
+    /// e.g. from `sched_getaffinity`). A configured core that is not available
+    /// is an error naming the field and its line: a real-time thread that
+    /// silently ran unpinned would not be what the scenario asks for. Called
+    /// by the daemons at start-up, not by [`Scenario::load`], so that a
+    /// robot's scenario can still be simulated in process on another machine.
+    pub fn check_cpu_core(&self, section: &str, available: &[usize]) -> Result<(), ConfigError> {
+        let core = match section {
+            "controller_daemon" => self.controller_daemon.cpu_core,
+            "sim_daemon" => self.sim_daemon.cpu_core,
+            _ => None,
+        };
+        let Some(core) = core else {
+            return Ok(());
+        };
+        if available.contains(&core) {
+            return Ok(());
+        }
+        let path = format!("{section}.cpu_core");
+        let text = std::fs::read_to_string(&self.path).unwrap_or_default();
+        let mut sorted = available.to_vec();
+        sorted.sort_unstable();
+        Err(invalid(
+            &self.path,
+            &text,
+            &path,
+            format!(
+                "CPU core {core} is not available to this process (available: {})",
+                if sorted.is_empty() {
+                    "unknown".to_string()
+                } else {
+                    sorted
+                        .iter()
+                        .map(|c| c.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            ),
+        ))
+    }
+
+    /// Switches the Coriolis cancellation τ_μ (eq. 22) on or off (e.g. for the ablation).
+    pub fn set_coriolis_cancellation(&mut self, on: bool) -> Result<(), ConfigError> {
+        self.spec.coriolis_cancellation = on;
+        Ok(())
+    }
+
+    /// The levels in priority order (those of [`Scenario::spec`]).
+    pub fn levels(&self) -> &[LevelSpec] {
+        &self.spec.levels
+    }
+
+    /// Task dimension m_i of every level.
+    pub fn task_dims(&self) -> Vec<usize> {
+        self.spec.task_dims(self.model.nq())
+    }
+
+    /// Control cycles of the run: duration × control rate (the states
+    /// k = 0..=cycles are sampled).
+    pub fn cycles(&self) -> u64 {
+        let s = &self.simulation;
+        (s.duration_s * s.control_rate_hz).round() as u64
+    }
+
+    /// The `[[setpoint]]` entries due within the run, as the messages a client
+    /// sends (each applied at the state of its cycle), in time order.
+    pub fn scheduled_messages(&self) -> Vec<hcc_msgs::Setpoint> {
+        let rate = self.simulation.control_rate_hz;
+        self.setpoints
+            .iter()
+            .filter(|e| e.cycle(rate) <= self.cycles())
+            .map(|e| e.message(rate))
+            .collect()
+    }
+}

@@ -1,0 +1,149 @@
+//! `[simulation]`: the in-process simulation (duration, rates, friction and
+//! external wrenches).
+
+use hcc_model::{FrameId, Model};
+use nalgebra::{DVector, Vector3};
+
+use crate::context::Ctx;
+use crate::error::ConfigError;
+use crate::schema::{SimulationSection, WrenchSection};
+
+/// An external wrench of the simulation, resolved to a frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wrench {
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub link: String,
+    pub frame_id: FrameId,
+    pub force: Vector3<f64>,
+    pub torque: Vector3<f64>,
+}
+
+/// Resolved `[simulation]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Simulation {
+    pub duration_s: f64,
+    pub control_rate_hz: f64,
+    pub integrator_dt_s: f64,
+    /// Plant steps per control period (control period / integrator dt, an integer).
+    pub substeps: usize,
+    /// Viscous friction per joint.
+    pub joint_friction: DVector<f64>,
+    pub wrenches: Vec<Wrench>,
+}
+
+impl Simulation {
+    /// The control period in whole ns (as the daemons count it): 1e9 /
+    /// `control_rate_hz`, rounded.
+    pub fn period_ns(&self) -> u64 {
+        (1e9 / self.control_rate_hz).round() as u64
+    }
+}
+
+pub(crate) fn resolve_simulation(
+    cx: &Ctx,
+    model: &Model,
+    s: &SimulationSection,
+) -> Result<Simulation, ConfigError> {
+    let substeps = plant_substeps(cx, s)?;
+    let n = model.nq();
+    let joint_friction = match &s.joint_friction {
+        Some(f) => cx.per_joint("simulation.joint_friction", f, n, false)?,
+        None => DVector::zeros(n),
+    };
+    let mut wrenches = Vec::with_capacity(s.wrench.len());
+    for (i, w) in s.wrench.iter().enumerate() {
+        wrenches.push(resolve_wrench(cx, model, i, w)?);
+    }
+    Ok(Simulation {
+        duration_s: s.duration_s,
+        control_rate_hz: s.control_rate_hz,
+        integrator_dt_s: s.integrator_dt_s,
+        substeps: substeps as usize,
+        joint_friction,
+        wrenches,
+    })
+}
+
+/// The times of `[simulation]`: positive, an integrator step that divides the
+/// control period, a duration of 1 to 1e8 control periods. Returns the plant steps
+/// per control period.
+fn plant_substeps(cx: &Ctx, s: &SimulationSection) -> Result<f64, ConfigError> {
+    let positive = |name: &str, v: f64| -> Result<(), ConfigError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(cx.err(
+                &format!("simulation.{name}"),
+                format!("must be a positive finite number, got {v}"),
+            ))
+        }
+    };
+    positive("duration_s", s.duration_s)?;
+    positive("control_rate_hz", s.control_rate_hz)?;
+    positive("integrator_dt_s", s.integrator_dt_s)?;
+    let period = 1.0 / s.control_rate_hz;
+    let ratio = period / s.integrator_dt_s;
+    let substeps = ratio.round();
+    if substeps < 1.0 || (ratio - substeps).abs() > 1e-6 * ratio {
+        return Err(cx.err(
+            "simulation.integrator_dt_s",
+            format!(
+                "{} s must divide the control period 1/{} Hz = {period} s into a whole number of steps",
+                s.integrator_dt_s, s.control_rate_hz
+            ),
+        ));
+    }
+    if s.duration_s * s.control_rate_hz < 1.0 {
+        return Err(cx.err(
+            "simulation.duration_s",
+            "is shorter than one control period",
+        ));
+    }
+    if s.duration_s * s.control_rate_hz > 1e8 {
+        return Err(cx.err(
+            "simulation.duration_s",
+            "is too long (more than 1e8 control cycles)",
+        ));
+    }
+    Ok(substeps)
+}
+
+/// `[[simulation.wrench]]` number `i`, its link resolved to a frame.
+fn resolve_wrench(
+    cx: &Ctx,
+    model: &Model,
+    i: usize,
+    w: &WrenchSection,
+) -> Result<Wrench, ConfigError> {
+    let p = |f: &str| format!("simulation.wrench[{i}].{f}");
+    if !(w.start_s.is_finite() && w.start_s >= 0.0) {
+        return Err(cx.err(&p("start_s"), "must be a finite non-negative time"));
+    }
+    if !(w.duration_s.is_finite() && w.duration_s >= 0.0) {
+        return Err(cx.err(&p("duration_s"), "must be a finite non-negative duration"));
+    }
+    let frame_id = model.frame_id(&w.link).ok_or_else(|| {
+        cx.err(
+            &p("link"),
+            format!("unknown link '{}' (not a link of the robot model)", w.link),
+        )
+    })?;
+    let v3 = |name: &str, v: &Option<Vec<f64>>| -> Result<Vector3<f64>, ConfigError> {
+        match v {
+            None => Ok(Vector3::zeros()),
+            Some(v) => {
+                let d = cx.vector(&p(name), v, 3, "x, y, z in world axes")?;
+                Ok(Vector3::new(d[0], d[1], d[2]))
+            }
+        }
+    };
+    Ok(Wrench {
+        start_s: w.start_s,
+        duration_s: w.duration_s,
+        link: w.link.clone(),
+        frame_id,
+        force: v3("force", &w.force)?,
+        torque: v3("torque", &w.torque)?,
+    })
+}

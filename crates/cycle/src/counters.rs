@@ -1,0 +1,109 @@
+//! Every counter of the control cycle, defined once: those telemetry carries
+//! ([`TelemetryCounters`], hcc-msgs) and the cycle's own ([`CoreCounters`]),
+//! both with `hcc_msgs::define_counters!`. [`CycleCounters`] joins them in
+//! one order, so that a daemon's shared atomics, its logs and its `--stats`
+//! report follow a new counter without another edit.
+
+use hcc_msgs::TelemetryCounters;
+
+hcc_msgs::define_counters! {
+    /// Counters of the cycle that telemetry does not carry (totals since start).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct CoreCounters {
+        /// States whose control law failed numerically (answered with SafeHold).
+        numerical_failures: "numerical failures of the control law (answered with SafeHold)",
+        /// Peer restarts detected (a new stream after an outage, or rejected
+        /// states that follow each other).
+        peer_restarts: "new peer detected; sequence checker reset",
+    }
+}
+
+/// Every counter of the cycle: telemetry's, then the cycle's own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CycleCounters {
+    /// The counters telemetry carries.
+    pub telemetry: TelemetryCounters,
+    /// The cycle's own counters.
+    pub core: CoreCounters,
+}
+
+impl CycleCounters {
+    /// Number of counters.
+    pub const COUNT: usize = TelemetryCounters::COUNT + CoreCounters::COUNT;
+
+    /// Name of counter `i` (telemetry's first).
+    const fn name(i: usize) -> &'static str {
+        if i < TelemetryCounters::COUNT {
+            TelemetryCounters::NAMES[i]
+        } else {
+            CoreCounters::NAMES[i - TelemetryCounters::COUNT]
+        }
+    }
+
+    /// Description of counter `i` (telemetry's first).
+    const fn label(i: usize) -> &'static str {
+        if i < TelemetryCounters::COUNT {
+            TelemetryCounters::LABELS[i]
+        } else {
+            CoreCounters::LABELS[i - TelemetryCounters::COUNT]
+        }
+    }
+
+    /// The values, telemetry's first, each in field order.
+    pub fn values(&self) -> [u64; Self::COUNT] {
+        let t = self.telemetry.values();
+        let c = self.core.values();
+        std::array::from_fn(|i| {
+            if i < TelemetryCounters::COUNT {
+                t[i]
+            } else {
+                c[i - TelemetryCounters::COUNT]
+            }
+        })
+    }
+
+    /// The counters from their values in the order of [`CycleCounters::values`].
+    pub fn from_values(values: [u64; Self::COUNT]) -> CycleCounters {
+        let (t, c) = values.split_at(TelemetryCounters::COUNT);
+        CycleCounters {
+            telemetry: TelemetryCounters::from_values(std::array::from_fn(|i| t[i])),
+            core: CoreCounters::from_values(std::array::from_fn(|i| c[i])),
+        }
+    }
+
+    /// (name, description, value) of every counter, telemetry's first.
+    pub fn entries(&self) -> [(&'static str, &'static str, u64); Self::COUNT] {
+        let values = self.values();
+        std::array::from_fn(|i| (Self::name(i), Self::label(i), values[i]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_counter_round_trips_through_its_values_in_one_order() {
+        let mut values = [0u64; CycleCounters::COUNT];
+        for (i, v) in values.iter_mut().enumerate() {
+            *v = 10 + i as u64;
+        }
+        let c = CycleCounters::from_values(values);
+        assert_eq!(c.telemetry.cycles, 10);
+        assert_eq!(c.telemetry.send_failures, 18);
+        assert_eq!(c.telemetry.rate_limited, 19);
+        assert_eq!(c.telemetry.low_passed, 20);
+        assert_eq!(c.core.numerical_failures, 21);
+        assert_eq!(c.core.peer_restarts, 22);
+        assert_eq!(c.values(), values);
+        let entries = c.entries();
+        assert_eq!(entries[0], ("cycles", "cycles", 10));
+        assert_eq!(entries[12].0, "peer_restarts");
+        assert!(entries[12].1.contains("new peer detected"));
+        let names: Vec<_> = entries.iter().map(|e| e.0).collect();
+        let mut unique = names.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), names.len(), "{names:?}");
+    }
+}

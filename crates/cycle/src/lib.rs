@@ -1,0 +1,51 @@
+//! The control cycle of hcc, without any I/O: one call from a joint state to
+//! the torque command that answers it (libfranka's shape), the same code
+//! wherever a cycle runs — the controller daemon (`hcc-controller`, around
+//! iceoryx2), the in-process closed loop (`hcc simulate`), the replay of a
+//! recording (`hcc replay`) and the derivation of its results. A lockstep
+//! run over IPC, an in-process run and a replay therefore apply the same
+//! torque by construction.
+//!
+//! ```text
+//!  JointState ─▶ stream checks ─▶ setpoints due ─▶ law (eq. 19) ─▶ torque filter ─▶ saturation ─▶ TorqueCommand
+//!   (q, q̇,        validation,      SetpointHandler   hcc-control      rate limit,      hcc_control::     + Telemetry
+//!    seq)         sequence, peer   transitions       Controller::step  low-pass         saturate
+//!                   └─ rejected: the safe command τ = g(q_v) (or 0) ───────────────────────▶
+//! ```
+//!
+//! * [`ControlCycle`] ([`control_cycle`]): the cycle — [`ControlCycle::step`]
+//!   takes a state, the setpoints that arrived with it and the wake-up time,
+//!   and leaves the [`hcc_msgs::TorqueCommand`] and the
+//!   [`hcc_msgs::Telemetry`] sample in its buffers.
+//! * [`stream`]: what a state is worth before the law sees it — validation,
+//!   the gravity agreement, the sequence (duplicates, gaps, a restarted peer).
+//! * [`setpoints`]: [`SetpointHandler`] — checks a client's setpoint against
+//!   the law and the `[setpoint_limits]`, queues it until its state, moves
+//!   the level's equilibrium and gains through a transition.
+//! * [`torque_filter`]: [`TorqueFilter`] — the `[torque_filter]` rate limit
+//!   and low-pass between the law and the saturation.
+//! * [`schedule`]: a scenario's `[[setpoint]]` entries, delivered to a cycle
+//!   as a client would send them.
+//! * [`counters`]: every counter of the cycle, defined once.
+//! * [`settings`]: [`CycleSettings`] from a scenario, and [`CycleError`].
+//!
+//! Everything is allocated when a [`ControlCycle`] is built; a cycle
+//! allocates nothing, takes no lock, does no logging or formatting (the
+//! controller daemon's tests count its allocations). Events go to counters.
+
+pub mod control_cycle;
+pub mod counters;
+pub mod schedule;
+pub mod setpoints;
+pub mod settings;
+pub mod stream;
+mod telemetry;
+pub mod torque_filter;
+
+pub use control_cycle::{Answer, ControlCycle};
+pub use counters::{CoreCounters, CycleCounters};
+pub use schedule::Schedule;
+pub use setpoints::SetpointHandler;
+pub use settings::{CycleError, CycleSettings};
+pub use stream::{GAP_SLACK, RESYNC_RUN, max_plausible_gap};
+pub use torque_filter::TorqueFilter;

@@ -1,0 +1,343 @@
+//! Setpoints applied to the running law, allocation-free.
+//!
+//! [`SetpointHandler::take`] checks a [`Setpoint`] — first the model-free checks of
+//! [`Setpoint::validate`], then against the law: the level exists, `dim`
+//! equals m_i, every eigenvalue of K ≤ the level's `max_stiffness`, joint goals
+//! inside the URDF limits, position goals inside the level's workspace (the
+//! `[[setpoint_limits.level]]` box, by default the ball the chain reaches from its
+//! root) — and, if accepted, starts the level's transition
+//! ([`hcc_control::transition::Transition`]: minimum-jerk equilibrium, slerp
+//! for orientation tasks and a pose level's orientation rows, convex gains).
+//! A transition shorter than the level's speed limit allows is
+//! **stretched** to it: the equilibrium's peak speed 15/8 · |Δx| / T stays
+//! ≤ `max_speed` (|Δx| the Euclidean distance, the rotation angle for
+//! orientation, √(|Δp|² + θ²) for a pose). The answer (accepted, or a
+//! rejection code, with the duration in force) is kept per client for
+//! telemetry.
+//!
+//! [`SetpointHandler::receive`] is the cycle's entry: a setpoint whose
+//! application point ([`Setpoint::apply_at_state_seq`]) the current state has
+//! reached is taken at once; one due later waits in a preallocated queue of
+//! [`MAX_PENDING_SETPOINTS`](hcc_msgs::MAX_PENDING_SETPOINTS) (arrival order) until [`SetpointHandler::apply_due`]
+//! finds its state, and is answered then. The model-free checks reject at
+//! receipt; a full queue rejects with [`Rejection::PendingFull`]. A setpoint
+//! that arrives after its state is taken at once and counted late.
+//!
+//! [`SetpointHandler::advance`] moves every transition by one period and hands
+//! x_{i,d}(t), K_i(t), D_i(t) and — with `relative_damping` — ẋ_{i,d}(t) to
+//! the law (`set_goal`, `set_gains`, `set_goal_velocity`). Nothing changes
+//! for a level that never received a setpoint, so a run without setpoints is
+//! bit-identical to one without this module.
+
+use hcc_config::setpoint_limits::SetpointLimits;
+use hcc_control::transition::{GoalKind, Target, Transition};
+use hcc_control::{Controller, TaskSpec};
+use hcc_msgs::{
+    ANSWER_ACCEPTED, MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Rejection, SETPOINT_DAMPING,
+    SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer, Telemetry,
+    answer_code,
+};
+use nalgebra::DMatrix;
+
+use crate::settings::CycleError;
+
+mod pending;
+mod workspace;
+
+use pending::Pending;
+use workspace::Workspace;
+
+/// One level's limits and state.
+struct LevelState {
+    transition: Transition,
+    max_stiffness: f64,
+    max_speed: f64,
+    workspace: Workspace,
+    /// Joint indices of a joint task (goal entry a ↔ joint `joints[a]`).
+    joints: Option<Vec<usize>>,
+    /// Whether the law must be updated this cycle (a transition runs or just ended).
+    active: bool,
+    k: DMatrix<f64>,
+    d: DMatrix<f64>,
+}
+
+/// The setpoint side of the control cycle (see the module docs).
+pub struct SetpointHandler {
+    levels: Vec<LevelState>,
+    relative_damping: bool,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    answers: [SetpointAnswer; MAX_SETPOINT_CLIENTS],
+    /// Per answer slot: when the client was last heard (a running count).
+    heard: [u64; MAX_SETPOINT_CLIENTS],
+    count: u64,
+    zeros: [f64; MAX_TASK_DIM],
+    pending: Pending,
+}
+
+impl SetpointHandler {
+    /// Limits from `settings` (one entry per level) for `controller`'s levels.
+    /// Allocates.
+    pub fn new(
+        controller: &Controller,
+        settings: &SetpointLimits,
+    ) -> Result<SetpointHandler, CycleError> {
+        let r = controller.levels();
+        if settings.levels.len() != r {
+            return Err(CycleError::Shape(format!(
+                "setpoint_limits has limits for {} levels, the controller {r}",
+                settings.levels.len()
+            )));
+        }
+        let model = controller.model();
+        let lower = model.joints.iter().map(|j| j.lower).collect();
+        let upper = model.joints.iter().map(|j| j.upper).collect();
+        let mut levels = Vec::with_capacity(r);
+        for (i, limits) in settings.levels.iter().enumerate() {
+            let spec = &controller.spec().levels[i];
+            let target = controller
+                .level_target(i)
+                .ok_or_else(|| CycleError::Shape(format!("no level {i}")))?;
+            // An orientation task and a pose level's roll, pitch, yaw rows
+            // move on SO(3) (slerp); every other level, stacked ones
+            // included, row by row.
+            let kind = match spec.tasks.as_slice() {
+                [TaskSpec::Orientation { .. }] => GoalKind::RollPitchYaw,
+                [TaskSpec::Pose { .. }] => GoalKind::Pose,
+                _ => GoalKind::Vector,
+            };
+            let transition = Transition::new(kind, target.goal, target.stiffness, target.damping)
+                .map_err(|e| CycleError::Shape(e.to_string()))?;
+            let workspace = Workspace::of_level(controller, spec, limits.workspace.as_ref());
+            let joints = match spec.tasks.as_slice() {
+                [TaskSpec::Joints { indices }] => Some(indices.clone()),
+                [TaskSpec::Posture] => Some((0..controller.nq()).collect()),
+                _ => None,
+            };
+            let m = controller.task_dim(i);
+            levels.push(LevelState {
+                transition,
+                max_stiffness: limits.max_stiffness,
+                max_speed: limits.max_speed,
+                workspace,
+                joints,
+                active: false,
+                k: DMatrix::zeros(m, m),
+                d: DMatrix::zeros(m, m),
+            });
+        }
+        Ok(SetpointHandler {
+            levels,
+            relative_damping: settings.relative_damping,
+            lower,
+            upper,
+            answers: [SetpointAnswer::default(); MAX_SETPOINT_CLIENTS],
+            heard: [0; MAX_SETPOINT_CLIENTS],
+            count: 0,
+            zeros: [0.0; MAX_TASK_DIM],
+            pending: Pending::new(),
+        })
+    }
+
+    /// Checks `setpoint`, starts its transition if accepted, and records the
+    /// answer for its client, now (whatever its application point). Returns
+    /// the answer code. Allocation-free.
+    pub fn take(&mut self, setpoint: &Setpoint) -> u32 {
+        self.take_counted(setpoint, false)
+    }
+
+    fn take_counted(&mut self, setpoint: &Setpoint, late: bool) -> u32 {
+        let result = self.check(setpoint);
+        let duration = match result {
+            Ok(()) => self.start(setpoint),
+            Err(_) => 0.0,
+        };
+        let code = answer_code(result);
+        self.record(setpoint, code, duration, late);
+        code
+    }
+
+    /// A setpoint received in the cycle of the state with sequence number
+    /// `state_seq` (module docs): taken now when due (`Some(code)`), or
+    /// queued until [`SetpointHandler::apply_due`] reaches its state (`None`).
+    /// Rejected at once by the model-free checks or a full queue.
+    /// Allocation-free.
+    pub fn receive(&mut self, setpoint: &Setpoint, state_seq: u64) -> Option<u32> {
+        if let Err(r) = setpoint.validate() {
+            self.record(setpoint, r.code(), 0.0, false);
+            return Some(r.code());
+        }
+        let at = setpoint.apply_at_state_seq;
+        if at <= state_seq {
+            // Late: its state has already been answered.
+            return Some(self.take_counted(setpoint, at < state_seq));
+        }
+        if self.pending.push(setpoint) {
+            return None;
+        }
+        let code = Rejection::PendingFull.code();
+        self.record(setpoint, code, 0.0, false);
+        Some(code)
+    }
+
+    /// Takes, in arrival order, every queued setpoint whose application
+    /// point the state `state_seq` has reached. Bounded by
+    /// [`MAX_PENDING_SETPOINTS`](hcc_msgs::MAX_PENDING_SETPOINTS); allocation-free. Returns how many it took.
+    pub fn apply_due(&mut self, state_seq: u64) -> usize {
+        let mut taken = 0;
+        let mut k = 0;
+        while k < self.pending.len {
+            let slot = self.pending.order[k];
+            if self.pending.slots[slot].apply_at_state_seq > state_seq {
+                k += 1;
+                continue;
+            }
+            let sp = self.pending.slots[slot];
+            self.pending.remove(k);
+            self.take_counted(&sp, false);
+            taken += 1;
+        }
+        taken
+    }
+
+    /// Setpoints waiting for their state.
+    pub fn pending(&self) -> usize {
+        self.pending.len
+    }
+
+    /// The law-side checks (module docs), after the model-free ones.
+    fn check(&self, sp: &Setpoint) -> Result<(), Rejection> {
+        sp.validate()?;
+        let level = self
+            .levels
+            .get(sp.level as usize)
+            .ok_or(Rejection::UnknownLevel)?;
+        let m = level.transition.dim();
+        if sp.dim() != m {
+            return Err(Rejection::DimensionMismatch);
+        }
+        if sp.sets(SETPOINT_STIFFNESS) && !sp.stiffness_within(level.max_stiffness) {
+            return Err(Rejection::StiffnessAboveLimit);
+        }
+        if !sp.sets(SETPOINT_GOAL) {
+            return Ok(());
+        }
+        let goal = sp.goal();
+        if let Some(joints) = &level.joints {
+            for (a, &j) in joints.iter().enumerate() {
+                let (lo, hi) = (self.lower[j], self.upper[j]);
+                // A joint without limits (continuous) has lower ≥ upper in the model.
+                if lo < hi && !(lo..=hi).contains(&goal[a]) {
+                    return Err(Rejection::JointLimit);
+                }
+            }
+        }
+        let inside = level.workspace.contains(&goal[..m]);
+        if inside {
+            Ok(())
+        } else {
+            Err(Rejection::OutsideWorkspace)
+        }
+    }
+
+    /// Starts the accepted setpoint's transition; returns its duration (s),
+    /// stretched to the level's speed limit.
+    fn start(&mut self, sp: &Setpoint) -> f64 {
+        let level = &mut self.levels[sp.level as usize];
+        let m = level.transition.dim();
+        let mut duration = sp.duration_s;
+        if sp.sets(SETPOINT_GOAL) {
+            let distance = level.transition.distance_to(sp.goal());
+            // Peak speed of the quintic profile: 15/8 · distance / T.
+            duration = duration.max(1.875 * distance / level.max_speed);
+        }
+        for a in 0..m {
+            for b in 0..m {
+                // Symmetrised, so the law's exact symmetry check holds.
+                level.k[(a, b)] = 0.5 * (sp.stiffness_at(a, b) + sp.stiffness_at(b, a));
+                level.d[(a, b)] = 0.5 * (sp.damping_at(a, b) + sp.damping_at(b, a));
+            }
+        }
+        let target = Target {
+            goal: sp.sets(SETPOINT_GOAL).then(|| sp.goal()),
+            stiffness: sp.sets(SETPOINT_STIFFNESS).then_some(&level.k),
+            damping: sp.sets(SETPOINT_DAMPING).then_some(&level.d),
+        };
+        level.transition.start(target, duration);
+        if sp.sets(SETPOINT_VELOCITY) {
+            level.transition.set_feed_forward(sp.velocity());
+        }
+        level.active = true;
+        duration
+    }
+
+    /// Keeps the answer in the client's slot (or the least recently heard one).
+    fn record(&mut self, sp: &Setpoint, code: u32, duration_s: f64, late: bool) {
+        self.count += 1;
+        let slot = self
+            .answers
+            .iter()
+            .position(|a| a.answered > 0 && a.client_id == sp.client_id)
+            .unwrap_or_else(|| {
+                (0..MAX_SETPOINT_CLIENTS)
+                    .min_by_key(|&k| self.heard[k])
+                    .unwrap_or(0)
+            });
+        let (answered, rejected, late_count) =
+            if self.answers[slot].answered > 0 && self.answers[slot].client_id == sp.client_id {
+                let a = &self.answers[slot];
+                (a.answered, a.rejected, a.late)
+            } else {
+                (0, 0, 0)
+            };
+        self.answers[slot] = SetpointAnswer {
+            client_id: sp.client_id,
+            seq: sp.header.seq,
+            answered: answered + 1,
+            code,
+            level: sp.level,
+            duration_s,
+            rejected: rejected.saturating_add(u32::from(code != ANSWER_ACCEPTED)),
+            late: late_count.saturating_add(u32::from(late)),
+        };
+        self.heard[slot] = self.count;
+    }
+
+    /// Advances every active transition by `dt` s and hands the equilibrium,
+    /// the gains and (with relative damping) the equilibrium's velocity to
+    /// the law. Levels without a setpoint are not touched. Allocation-free.
+    pub fn advance(&mut self, dt: f64, controller: &mut Controller) {
+        for (i, level) in self.levels.iter_mut().enumerate() {
+            if !level.active {
+                continue;
+            }
+            level.transition.advance(dt);
+            let t = &level.transition;
+            // The values come from checked setpoints: these calls cannot fail.
+            let _ = controller.set_goal(i, t.goal());
+            let _ = controller.set_gains(i, Some(t.stiffness()), Some(t.damping()));
+            let velocity = if self.relative_damping {
+                t.goal_velocity()
+            } else {
+                &self.zeros[..t.dim()]
+            };
+            let _ = controller.set_goal_velocity(i, velocity);
+            level.active = t.is_moving() || t.has_feed_forward();
+        }
+    }
+
+    /// Writes the active goals, gain diagonals, progress and answers into `t`.
+    pub fn fill(&self, t: &mut Telemetry) {
+        for (i, level) in self.levels.iter().enumerate().take(MAX_LEVELS) {
+            let tr = &level.transition;
+            let m = tr.dim().min(MAX_TASK_DIM);
+            t.goal[i][..m].copy_from_slice(&tr.goal()[..m]);
+            for a in 0..m {
+                t.stiffness_diag[i][a] = tr.stiffness()[(a, a)];
+                t.damping_diag[i][a] = tr.damping()[(a, a)];
+            }
+            t.transition_progress[i] = tr.progress();
+        }
+        t.setpoint_answers = self.answers;
+    }
+}

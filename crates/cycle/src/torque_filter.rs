@@ -1,0 +1,193 @@
+//! The torque filter between the law and the saturation (`[torque_filter]`),
+//! allocation-free:
+//!
+//! ```text
+//! τ (Eq. (19)) ─▶ finite? ─▶ rate limit ─▶ low-pass ─▶ saturation ─▶ command
+//!                 (the law     |Δτ_k| ≤ r·Δt   τ_f += α(τ − τ_f)   hcc_control::saturate
+//!                 refuses a    (whole or       α = 1 − e^(−2π f_c Δt)
+//!                 non-finite τ) per joint)
+//! ```
+//!
+//! The finite check is the law's own (a non-finite τ is a numerical failure
+//! answered with the safe command); the saturation is the cycle's
+//! ([`crate::ControlCycle`]). This module holds the two stages between
+//! them. Both act on the previous command sent (Δt the nominal period):
+//! the first command after start-up, and the first after a safe command,
+//! are not rate-limited (there is no applied law torque to limit from; the
+//! safe command itself is never limited or filtered, a safety stop must not
+//! be delayed), and the filter starts from that torque.
+//!
+//! **Whole or per joint.** `whole` scales the increment Δτ by one factor so
+//! that the largest |Δτ_k| equals r·Δt: the direction of the change — and
+//! with it the null-space structure of the hierarchy's increment — is kept,
+//! as the saturation keeps it for τ. `per_joint` clips each joint and is
+//! faster to reach a new torque but bends the increment out of the levels'
+//! subspaces. The default is `whole`.
+
+use hcc_config::torque_filter::{RateLimitMode, TorqueFilterSpec};
+use hcc_msgs::MAX_JOINTS;
+
+/// What the stages did to one torque.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stages {
+    /// The rate limit changed τ.
+    pub rate_limited: bool,
+    /// The low-pass filter ran.
+    pub low_passed: bool,
+}
+
+/// The rate limit and the low-pass between the law and the saturation.
+#[derive(Debug, Clone)]
+pub struct TorqueFilter {
+    /// Largest |Δτ_k| per cycle (r·Δt), or `None`.
+    max_step: Option<f64>,
+    mode: RateLimitMode,
+    /// Low-pass coefficient α, or `None`.
+    alpha: Option<f64>,
+    /// The previous command's τ (the filter's state), valid if `have_prev`.
+    prev: [f64; MAX_JOINTS],
+    have_prev: bool,
+}
+
+impl TorqueFilter {
+    /// The filter of `settings` at the nominal period `period_s`.
+    pub fn new(settings: &TorqueFilterSpec, period_s: f64) -> TorqueFilter {
+        TorqueFilter {
+            max_step: settings.torque_rate_limit.map(|r| r * period_s),
+            mode: settings.rate_limit_mode,
+            alpha: settings
+                .low_pass_hz
+                .map(|f| 1.0 - (-std::f64::consts::TAU * f * period_s).exp()),
+            prev: [0.0; MAX_JOINTS],
+            have_prev: false,
+        }
+    }
+
+    /// Whether any stage is on.
+    pub fn is_active(&self) -> bool {
+        self.max_step.is_some() || self.alpha.is_some()
+    }
+
+    /// Passes the law's τ (length n, finite) through the rate limit and the
+    /// low-pass, in place. Allocation-free.
+    pub fn apply(&mut self, tau: &mut [f64]) -> Stages {
+        let n = tau.len().min(MAX_JOINTS);
+        let mut stages = Stages::default();
+        if !self.have_prev {
+            self.prev[..n].copy_from_slice(&tau[..n]);
+            self.have_prev = true;
+            return stages;
+        }
+        if let Some(max_step) = self.max_step {
+            stages.rate_limited = limit_rate(&mut tau[..n], &self.prev[..n], max_step, self.mode);
+        }
+        if let Some(alpha) = self.alpha {
+            for (t, p) in tau[..n].iter_mut().zip(&self.prev[..n]) {
+                *t = p + alpha * (*t - p);
+            }
+            stages.low_passed = true;
+        }
+        self.prev[..n].copy_from_slice(&tau[..n]);
+        stages
+    }
+
+    /// A command that did not come through [`TorqueFilter::apply`] (the safe
+    /// command) was sent: the next law torque is taken as it is.
+    pub fn interrupt(&mut self) {
+        self.have_prev = false;
+    }
+}
+
+/// Limits |τ_k − prev_k| to `max_step`, as a whole or per joint; true if τ changed.
+fn limit_rate(tau: &mut [f64], prev: &[f64], max_step: f64, mode: RateLimitMode) -> bool {
+    let largest = tau
+        .iter()
+        .zip(prev)
+        .fold(0.0_f64, |m, (t, p)| m.max((t - p).abs()));
+    if largest <= max_step {
+        return false;
+    }
+    match mode {
+        RateLimitMode::Whole => {
+            let scale = max_step / largest;
+            for (t, p) in tau.iter_mut().zip(prev) {
+                *t = p + scale * (*t - p);
+            }
+        }
+        RateLimitMode::PerJoint => {
+            for (t, p) in tau.iter_mut().zip(prev) {
+                *t = t.clamp(p - max_step, p + max_step);
+            }
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn filter(rate: Option<f64>, mode: RateLimitMode, low_pass: Option<f64>) -> TorqueFilter {
+        let settings = TorqueFilterSpec {
+            torque_rate_limit: rate,
+            rate_limit_mode: mode,
+            low_pass_hz: low_pass,
+        };
+        TorqueFilter::new(&settings, 1e-3)
+    }
+
+    #[test]
+    fn off_by_default_changes_nothing() {
+        let mut p = filter(None, RateLimitMode::Whole, None);
+        assert!(!p.is_active());
+        for k in 0..5 {
+            let mut tau = [k as f64 * 100.0, -3.0];
+            let before = tau;
+            assert_eq!(p.apply(&mut tau), Stages::default());
+            assert_eq!(tau, before);
+        }
+    }
+
+    #[test]
+    fn whole_keeps_the_direction_per_joint_clips() {
+        // 1000 N·m/s at 1 kHz: at most 1 N·m per cycle.
+        let mut whole = filter(Some(1000.0), RateLimitMode::Whole, None);
+        let mut per = filter(Some(1000.0), RateLimitMode::PerJoint, None);
+        let mut first = [0.0, 0.0];
+        assert!(
+            !whole.apply(&mut first).rate_limited,
+            "the first is taken as is"
+        );
+        per.apply(&mut [0.0, 0.0]);
+        let mut a = [4.0, 2.0];
+        let mut b = [4.0, 2.0];
+        assert!(whole.apply(&mut a).rate_limited);
+        assert!(per.apply(&mut b).rate_limited);
+        assert_eq!(a, [1.0, 0.5], "scaled as a whole");
+        assert_eq!(b, [1.0, 1.0], "clipped per joint");
+        // Within the limit: untouched.
+        let mut c = [1.5, 1.0];
+        assert!(!whole.apply(&mut c).rate_limited);
+        assert_eq!(c, [1.5, 1.0]);
+        // A safe command in between: the next torque is taken as is.
+        whole.interrupt();
+        let mut d = [50.0, -50.0];
+        assert!(!whole.apply(&mut d).rate_limited);
+        assert_eq!(d, [50.0, -50.0]);
+    }
+
+    #[test]
+    fn the_low_pass_is_first_order() {
+        let mut p = filter(None, RateLimitMode::Whole, Some(100.0));
+        p.apply(&mut [0.0]);
+        let alpha = 1.0 - (-std::f64::consts::TAU * 100.0 * 1e-3).exp();
+        let mut y = 0.0;
+        for _ in 0..50 {
+            let mut tau = [1.0];
+            assert!(p.apply(&mut tau).low_passed);
+            y += alpha * (1.0 - y);
+            assert!((tau[0] - y).abs() < 1e-15);
+        }
+        assert!(y > 0.99, "step response settles within 50 ms at 100 Hz");
+    }
+}

@@ -1,0 +1,123 @@
+//! The control cycle allocates nothing — not even from the real-time pool —
+//! through valid states, NaN states, duplicates, steps backwards, stale
+//! timeouts and a setpoint every cycle (accepted, queued and rejected ones),
+//! with the torque filter on. Counted by `RtAllocator`, this test binary's
+//! global allocator.
+
+use std::path::PathBuf;
+
+use hcc_config::Scenario;
+use hcc_control::Controller;
+use hcc_cycle::{Answer, ControlCycle, CycleSettings};
+use hcc_msgs::{CommandMode, JointState, Setpoint};
+use hcc_rtalloc::{RtAllocator, RtSection, thread_stats};
+
+#[global_allocator]
+static ALLOCATOR: RtAllocator = RtAllocator::new();
+
+const WARM_UP: u64 = 3_000;
+
+fn scenario() -> Scenario {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/paper-sim1.toml");
+    Scenario::load(&path).unwrap()
+}
+
+#[test]
+fn the_cycle_allocates_nothing() {
+    let scenario = scenario();
+    let n = scenario.model.nq();
+    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    // With the whole torque filter on (rate limit and low-pass).
+    let mut settings = CycleSettings::from_scenario(&scenario);
+    settings.torque_filter.torque_rate_limit = Some(10.0);
+    settings.torque_filter.low_pass_hz = Some(100.0);
+    let mut cycle = ControlCycle::new(controller, &settings).unwrap();
+    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut states = Vec::new();
+    for k in 0..2 * WARM_UP {
+        let mut s = JointState::zeroed();
+        let q: Vec<f64> = q0
+            .iter()
+            .map(|q| q + 0.05 * (k as f64 * 1e-3).sin())
+            .collect();
+        s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+        s.header.seq = k;
+        match k % 97 {
+            // A NaN, a duplicate, a step backwards: the safe command or no answer.
+            13 => s.q[0] = f64::NAN,
+            29 => s.header.seq = k - 1,
+            61 => s.header.seq = k / 2,
+            _ => {}
+        }
+        states.push(s);
+    }
+    // A setpoint every cycle (prepared beforehand): goals along a small
+    // circle, gain changes, full matrices, and rejected ones (NaN, not SPD,
+    // unknown level).
+    let setpoints: Vec<Setpoint> = (0..2 * WARM_UP)
+        .map(|k| {
+            let phase = k as f64 * 1e-3;
+            let goal = [0.90 + 0.02 * phase.sin(), 0.80 + 0.02 * phase.cos()];
+            let mut sp = Setpoint::for_level(k % 3 + 1, k, 0, 2)
+                .with_goal(&goal)
+                .unwrap()
+                .with_velocity(&[0.02 * phase.cos(), -0.02 * phase.sin()])
+                .unwrap()
+                .with_duration(0.01);
+            if k.is_multiple_of(5) {
+                // Due two states later: through the queue of waiting setpoints.
+                sp = sp.with_apply_at(k + 2);
+            }
+            match k % 7 {
+                1 => sp = sp.with_stiffness(&[1000.0, 10.0, 10.0, 900.0]).unwrap(),
+                2 => sp.goal[0] = f64::NAN,
+                3 => sp = sp.with_damping(&[40.0, -1.0]).unwrap(),
+                4 => sp.level = 6,
+                _ => {}
+            }
+            sp
+        })
+        .collect();
+    let step = |cycle: &mut ControlCycle, k: u64| {
+        if k % 500 == 499 {
+            cycle.stale(k * 1_000_000);
+        }
+        let mut setpoint = Some(setpoints[k as usize]);
+        let answer = cycle.step(&states[k as usize], k * 1_000_000, || setpoint.take());
+        let code = cycle
+            .telemetry()
+            .answer_for(setpoints[k as usize].client_id)
+            .map_or(0, |a| a.code);
+        (answer, code)
+    };
+    let rt = RtSection::enter();
+    for k in 0..WARM_UP {
+        step(&mut cycle, k);
+    }
+    let before = thread_stats();
+    let mut answers = [0u64; 2];
+    let mut setpoint_answers = [0u64; 2];
+    for k in WARM_UP..2 * WARM_UP {
+        let (answer, code) = step(&mut cycle, k);
+        setpoint_answers[usize::from(code != 0)] += 1;
+        match answer {
+            Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
+            Answer::Command(_) => answers[0] += 1,
+            Answer::Duplicate => {}
+        }
+    }
+    let during = thread_stats().since(before);
+    drop(rt);
+    println!("cycle, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
+    assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
+    let c = cycle.counters().telemetry;
+    assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
+    // Setpoints accepted and rejected, every cycle.
+    assert!(
+        setpoint_answers[0] > 0 && setpoint_answers[1] > 0,
+        "{setpoint_answers:?}"
+    );
+    assert_eq!(during.pool_allocs, 0, "{during:?}");
+    assert_eq!(during.system_allocs, 0, "{during:?}");
+    assert_eq!(during.fallbacks, 0, "{during:?}");
+}

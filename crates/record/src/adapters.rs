@@ -1,0 +1,47 @@
+//! What the recorder reads a cycle from: the controller's telemetry sample
+//! (the law's output as the control cycle published it) and the law itself
+//! (its terms at the recorded state). `hcc simulate` and the derivation of a
+//! recording (`hcc run`, `hcc plot`) read the same two, so their rows agree.
+
+use hcc_control::Controller;
+use hcc_msgs::Telemetry;
+use nalgebra::DMatrix;
+
+use crate::{CycleOutput, LawTerms};
+
+/// The law's output of one cycle as its telemetry carries it (τ after the
+/// torque filter and the saturation, as commanded).
+impl CycleOutput for Telemetry {
+    fn tau(&self) -> &[f64] {
+        Telemetry::tau(self)
+    }
+    fn level_torque(&self, i: usize) -> &[f64] {
+        Telemetry::tau_level(self, i)
+    }
+    fn tau_mu(&self) -> &[f64] {
+        &self.tau_mu[..self.n()]
+    }
+    fn task_error(&self, i: usize) -> &[f64] {
+        Telemetry::task_error(self, i)
+    }
+    fn level_energy(&self, i: usize) -> f64 {
+        self.storage[i]
+    }
+    fn p_mu(&self) -> f64 {
+        self.p_mu
+    }
+}
+
+/// The terms of the law after its step at the recorded state.
+impl LawTerms for Controller {
+    fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {
+        Controller::task_jacobian(self, i)
+    }
+    fn level_potential(&self, i: usize) -> f64 {
+        self.output().potential[i]
+    }
+    fn extended_jacobian(&self) -> Option<(Vec<usize>, DMatrix<f64>)> {
+        let d = self.diagnostics();
+        Some((d.dims, d.jbar))
+    }
+}

@@ -1,0 +1,173 @@
+//! The live server: one thread drains the namespace's four streams from
+//! iceoryx2 (the largest queues the services allow, 128 samples = 128 ms at
+//! 1 kHz, drained every millisecond, at once again after a drain that found
+//! half a queue) and hands every sample to the [`Viewer`]; the Foxglove
+//! SDK's own runtime sends to the clients. Samples lost because the queue
+//! overflowed are counted as gaps; a restarted controller or driver (its
+//! sequence numbers start again) is counted and followed.
+
+use anyhow::Context as _;
+use hcc_config::Scenario;
+use hcc_msgs::ServiceNames;
+use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
+use hcc_record::mcap_log::{self, JointStateMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
+use iceoryx2::prelude::SignalHandlingMode;
+use std::time::{Duration, Instant};
+
+use crate::viewer::stats_line;
+use crate::{Args, Server};
+
+/// Sleep between drains.
+const POLL: Duration = Duration::from_millis(1);
+/// A drain that found this many samples on a stream is followed by another at once.
+const BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
+/// Interval of the progress line on stderr.
+const PROGRESS: Duration = Duration::from_secs(10);
+
+struct Subscribers {
+    states: ipc::StateSubscriber,
+    commands: ipc::CommandSubscriber,
+    telemetry: ipc::TelemetrySubscriber,
+    setpoints: ipc::SetpointSubscriber,
+}
+
+/// Monotonic stamps onto Unix time (the offset measured at the start).
+struct Clock {
+    offset_ns: i128,
+}
+
+impl Clock {
+    fn new() -> Clock {
+        let (unix, mono) = mcap_log::clock_pair();
+        Clock {
+            offset_ns: unix as i128 - mono as i128,
+        }
+    }
+
+    fn unix(&self, stamp_ns: u64) -> u64 {
+        (stamp_ns as i128 + self.offset_ns).clamp(0, u64::MAX as i128) as u64
+    }
+
+    fn now(&self) -> u64 {
+        self.unix(hcc_msgs::monotonic_now_ns())
+    }
+}
+
+impl Subscribers {
+    /// Hands every queued sample to the server; the largest count of one stream.
+    fn drain(&self, server: &mut Server, clock: &Clock) -> Result<usize, String> {
+        let v = &mut server.viewer;
+        let mut most = 0;
+        let mut k = 0;
+        while let Some(s) = self
+            .setpoints
+            .receive()
+            .map_err(|e| format!("setpoint: {e:?}"))?
+        {
+            v.setpoint(clock.unix(s.header.stamp_ns), &SetpointMsg::from(&*s));
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(s) = self
+            .states
+            .receive()
+            .map_err(|e| format!("joint_state: {e:?}"))?
+        {
+            let h = s.header;
+            v.joint_state(h.seq, h.stamp_ns, clock.unix(h.stamp_ns), || {
+                JointStateMsg::from(&*s)
+            });
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(c) = self
+            .commands
+            .receive()
+            .map_err(|e| format!("torque_command: {e:?}"))?
+        {
+            let h = c.header;
+            v.torque_command(h.seq, c.state_seq, clock.unix(h.stamp_ns), || {
+                TorqueCommandMsg::from(&*c)
+            });
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(t) = self
+            .telemetry
+            .receive()
+            .map_err(|e| format!("telemetry: {e:?}"))?
+        {
+            let h = t.header;
+            v.telemetry(h.seq, t.state_seq, clock.unix(h.stamp_ns), || {
+                TelemetryMsg::from(&*t)
+            });
+            k += 1;
+        }
+        Ok(most.max(k))
+    }
+}
+
+pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
+    let names = ServiceNames::new(namespace).context("--namespace")?;
+    let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
+    ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let scenario = args
+        .config
+        .as_ref()
+        .map(Scenario::load)
+        .transpose()
+        .context("--config")?;
+    if scenario.is_none() && !args.quiet {
+        eprintln!("hcc view: no --config: no transform tree, stick figure or joint limits");
+    }
+    let node = ipc::create_node(
+        &format!("hcc-view-{}", std::process::id()),
+        SignalHandlingMode::Disabled,
+        file_prefix.as_deref(),
+    )?;
+    let services = Services::open(&node, &names)?;
+    let subs = Subscribers {
+        states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+        commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+        telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+        setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
+    };
+    let mut server = crate::start(args, scenario.as_ref(), &format!("namespace {namespace}"))?;
+    let clock = Clock::new();
+    let mut next_progress = Instant::now() + PROGRESS;
+    let mut receive_errors = 0u64;
+    while !hcc_rt::stop_requested() {
+        let most = match subs.drain(&mut server, &clock) {
+            Ok(k) => k,
+            Err(e) => {
+                // The server outlives a broken peer: counted and said, once a power of two.
+                receive_errors += 1;
+                if receive_errors.is_power_of_two() {
+                    tracing::warn!("receive failed ({receive_errors} times so far): {e}");
+                }
+                0
+            }
+        };
+        if server.description_wanted() {
+            server.viewer.robot_description(clock.now());
+        }
+        let clients = server.clients();
+        server.viewer.tick(clients, clock.now());
+        if !args.quiet && Instant::now() >= next_progress {
+            eprintln!("hcc view: {}", stats_line(server.viewer.counts()));
+            next_progress += PROGRESS;
+        }
+        if most < BURST {
+            std::thread::sleep(POLL);
+        }
+    }
+    println!("hcc view: stopped; {}", stats_line(server.viewer.counts()));
+    server.handle.stop().wait_blocking();
+    drop(subs);
+    drop(services);
+    drop(node);
+    Ok(())
+}
