@@ -7,6 +7,8 @@
   applied; hold, fallback, stop) for drivers written in Python.
 * :class:`hcc.Client`: reads the controller's telemetry and the joint states,
   sets goals and gains at run time (setpoints) and waits for their answers.
+* :mod:`hcc.remote`: the same from another host, over Zenoh through
+  ``hcc bridge`` (``from hcc.remote import Client``).
 * :mod:`hcc.mujoco`: a plant driver on the MuJoCo physics engine
   (``python -m hcc.mujoco``).
 """

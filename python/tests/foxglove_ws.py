@@ -19,19 +19,12 @@ from typing import Any, Iterator
 
 from websockets.sync.client import ClientConnection, connect
 
-from procs import started
+from procs import free_port, started
 
 SUBPROTOCOL = "foxglove.sdk.v1"
 #: Binary opcodes of the server.
 MESSAGE_DATA = 1
 FETCH_ASSET_RESPONSE = 4
-
-
-def free_port() -> int:
-    """A loopback port nobody listens on right now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_for_port(port: int, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> None:

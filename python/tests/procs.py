@@ -7,6 +7,7 @@ import csv
 import os
 import pathlib
 import signal
+import socket
 import subprocess
 import sys
 from typing import Callable, Iterator
@@ -17,6 +18,13 @@ from conftest import ROOT, binary, unique
 
 #: Directory of POSIX shared memory on Linux.
 SHM_DIR = "/dev/shm"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (bound to port 0 and released)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def read_csv(path: pathlib.Path) -> tuple[list[str], list[list[float]]]:

@@ -67,6 +67,9 @@ enum Command {
     /// Serve a running namespace (or a recording, FILE.mcap) live to Foxglove over
     /// WebSocket: the recording's channels, the chain's transforms, the URDF.
     View(hcc_view::Args),
+    /// Publish a running namespace on Zenoh for ROS 2 nodes (rmw_zenoh wire format):
+    /// joint states, torque commands, telemetry; remote goals with --allow-setpoints.
+    Bridge(hcc_bridge::Args),
 }
 
 fn main() -> ExitCode {
@@ -85,6 +88,7 @@ fn main() -> ExitCode {
         Command::Gains(args) => setpoint_cmd::gains(args),
         Command::Monitor(args) => monitor_cmd::monitor(args),
         Command::View(args) => hcc_view::run(args),
+        Command::Bridge(args) => hcc_bridge::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
