@@ -72,15 +72,25 @@ impl std::fmt::Display for GainRate {
             f,
             "its {what} is more than the control rate ({:.0} Hz) can carry: {expr} = {:.3} > {} \
              (the arm is too light in that direction for it); scale {sym} by at most {:.3} \
-             (its largest entry {:.4} to at most {:.4})",
+             (its largest entry {} to at most {})",
             1.0 / self.period_s,
             self.value,
             self.bound,
             self.scale(),
             self.largest_entry,
-            self.largest_entry * self.scale(),
+            floor_significant(self.largest_entry * self.scale(), 4),
         )
     }
+}
+
+/// `x` > 0 rounded down to `digits` significant digits (a bound printed as
+/// "at most" must hold as printed).
+fn floor_significant(x: f64, digits: i32) -> f64 {
+    if !(x > 0.0 && x.is_finite()) {
+        return x;
+    }
+    let p = 10f64.powi(digits - 1 - x.log10().floor() as i32);
+    (x * p).floor() / p
 }
 
 /// Buffers of the check for a task of m rows and n joints.
