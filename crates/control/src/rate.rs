@@ -169,7 +169,7 @@ pub fn check_level(
 ) -> Result<(), GainRate> {
     let largest = |g: &DMatrix<f64>| g.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
     let b = period_s * work.lambda_max(d);
-    if !(b <= B_MAX) {
+    if b.is_nan() || b > B_MAX {
         return Err(GainRate {
             level,
             damping: true,
@@ -180,7 +180,7 @@ pub fn check_level(
         });
     }
     let a = period_s * period_s * work.lambda_max(k);
-    if !(a <= A_MAX) {
+    if a.is_nan() || a > A_MAX {
         return Err(GainRate {
             level,
             damping: false,

@@ -922,7 +922,7 @@ impl Safety {
                 let m = *m_k.get_or_insert_with(|| self.effective_inertia(chol, k));
                 excess = excess.max(a_jerk - (2.0 * rate / m * headroom.max(0.0)).sqrt());
             }
-            if !(excess > 0.0) {
+            if excess.is_nan() || excess <= 0.0 {
                 continue;
             }
             let t = -sign * m_k.unwrap_or(0.0) * excess;

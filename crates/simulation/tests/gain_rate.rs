@@ -38,10 +38,10 @@ fn with_posture_damping(d: f64, dir: &Path) -> PathBuf {
 
 #[test]
 fn a_damping_the_rate_cannot_carry_is_refused_and_the_one_it_names_converges() {
-    let err = Scenario::load(data("fr3-position-posture.toml"))
-        .err()
-        .expect("a posture damping of 2 on a bare FR3 is refused")
-        .to_string();
+    let Err(err) = Scenario::load(data("fr3-position-posture.toml")) else {
+        panic!("a posture damping of 2 on a bare FR3 is refused");
+    };
+    let err = err.to_string();
     println!("{err}");
     assert!(err.contains("level 2 (posture)"), "{err}");
     assert!(err.contains("damping"), "{err}");

@@ -2,7 +2,7 @@
 //! ([`hcc_cycle::ControlCycle`]) — wait for a joint state (per the wait
 //! strategy), take the newest sample and the setpoints that came with it,
 //! let the cycle answer it (stream checks → law τ = Σ τ_i + τ_μ + g, paper
-//! Eq. (19) → torque filter → saturation, or the safe command), send the
+//! Eq. (19) → saturation → torque filter, or the safe command), send the
 //! command and notify `command_ready`, publish telemetry, and record the
 //! timing histograms.
 //!
