@@ -157,9 +157,9 @@ pub fn observe(obs: &mut MomentumObserver, terms: &Data, input: &ObserverInput<'
     for i in 0..n {
         let mut p = 0.0;
         let mut b = 0.0;
-        for j in 0..n {
-            p += terms.m[(i, j)] * qd[j];
-            b += terms.c[(j, i)] * qd[j];
+        for (j, v) in qd.iter().enumerate() {
+            p += terms.m[(i, j)] * v;
+            b += terms.c[(j, i)] * v;
         }
         obs.p[i] = p;
         obs.beta[i] = if input.gravity_in_command {
@@ -180,10 +180,9 @@ pub fn observe(obs: &mut MomentumObserver, terms: &Data, input: &ObserverInput<'
             }
             obs.alpha_period = input.dt;
         }
-        for i in 0..n {
-            let y = (obs.p[i] - obs.p_prev[i]) / input.dt
-                - tau[i]
-                - 0.5 * (obs.beta_prev[i] + obs.beta[i]);
+        for (i, t) in tau.iter().enumerate() {
+            let y =
+                (obs.p[i] - obs.p_prev[i]) / input.dt - t - 0.5 * (obs.beta_prev[i] + obs.beta[i]);
             obs.r[i] += obs.alpha[i] * (y - obs.r[i]);
         }
     }
@@ -241,7 +240,7 @@ impl ContactDetector {
     /// Updates the flag from the estimate `r` (length n; a non-finite entry
     /// counts as above every threshold). Allocation-free.
     pub fn update(&mut self, r: &[f64]) -> ContactChange {
-        let above = |x: f64, t: f64| !(x.abs() <= t);
+        let above = |x: f64, t: f64| x.is_nan() || x.abs() > t;
         if self.in_contact {
             let released = r.iter().zip(self.off.iter()).all(|(&x, &t)| !above(x, t));
             if released {

@@ -12,7 +12,7 @@ use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::JointState;
-use hcc_plant::{LoopTiming, Plant};
+use hcc_plant::LoopTiming;
 use nalgebra::{DMatrix, DVector, Vector6};
 
 const PUSH_START: f64 = 1.5;
@@ -134,32 +134,35 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
         .collect();
     let k_o = scenario.contact.observer_gain[0];
     let (err, peak) = relative_error(&samples, &reference, PUSH_START + 5.0 / k_o, end);
-    let (on, off) = flag_timing(&samples, PUSH_START, end);
+    let what = format!("15 N at the TCP (peak |Jᵀ F| {peak:.3} N·m)");
+    check_push(&what, &samples, err, end);
+}
+
+/// Prints the figures of a push over [PUSH_START, end) and checks them: r
+/// within 2 % of the peak after 5/K_O, flagged within 20 ms of the start,
+/// cleared within 50 ms of the end.
+fn check_push(what: &str, samples: &[Sample], err: f64, end: f64) {
+    let (on, off) = flag_timing(samples, PUSH_START, end);
     println!(
-        "15 N at the TCP: peak |Jᵀ F| {peak:.3} N·m, worst |r − Jᵀ F| after 5/K_O = {:.2} % of it; \
+        "{what}: worst |r − τ_ext| after 5/K_O = {:.2} % of the peak; \
          flagged {:.0} ms after the start, cleared {:.0} ms after the end",
         100.0 * err,
         on * 1e3,
         off * 1e3
     );
-    assert!(err < 0.02, "{err}");
-    assert!(on <= 0.020 + 1e-9, "{on}");
-    assert!(off <= 0.050 + 1e-9, "{off}");
+    assert!(err < 0.02, "{what}: {err}");
+    assert!(on <= 0.020 + 1e-9, "{what}: {on}");
+    assert!(off <= 0.050 + 1e-9, "{what}: {off}");
 }
 
-/// The closed loop of `scenario` with `disturbance(t)` added to the torque
-/// the plant receives (held over each period), the cycle unaware of it.
+/// The closed loop of `scenario` with `torque` on `joint` added to the
+/// torque the plant receives during the push (held over each period), the
+/// cycle unaware of it.
 fn run_with_joint_torque(scenario: &Scenario, joint: usize, torque: f64) -> Vec<Sample> {
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
     let mut cycle = ControlCycle::new(controller, &CycleSettings::from_scenario(scenario)).unwrap();
     let s = &scenario.simulation;
-    let mut plant = Plant::new(
-        scenario.model.clone(),
-        &scenario.q0,
-        &scenario.qd0,
-        &s.joint_friction,
-    )
-    .unwrap();
+    let mut plant = hcc_plant::plant_for(scenario).unwrap();
     let timing = LoopTiming {
         control_period_s: 1.0 / s.control_rate_hz,
         substeps: s.substeps,
@@ -215,18 +218,12 @@ fn a_torque_on_one_joint_is_estimated_and_flagged() {
         .collect();
     let k_o = scenario.contact.observer_gain[0];
     let (err, _) = relative_error(&samples, &reference, PUSH_START + 5.0 / k_o, end);
-    let (on, off) = flag_timing(&samples, PUSH_START, end);
-    println!(
-        "{torque} N·m on joint {}: worst |r − τ_ext| after 5/K_O = {:.2} % of it; \
-         flagged {:.0} ms after the start, cleared {:.0} ms after the end",
-        joint + 1,
-        100.0 * err,
-        on * 1e3,
-        off * 1e3
+    check_push(
+        &format!("{torque} N·m on joint {}", joint + 1),
+        &samples,
+        err,
+        end,
     );
-    assert!(err < 0.02, "{err}");
-    assert!(on <= 0.020 + 1e-9, "{on}");
-    assert!(off <= 0.050 + 1e-9, "{off}");
 }
 
 #[test]
