@@ -26,7 +26,7 @@ from typing import Any, Sequence
 DRIVER_SCHEMA_VERSION: int = 3
 #: Version of the client-facing part (setpoints, telemetry, rejection codes);
 #: part of their type names (``@client<N>``).
-CLIENT_SCHEMA_VERSION: int = 3
+CLIENT_SCHEMA_VERSION: int = 4
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -47,6 +47,9 @@ COMMAND_FLAG_GRAVITY_INCLUDED: int = 1 << 0
 COMMAND_FLAGS_KNOWN: int = COMMAND_FLAG_GRAVITY_INCLUDED
 #: :attr:`Telemetry.flags` bit: the controller lost the driver (no state within its timeout).
 TELEMETRY_FLAG_PEER_LOST: int = 1 << 16
+#: :attr:`Telemetry.flags` bit: the controller's contact detection flags a contact
+#: (some ``|tau_ext[j]|`` above its threshold, not yet all below the release level).
+TELEMETRY_FLAG_CONTACT: int = 1 << 17
 #: Clients whose last answer :class:`Telemetry` carries (the most recent ones).
 MAX_SETPOINT_CLIENTS: int = 8
 #: Setpoints the controller keeps waiting for their application point
@@ -399,7 +402,9 @@ class Telemetry(ctypes.Structure):
     (26), (28)), P_μ = τ_μᵀ q̇. Since schema 2 also the active goal
     x_{i,d}(t) and the diagonals of K_i(t) and D_i(t) of every level
     (Eqs. (20), (21)), each level's transition progress, and the answer to
-    the last setpoint of each recent client.
+    the last setpoint of each recent client. Since client schema 4 also
+    ``tau_ext``, the estimate of the external joint torque (appended last),
+    and the contact flag :data:`TELEMETRY_FLAG_CONTACT`.
     """
 
     _fields_ = [
@@ -426,6 +431,7 @@ class Telemetry(ctypes.Structure):
         ("damping_diag", (ctypes.c_double * MAX_TASK_DIM) * MAX_LEVELS),
         ("transition_progress", ctypes.c_double * MAX_LEVELS),
         ("setpoint_answers", SetpointAnswer * MAX_SETPOINT_CLIENTS),
+        ("tau_ext", _Joints),
     ]
     header: Header
     state_seq: int
@@ -501,6 +507,15 @@ class Telemetry(ctypes.Structure):
     def peer_lost(self) -> bool:
         """Whether this sample reports a lost driver."""
         return bool(self.flags & TELEMETRY_FLAG_PEER_LOST)
+
+    def tau_ext_list(self) -> list[float]:
+        """r, the controller's estimate of the external joint torque τ_ext
+        (N·m; generalized-momentum observer, client schema 4), length n."""
+        return list(self.tau_ext[: self.n()])
+
+    def contact(self) -> bool:
+        """Whether this sample flags a contact."""
+        return bool(self.flags & TELEMETRY_FLAG_CONTACT)
 
     def is_singular(self, level: int) -> bool:
         """Whether level ``level`` (0-based) is flagged singular."""

@@ -39,6 +39,7 @@
 //! or one gain and goal for the whole level. The resolved hierarchy is
 //! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
 
+pub mod contact;
 pub mod error;
 pub mod franka;
 pub mod schedule;

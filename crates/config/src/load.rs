@@ -17,7 +17,7 @@ use crate::safety::safety_spec;
 use crate::scenario::Scenario;
 use crate::schema::{self, ScenarioFile};
 use crate::simulation::resolve_simulation;
-use crate::{franka, schedule, setpoint_limits, torque_filter};
+use crate::{contact, franka, schedule, setpoint_limits, torque_filter};
 
 impl Scenario {
     /// Loads, checks and resolves a scenario file; builds the robot model from its URDF.
@@ -93,6 +93,7 @@ impl Scenario {
             setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
         let franka = franka::resolve(cx.file, cx.text, &file.franka)?;
+        let contact = contact::resolve(&cx, &model, &file.contact, simulation.control_rate_hz)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -115,6 +116,7 @@ impl Scenario {
             torque_filter,
             setpoints,
             franka,
+            contact,
         })
     }
 }

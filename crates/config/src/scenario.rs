@@ -46,6 +46,8 @@ pub struct Scenario {
     pub setpoints: Vec<schedule::ScheduledSetpoint>,
     /// Resolved `[franka]` (libfranka's defaults where not given).
     pub franka: franka::Franka,
+    /// Resolved `[contact]` (the defaults where not given).
+    pub contact: crate::contact::Contact,
 }
 
 impl Scenario {

@@ -43,6 +43,9 @@ pub struct ScenarioFile {
     pub commanding: Option<toml::Value>,
     #[serde(default)]
     pub output: Option<toml::Value>,
+    /// `[contact]`: the external-torque observer and contact detection.
+    #[serde(default)]
+    pub contact: crate::contact::ContactSection,
     /// `[[setpoint]]`: setpoints scheduled in time.
     #[serde(default, rename = "setpoint")]
     pub setpoints: Vec<crate::schedule::SetpointSection>,

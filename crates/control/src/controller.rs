@@ -610,6 +610,13 @@ impl Controller {
         &self.spec
     }
 
+    /// The model's terms at the state of the last cycle: M(q), C(q, q̇) (with
+    /// Ṁ = C + Cᵀ) and g(q) in `m`, `c`, `g` (what the momentum observer of
+    /// [`crate::contact`] reads). Valid after a successful [`Controller::step`].
+    pub fn model_terms(&self) -> &Data {
+        &self.data
+    }
+
     /// Result of the last cycle.
     pub fn output(&self) -> &StepOutput {
         &self.out

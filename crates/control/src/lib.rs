@@ -68,6 +68,7 @@
 //! `hcc_model::Data` included); [`Controller::step`] allocates nothing. M⁻¹ is never
 //! formed: it is applied by Cholesky solves.
 
+pub mod contact;
 pub mod controller;
 mod fade;
 pub mod rate;
@@ -77,6 +78,7 @@ pub mod spec;
 pub mod task;
 pub mod transition;
 
+pub use contact::{ContactChange, ContactDetector, MomentumObserver, ObserverInput, observe};
 pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
 pub use fade::FADE_RANGE;
 pub use rate::GainRate;

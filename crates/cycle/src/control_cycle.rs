@@ -49,9 +49,11 @@ use hcc_control::Controller;
 use hcc_msgs::ipc::SETPOINT_BUFFER;
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, Setpoint,
-    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings, TorqueCommand, monotonic_now_ns,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings, TorqueCommand,
+    monotonic_now_ns,
 };
 
+use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
 use crate::setpoints::SetpointHandler;
 use crate::settings::{CycleError, CycleSettings};
@@ -82,6 +84,9 @@ pub struct ControlCycle {
     stream: StreamCheck,
     setpoints: SetpointHandler,
     filter: TorqueFilter,
+    /// The external-torque observer and the contact detection (module
+    /// `contact`).
+    contact: ContactWatch,
     command: TorqueCommand,
     telemetry: Box<Telemetry>,
     counters: CycleCounters,
@@ -132,6 +137,7 @@ impl ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
             setpoints,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
+            contact: ContactWatch::new(&settings.contact),
             controller,
             n,
             limits,
@@ -177,6 +183,18 @@ impl ControlCycle {
     /// the law did not run).
     pub fn step_ns(&self) -> Option<u64> {
         self.step_ns
+    }
+
+    /// r, the estimate of the external joint torque τ_ext at the last used
+    /// state (N·m, length n; the generalized-momentum observer, module
+    /// `contact`).
+    pub fn external_torque(&self) -> &[f64] {
+        self.contact.residual()
+    }
+
+    /// Whether the contact detection flags a contact.
+    pub fn in_contact(&self) -> bool {
+        self.contact.in_contact()
     }
 
     /// Whether the peer is lost (a stale timeout since the last state).
@@ -274,6 +292,10 @@ impl ControlCycle {
             Some(Ok(())) => (self.law(state, &mut tau), false),
             Some(Err(gravity_conflict)) => (None, gravity_conflict),
         };
+        if law_mode.is_none() {
+            // A fault: the observer starts again (module `contact`).
+            self.contact.reset();
+        }
         // Whether tau contains g(q_v) = gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
             Some(_) => self.gravity_compensation,
@@ -349,6 +371,9 @@ impl ControlCycle {
         t.header.seq = self.telemetry_seq;
         t.header.stamp_ns = now_ns;
         t.flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST;
+        if self.contact.in_contact() {
+            t.flags |= TELEMETRY_FLAG_CONTACT;
+        }
         t.counters = self.counters.telemetry;
         new_loss
     }
@@ -370,6 +395,7 @@ impl ControlCycle {
                 if new_peer {
                     c.core.peer_restarts += 1;
                     self.controller.reset();
+                    self.contact.reset();
                 }
                 Some(Ok(()))
             }
@@ -429,7 +455,18 @@ impl ControlCycle {
         tau[..n].copy_from_slice(out.tau.as_slice());
         self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
         self.have_valid = true;
-        if out.any_singular {
+        let singular = out.any_singular;
+        // The observer reads the model terms the law computed at this state
+        // and the previous command, still in its buffer (module `contact`).
+        self.contact.update(
+            state,
+            self.controller.model_terms(),
+            &self.command,
+            self.gravity_compensation,
+            self.period_s,
+            &mut self.counters.core,
+        );
+        if singular {
             self.counters.telemetry.singular_cycles += 1;
             Some(CommandMode::Singular)
         } else {
@@ -485,7 +522,11 @@ impl ControlCycle {
         t.command_seq = self.command_seq;
         t.mode = mode.code();
         t.flags = self.command.flags;
+        if self.contact.in_contact() {
+            t.flags |= TELEMETRY_FLAG_CONTACT;
+        }
         t.tau[..n].copy_from_slice(&self.command.tau[..n]);
+        t.tau_ext[..n].copy_from_slice(self.contact.residual());
         t.counters = self.counters.telemetry;
         self.setpoints.fill(t);
         if fresh {

@@ -15,6 +15,10 @@ hcc_msgs::define_counters! {
         /// Peer restarts detected (a new stream after an outage, or rejected
         /// states that follow each other).
         peer_restarts: "new peer detected; sequence checker reset",
+        /// Contacts detected (the contact flag rose; hcc-control's `contact`).
+        contact_events: "contacts detected",
+        /// Cycles with the contact flag set.
+        contact_cycles: "cycles in contact",
     }
 }
 

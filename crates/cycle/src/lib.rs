@@ -26,6 +26,9 @@
 //!   and low-pass on the saturated torque, against the previous command.
 //! * [`schedule`]: a scenario's `[[setpoint]]` entries, delivered to a cycle
 //!   as a client would send them.
+//! * `contact`: the generalized-momentum observer of the external joint
+//!   torque and the contact detection on every used state
+//!   ([`ControlCycle::external_torque`], [`ControlCycle::in_contact`]).
 //! * [`counters`]: every counter of the cycle, defined once.
 //! * [`settings`]: [`CycleSettings`] from a scenario, and [`CycleError`].
 //!
@@ -33,6 +36,7 @@
 //! allocates nothing, takes no lock, does no logging or formatting (the
 //! controller daemon's tests count its allocations). Events go to counters.
 
+mod contact;
 pub mod control_cycle;
 pub mod counters;
 pub mod schedule;

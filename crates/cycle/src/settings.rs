@@ -1,6 +1,7 @@
 //! What a [`crate::ControlCycle`] is built with, and what can refuse it.
 
 use hcc_config::Scenario;
+use hcc_config::contact::Contact;
 use hcc_config::setpoint_limits::SetpointLimits;
 use hcc_config::torque_filter::TorqueFilterSpec;
 use hcc_msgs::{MAX_JOINTS, MAX_LEVELS};
@@ -21,12 +22,14 @@ pub struct CycleSettings {
     pub setpoint_limits: SetpointLimits,
     /// The rate limit and low-pass after the law (`[torque_filter]`).
     pub torque_filter: TorqueFilterSpec,
+    /// The external-torque observer and contact detection (`[contact]`).
+    pub contact: Contact,
 }
 
 impl CycleSettings {
     /// The settings of `scenario`: its control rate, `[controller_daemon]
-    /// torque_limits`, `[robot] gravity_compensation`, `[setpoint_limits]`
-    /// and `[torque_filter]`.
+    /// torque_limits`, `[robot] gravity_compensation`, `[setpoint_limits]`,
+    /// `[torque_filter]` and `[contact]`.
     pub fn from_scenario(scenario: &Scenario) -> CycleSettings {
         CycleSettings {
             period_ns: scenario.simulation.period_ns(),
@@ -39,6 +42,7 @@ impl CycleSettings {
             gravity_compensation: scenario.spec.gravity_compensation,
             setpoint_limits: scenario.setpoint_limits.clone(),
             torque_filter: scenario.torque_filter.clone(),
+            contact: scenario.contact.clone(),
         }
     }
 
@@ -71,6 +75,14 @@ impl CycleSettings {
             return Err(CycleError::Shape(format!(
                 "controller_daemon.torque_limits[{k}] = {} must be positive",
                 limits[k]
+            )));
+        }
+        let c = &self.contact;
+        if c.observer_gain.len() != n || c.threshold.len() != n {
+            return Err(CycleError::Shape(format!(
+                "contact: {} observer gains and {} thresholds for {n} joints",
+                c.observer_gain.len(),
+                c.threshold.len()
             )));
         }
         if self.period_ns == 0 {

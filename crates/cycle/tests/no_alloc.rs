@@ -1,7 +1,9 @@
 //! The control cycle allocates nothing — not even from the real-time pool —
 //! through valid states, NaN states, duplicates, steps backwards, stale
 //! timeouts and a setpoint every cycle (accepted, queued and rejected ones),
-//! with the torque filter on. Counted by `RtAllocator`, this test binary's
+//! with the torque filter on, and the contact observer estimating and
+//! flagging contacts (low thresholds: the states' q̇ = 0 while q moves is an
+//! "external torque" to it, and every rejected state resets it). Counted by `RtAllocator`, this test binary's
 //! global allocator.
 
 use std::path::PathBuf;
@@ -31,6 +33,7 @@ fn the_cycle_allocates_nothing() {
     let mut settings = CycleSettings::from_scenario(&scenario);
     settings.torque_filter.torque_rate_limit = Some(10.0);
     settings.torque_filter.low_pass_hz = Some(100.0);
+    settings.contact.threshold.fill(0.05);
     let mut cycle = ControlCycle::new(controller, &settings).unwrap();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let mut states = Vec::new();
@@ -112,6 +115,14 @@ fn the_cycle_allocates_nothing() {
     assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
     let c = cycle.counters().telemetry;
     assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");
+    // The observer ran and the detector flagged contacts and released them.
+    let core = cycle.counters().core;
+    assert!(core.contact_events > 1, "{core:?}");
+    assert!(
+        core.contact_cycles > 0 && core.contact_cycles < c.cycles,
+        "{core:?}"
+    );
+    assert!(cycle.external_torque().iter().any(|r| *r != 0.0));
     // Setpoints accepted and rejected, every cycle.
     assert!(
         setpoint_answers[0] > 0 && setpoint_answers[1] > 0,

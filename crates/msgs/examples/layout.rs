@@ -18,7 +18,8 @@ use hcc_msgs::{
     Rejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
     SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
     STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
-    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
+    TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -86,7 +87,7 @@ fn main() {
             fields!(Telemetry: header, state_seq, command_seq, mode, n_levels, task_dims,
                 singular_levels, flags, tau, tau_level, tau_mu, tau_gravity, task_error,
                 storage, min_singular_value, p_mu, counters, timings, goal, stiffness_diag,
-                damping_diag, transition_progress, setpoint_answers),
+                damping_diag, transition_progress, setpoint_answers, tau_ext),
         ),
         (
             "Setpoint",
@@ -141,6 +142,7 @@ fn main() {
         ("state_flags_known", STATE_FLAGS_KNOWN),
         ("command_gravity_included", COMMAND_FLAG_GRAVITY_INCLUDED),
         ("telemetry_peer_lost", TELEMETRY_FLAG_PEER_LOST),
+        ("telemetry_contact", TELEMETRY_FLAG_CONTACT),
         ("setpoint_goal", SETPOINT_GOAL),
         ("setpoint_velocity", SETPOINT_VELOCITY),
         ("setpoint_stiffness", SETPOINT_STIFFNESS),

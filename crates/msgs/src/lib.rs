@@ -117,7 +117,7 @@
 //! layout bumps both. The version sits in every header
 //! (`header.schema_version`, checked by [`check_schema`]) and, as
 //! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
-//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client3`), so
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client4`), so
 //! iceoryx2 itself refuses to connect peers of different versions of one
 //! part when a service is opened (`IncompatibleTypes`; size and alignment
 //! are compared too). Both parts started at 3, the single schema they were
@@ -175,8 +175,8 @@ pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
     JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
     STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY,
-    TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters, TelemetryTimings,
-    TorqueCommand,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters,
+    TelemetryTimings, TorqueCommand,
 };
 
 /// Version of the driver-facing part of the contract: [`JointState`],
@@ -196,8 +196,10 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// schema 2: [`Telemetry`] answers setpoints (active goals and gains,
 /// transition progress, per-client answers); schema 3:
 /// [`Setpoint::apply_at_state_seq`], [`SetpointAnswer::rejected`] and
-/// [`SetpointAnswer::late`].
-pub const CLIENT_SCHEMA_VERSION: u32 = 3;
+/// [`SetpointAnswer::late`]; client schema 4: [`Telemetry::tau_ext`] (the
+/// estimate of the external joint torque, appended after every older field,
+/// whose offsets are unchanged) and [`TELEMETRY_FLAG_CONTACT`].
+pub const CLIENT_SCHEMA_VERSION: u32 = 4;
 
 /// The two parts of the contract, each with its own version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

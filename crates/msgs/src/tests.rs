@@ -40,8 +40,14 @@ fn layout_has_no_hidden_padding() {
         + size_of::<TelemetryTimings>()
         + 3 * 8 * MAX_TASK_DIM * MAX_LEVELS
         + 8 * MAX_LEVELS
-        + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS;
+        + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS
+        + 8 * MAX_JOINTS;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
+    // Client schema 4 appended tau_ext: every older field kept its offset.
+    assert_eq!(
+        offset_of!(Telemetry, tau_ext),
+        telemetry_fields - 8 * MAX_JOINTS
+    );
     assert_eq!(size_of::<TelemetryCounters>(), 11 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
     assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 2 * 4);

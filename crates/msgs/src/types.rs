@@ -51,11 +51,16 @@ pub const COMMAND_FLAGS_KNOWN: u32 = COMMAND_FLAG_GRAVITY_INCLUDED;
 /// diagnostics are those of the last answer, the counters are current). Set
 /// in every sample until states come back. Never set in a command.
 pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
+/// [`Telemetry::flags`] bit: the controller's contact detection flags a
+/// contact — some |[`Telemetry::tau_ext`]_j| rose above its threshold and
+/// not every one has fallen below its release level since (hcc-control's
+/// `contact` module). Never set in a command.
+pub const TELEMETRY_FLAG_CONTACT: u32 = 1 << 17;
 
 /// Header shared by all messages. It belongs to both parts of the contract:
 /// a change of its layout bumps both versions (its type name carries both).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@driver3@client3")]
+#[type_name("hcc_msgs::Header@driver3@client4")]
 #[repr(C)]
 pub struct Header {
     /// The writer's version of the message's part of the contract
@@ -602,7 +607,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@client3")]
+    #[type_name("hcc_msgs::TelemetryCounters@client4")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -632,7 +637,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@client3")]
+#[type_name("hcc_msgs::TelemetryTimings@client4")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -652,7 +657,7 @@ pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
 /// The controller's answer to the last setpoint of one client.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@client3")]
+#[type_name("hcc_msgs::SetpointAnswer@client4")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -681,7 +686,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@client3")]
+#[type_name("hcc_msgs::Telemetry@client4")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -732,6 +737,11 @@ pub struct Telemetry {
     pub transition_progress: [f64; MAX_LEVELS],
     /// The answer to the last setpoint of each recent client.
     pub setpoint_answers: [SetpointAnswer; MAX_SETPOINT_CLIENTS],
+    /// r, the estimate of the external joint torque τ_ext (N·m) by the
+    /// generalized-momentum observer (ṙ = K_O (τ_ext − r); De Luca & Mattone,
+    /// ICRA 2005), at this state. Client schema 4; appended last, so every
+    /// older field keeps its offset.
+    pub tau_ext: [f64; MAX_JOINTS],
 }
 
 impl Telemetry {
@@ -775,6 +785,7 @@ impl Telemetry {
                 rejected: 0,
                 late: 0,
             }; MAX_SETPOINT_CLIENTS],
+            tau_ext: [0.0; MAX_JOINTS],
         }
     }
 
@@ -823,7 +834,12 @@ impl Telemetry {
         for (dst, &m) in self.task_dims.iter_mut().zip(task_dims) {
             *dst = m as u32;
         }
-        for v in [&mut self.tau, &mut self.tau_mu, &mut self.tau_gravity] {
+        for v in [
+            &mut self.tau,
+            &mut self.tau_mu,
+            &mut self.tau_gravity,
+            &mut self.tau_ext,
+        ] {
             v[n..].fill(0.0);
         }
         for (i, v) in self.tau_level.iter_mut().enumerate() {
@@ -889,6 +905,16 @@ impl Telemetry {
         self.setpoint_answers
             .iter()
             .find(|a| a.answered > 0 && a.client_id == client_id)
+    }
+
+    /// r, the estimate of the external joint torque, length n.
+    pub fn tau_ext(&self) -> &[f64] {
+        &self.tau_ext[..self.n()]
+    }
+
+    /// Whether this sample flags a contact ([`TELEMETRY_FLAG_CONTACT`]).
+    pub fn contact(&self) -> bool {
+        self.flags & TELEMETRY_FLAG_CONTACT != 0
     }
 
     /// Whether this sample reports a lost driver ([`TELEMETRY_FLAG_PEER_LOST`]).

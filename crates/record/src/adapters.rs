@@ -30,6 +30,12 @@ impl CycleOutput for Telemetry {
     fn p_mu(&self) -> f64 {
         self.p_mu
     }
+    fn external_torque(&self) -> Option<&[f64]> {
+        Some(Telemetry::tau_ext(self))
+    }
+    fn contact(&self) -> Option<bool> {
+        Some(Telemetry::contact(self))
+    }
 }
 
 /// The terms of the law after its step at the recorded state.

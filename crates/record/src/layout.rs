@@ -113,5 +113,7 @@ pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     }
     c.push(columns::E_KIN.to_string());
     c.push(columns::E_POT.to_string());
+    c.extend((1..=n).map(columns::external_torque));
+    c.push(columns::CONTACT.to_string());
     c
 }

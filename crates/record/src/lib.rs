@@ -22,7 +22,9 @@
 //!   `accv<i>_mu` = ‖Λ_i⁻¹ Σ_{j≠i} μ_ij v_j‖ is the coupling that τ_μ cancels,
 //! - `S<i>_kin` = S_i − V_i (the kinetic part ½ v_iᵀ Λ_i v_i) and `S<i>_pot` =
 //!   V_i(x̃_i) (the potential of eq. 28),
-//! - `E_kin`, `E_pot`: the mechanical energy of the plant ([`EnergyModel`]).
+//! - `E_kin`, `E_pot`: the mechanical energy of the plant ([`EnergyModel`]),
+//! - `tau_ext_<k>`, `contact`: the estimate of the external joint torque and
+//!   the contact flag, from the telemetry (NaN where the output has none).
 //!
 //! The recorder is streaming: [`Recorder::record`] takes one cycle and pushes
 //! one row into a [`RowSink`]; the in-memory [`hcc_report::Trajectory`] is one

@@ -23,6 +23,16 @@ pub trait CycleOutput {
     fn level_energy(&self, i: usize) -> f64;
     /// Power of τ_μ, P_μ = τ_μᵀ q̇.
     fn p_mu(&self) -> f64;
+    /// The estimate r of the external joint torque (`None`: not known, the
+    /// `tau_ext_<k>` columns are NaN).
+    fn external_torque(&self) -> Option<&[f64]> {
+        None
+    }
+    /// Whether a contact is flagged (`None`: not known, the `contact` column
+    /// is NaN).
+    fn contact(&self) -> Option<bool> {
+        None
+    }
 }
 
 /// Terms of the control law at the recorded state that the derived columns
@@ -208,6 +218,7 @@ impl Recorder {
         let (kinetic, potential) = self.energy.energy_at(t, &self.q, &self.qd)?;
         self.row.push(kinetic);
         self.row.push(potential);
+        self.push_contact_columns(cycle.output);
         sink.push_row(&self.row)
     }
 
@@ -272,6 +283,16 @@ impl Recorder {
             row.extend_from_slice(out.level_torque(i));
         }
         row.extend_from_slice(out.tau_mu());
+    }
+
+    /// `tau_ext_<k>` and `contact` (NaN where the output does not know them).
+    fn push_contact_columns(&mut self, out: &dyn CycleOutput) {
+        match out.external_torque() {
+            Some(r) if r.len() == self.n => self.row.extend_from_slice(r),
+            _ => self.row.extend(std::iter::repeat_n(f64::NAN, self.n)),
+        }
+        self.row
+            .push(out.contact().map_or(f64::NAN, |c| f64::from(u8::from(c))));
     }
 
     /// M⁻¹ τ_j for every level j, then M⁻¹ τ_μ (by Cholesky solves).

@@ -52,6 +52,12 @@ impl CycleOutput for Output {
     fn p_mu(&self) -> f64 {
         0.125
     }
+    fn external_torque(&self) -> Option<&[f64]> {
+        Some(&[0.5, -1.0, 2.0, 0.0])
+    }
+    fn contact(&self) -> Option<bool> {
+        Some(true)
+    }
 }
 
 /// Joint-space terms: J_1 selects joint 1, J_2 = I; J̄ = J stacked (not a
@@ -155,6 +161,8 @@ fn one_row_per_cycle_in_the_layout_of_column_names() {
     assert_eq!(get("S2_kin"), 3.0);
     assert_eq!(get("E_kin"), 7.0);
     assert_eq!(get("E_pot"), 0.4);
+    assert_eq!(get("tau_ext_3"), 2.0);
+    assert_eq!(get("contact"), 1.0);
 }
 
 #[test]

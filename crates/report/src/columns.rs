@@ -15,7 +15,10 @@
 //! - `accv<i>_<j>`, `accv<i>_mu`: the same in the local null-space velocities of
 //!   the paper, ‖J̄_i M⁻¹ τ_j‖ (zero for j ≠ i by the block-diagonal Λ, eq. 16),
 //! - `S<i>_kin`, `S<i>_pot`: kinetic ½v_iᵀΛ_i v_i and potential V_i parts of S_i,
-//! - `E_kin`, `E_pot`: mechanical energy of the plant.
+//! - `E_kin`, `E_pot`: mechanical energy of the plant,
+//! - `tau_ext_<k>`: the controller's estimate r of the external joint torque
+//!   at joint k (generalized-momentum observer, hcc-control's `contact`),
+//! - `contact`: 1 while the contact detection flags a contact, else 0.
 
 /// Time column.
 pub const TIME: &str = "t";
@@ -25,6 +28,9 @@ pub const P_MU: &str = "P_mu";
 pub const E_KIN: &str = "E_kin";
 /// Potential (gravity) energy of the plant.
 pub const E_POT: &str = "E_pot";
+
+/// The contact flag (1 in contact, 0 not).
+pub const CONTACT: &str = "contact";
 
 /// Joint position `q<k>` (1-based).
 pub fn position(k: usize) -> String {
@@ -57,6 +63,10 @@ pub fn energy_potential(i: usize) -> String {
 /// Torque of level `i` at joint `k`: `tau_L<i>_<k>`.
 pub fn level_torque(i: usize, k: usize) -> String {
     format!("tau_L{i}_{k}")
+}
+/// The estimate of the external torque at joint `k`: `tau_ext_<k>`.
+pub fn external_torque(k: usize) -> String {
+    format!("tau_ext_{k}")
 }
 /// τ_μ at joint `k`: `tau_mu_<k>`.
 pub fn mu_torque(k: usize) -> String {

@@ -230,6 +230,10 @@ pub struct TelemetryMsg {
     /// g(q) (zero when the driver adds gravity).
     #[serde(deserialize_with = "nums")]
     pub tau_gravity: Vec<f64>,
+    /// r, the estimate of the external joint torque (client schema 4;
+    /// empty in recordings made before it).
+    #[serde(default, deserialize_with = "nums")]
+    pub tau_ext: Vec<f64>,
     /// P_μ = τ_μᵀ q̇.
     #[serde(rename = "P_mu", deserialize_with = "num")]
     pub p_mu: f64,
@@ -303,6 +307,7 @@ impl From<&Telemetry> for TelemetryMsg {
             tau: t.tau().to_vec(),
             tau_mu: t.tau_mu[..n].to_vec(),
             tau_gravity: t.tau_gravity[..n].to_vec(),
+            tau_ext: t.tau_ext().to_vec(),
             p_mu: t.p_mu,
             levels,
             counters: t
@@ -356,6 +361,9 @@ impl TelemetryMsg {
         fill(&mut t.tau, &self.tau, "tau")?;
         fill(&mut t.tau_mu, &self.tau_mu, "tau_mu")?;
         fill(&mut t.tau_gravity, &self.tau_gravity, "tau_gravity")?;
+        if !self.tau_ext.is_empty() {
+            fill(&mut t.tau_ext, &self.tau_ext, "tau_ext")?;
+        }
         t.p_mu = self.p_mu;
         if self.levels.len() > MAX_LEVELS {
             return Err(format!("{} levels", self.levels.len()));

@@ -131,11 +131,12 @@ fn telemetry() -> Value {
             "command_seq": integer("seq of the command of this cycle"),
             "mode": text("mode of the command sent"),
             "mode_code": integer("command mode code"),
-            "flags": integer("COMMAND_FLAG_* bits; 65536: peer lost"),
+            "flags": integer("COMMAND_FLAG_* bits; 65536: peer lost; 131072: contact"),
             "singular_levels": integer("bit i: level i+1 singular"),
             "tau": numbers("total torque τ = Σ τ_i + τ_μ + g, eq. (19), N·m"),
             "tau_mu": numbers("coupling compensation τ_μ, eq. (22), N·m"),
             "tau_gravity": numbers("gravity torque g(q), N·m"),
+            "tau_ext": numbers("estimate r of the external joint torque (momentum observer), N·m"),
             "P_mu": number("power of τ_μ, P_μ = τ_μᵀ q̇ (≈ 0), W"),
             "levels": {"type": "array", "items": level, "description": "per hierarchy level"},
             "counters": {
