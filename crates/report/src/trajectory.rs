@@ -157,6 +157,18 @@ impl Trajectory {
         })
     }
 
+    /// Same columns and every value the same bit pattern (NaN = NaN: a column a
+    /// run cannot know is NaN in every run). `==` follows f64, where NaN ≠ NaN.
+    pub fn bit_identical(&self, other: &Trajectory) -> bool {
+        self.columns == other.columns
+            && self.data.len() == other.data.len()
+            && self
+                .data
+                .iter()
+                .zip(&other.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+
     /// Column names in order.
     pub fn columns(&self) -> &[String] {
         &self.columns
