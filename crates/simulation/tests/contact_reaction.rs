@@ -319,14 +319,8 @@ fn hold_takes_gravity_and_damping_until_a_setpoint_releases_it() {
 fn torques(scenario: &Scenario) -> Vec<Vec<u64>> {
     let mut out = Vec::new();
     hcc_simulation::run_observed(scenario, &mut |v| {
-        out.push(
-            v.cycle
-                .command()
-                .tau()
-                .iter()
-                .map(|t| t.to_bits())
-                .collect(),
-        );
+        let tau = v.cycle.command().tau();
+        out.push(tau.iter().map(|t| t.to_bits()).collect());
         Ok(())
     })
     .unwrap();
