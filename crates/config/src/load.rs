@@ -93,7 +93,8 @@ impl Scenario {
             setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
         let franka = franka::resolve(cx.file, cx.text, &file.franka)?;
-        let contact = contact::resolve(&cx, &model, &file.contact, simulation.control_rate_hz)?;
+        let contact =
+            contact::resolve(&cx, &model, &q0, &file.contact, simulation.control_rate_hz)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()

@@ -2,7 +2,10 @@
 //! with an error that names the field.
 
 use hcc_config::Scenario;
-use hcc_config::contact::{DEFAULT_OBSERVER_GAIN, DEFAULT_RELEASE, DEFAULT_THRESHOLD};
+use hcc_config::contact::{
+    DEFAULT_HOLD_DAMPING, DEFAULT_OBSERVER_GAIN, DEFAULT_RAMP_S, DEFAULT_RELEASE,
+    DEFAULT_SOFTEN_FRACTION, DEFAULT_THRESHOLD, Reaction,
+};
 use std::path::PathBuf;
 
 fn load(extra: &str) -> Result<Scenario, hcc_config::ConfigError> {
@@ -19,6 +22,25 @@ fn defaults_without_the_table() {
     assert!(c.observer_gain.iter().all(|&k| k == DEFAULT_OBSERVER_GAIN));
     assert!(c.threshold.iter().all(|&t| t == DEFAULT_THRESHOLD));
     assert_eq!(c.release, DEFAULT_RELEASE);
+    assert_eq!(c.reaction, Reaction::Report);
+    assert_eq!(c.soften_fraction, DEFAULT_SOFTEN_FRACTION);
+    assert_eq!(c.ramp_s, DEFAULT_RAMP_S);
+    assert!(c.hold_damping.iter().all(|&d| d == DEFAULT_HOLD_DAMPING));
+}
+
+#[test]
+fn reactions_are_taken() {
+    let s =
+        load("\n[contact]\nreaction = \"soften\"\nsoften_fraction = 0.3\nramp_s = 0.25\n").unwrap();
+    assert_eq!(s.contact.reaction, Reaction::Soften);
+    assert_eq!(s.contact.soften_fraction, 0.3);
+    assert_eq!(s.contact.ramp_s, 0.25);
+    let s =
+        load("\n[contact]\nreaction = \"hold\"\nhold_damping = [1.0, 2.0, 3.0, 4.0]\n").unwrap();
+    assert_eq!(s.contact.reaction, Reaction::Hold);
+    assert_eq!(s.contact.hold_damping.as_slice(), &[1.0, 2.0, 3.0, 4.0]);
+    let s = load("\n[contact]\nreaction = \"report\"\n").unwrap();
+    assert_eq!(s.contact.reaction, Reaction::Report);
 }
 
 #[test]
@@ -60,7 +82,31 @@ fn malformed_values_name_the_field() {
         ("release = 0.0", "contact.release", "(0, 1]"),
         ("release = 1.5", "contact.release", "(0, 1]"),
         ("release = nan", "contact.release", "(0, 1]"),
-        ("reaction = \"hold\"", "contact", "unknown field"),
+        ("reaction = \"stop\"", "contact", "unknown variant"),
+        ("reaction = 1", "contact", ""),
+        ("soften_fraction = 0.0", "contact.soften_fraction", "(0, 1]"),
+        ("soften_fraction = 1.5", "contact.soften_fraction", "(0, 1]"),
+        ("soften_fraction = nan", "contact.soften_fraction", "(0, 1]"),
+        ("ramp_s = 0.0", "contact.ramp_s", "positive"),
+        ("ramp_s = -1.0", "contact.ramp_s", "positive"),
+        ("ramp_s = inf", "contact.ramp_s", "positive"),
+        ("hold_damping = 0.0", "contact.hold_damping", "positive"),
+        (
+            "hold_damping = [1.0, nan, 1.0, 1.0]",
+            "contact.hold_damping[1]",
+            "finite",
+        ),
+        (
+            "hold_damping = [1.0, 1.0]",
+            "contact.hold_damping",
+            "expected 4",
+        ),
+        (
+            "reaction = \"hold\"\nhold_damping = 1e6",
+            "contact.hold_damping",
+            "control rate carries",
+        ),
+        ("soften = true", "contact", "unknown field"),
     ] {
         let e = load(&format!("\n[contact]\n{text}\n"))
             .err()

@@ -396,6 +396,8 @@ pub struct Controller {
     have_applied: bool,
     /// The acceleration `applied_tau` gives on the model (for the barrier).
     applied_qdd: DVector<f64>,
+    /// κ, the factor on every level's spring ([`Controller::set_stiffness_scale`]).
+    stiffness_scale: f64,
     out: StepOutput,
 }
 
@@ -469,6 +471,7 @@ impl Controller {
             applied_tau: DVector::zeros(n),
             have_applied: false,
             applied_qdd: DVector::zeros(n),
+            stiffness_scale: 1.0,
             out,
         };
         c.check_initial(q0)?;
@@ -669,6 +672,25 @@ impl Controller {
         let k = k.unwrap_or(&l.stiffness);
         let d = d.unwrap_or(&l.damping);
         crate::rate::check_level(&mut l.rate, i, k, d, period)
+    }
+
+    /// Scales every level's spring by κ in (0, 1]: V_i becomes κ V_i and its
+    /// gradient κ ∂V_i/∂x_i (after the spring saturation), as if every K_i
+    /// were κ K_i; the damping D_i is unchanged. With κ = 1 the law is the
+    /// paper's, bit for bit. A contact reaction's softening (hcc-cycle) ramps κ
+    /// smoothly; a time-varying κ adds the power κ̇ Σ V_i to the storage
+    /// Σ S_i (Sec. IV), which is ≤ 0 while κ falls and at most (1 − κ_min)
+    /// Σ V_i over a whole rise. A value outside (0, 1] or not finite is
+    /// ignored (κ kept). Allocation-free.
+    pub fn set_stiffness_scale(&mut self, kappa: f64) {
+        if kappa > 0.0 && kappa <= 1.0 {
+            self.stiffness_scale = kappa;
+        }
+    }
+
+    /// κ ([`Controller::set_stiffness_scale`]).
+    pub fn stiffness_scale(&self) -> f64 {
+        self.stiffness_scale
     }
 
     /// Sets the virtual equilibrium x_{i,d} of level `i` without allocating.
@@ -1289,6 +1311,12 @@ impl Controller {
         l.potential = v_sat;
         if scale < 1.0 {
             self.out.safety.spring_saturated = true;
+        }
+        // A contact reaction's softening: κ V_i, a potential still.
+        let kappa = self.stiffness_scale;
+        if kappa != 1.0 {
+            l.potential *= kappa;
+            l.grad *= kappa;
         }
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
         if l.goal_moving {

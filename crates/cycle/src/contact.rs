@@ -31,6 +31,8 @@ pub(crate) struct ContactWatch {
     detector: ContactDetector,
     /// Sequence number of the state of the last update (primed or estimated).
     last_seq: Option<u64>,
+    /// Whether a contact began at the last update.
+    began: bool,
 }
 
 impl ContactWatch {
@@ -40,7 +42,13 @@ impl ContactWatch {
             observer: MomentumObserver::new(contact.observer_gain.as_slice()),
             detector: ContactDetector::new(contact.threshold.as_slice(), contact.release),
             last_seq: None,
+            began: false,
         }
+    }
+
+    /// Whether a contact began at the last update.
+    pub(crate) fn began(&self) -> bool {
+        self.began
     }
 
     /// r, the estimate of τ_ext.
@@ -58,6 +66,7 @@ impl ContactWatch {
         self.observer.reset();
         self.detector.reset();
         self.last_seq = None;
+        self.began = false;
     }
 
     /// The update at `state`, whose model terms the law left in `terms`;
@@ -90,7 +99,8 @@ impl ContactWatch {
         };
         observe(&mut self.observer, terms, &input);
         self.last_seq = Some(seq);
-        if self.detector.update(self.observer.residual()) == ContactChange::Began {
+        self.began = self.detector.update(self.observer.residual()) == ContactChange::Began;
+        if self.began {
             counters.contact_events += 1;
         }
         if self.detector.in_contact() {

@@ -55,6 +55,7 @@ use hcc_msgs::{
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
+use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
 use crate::settings::{CycleError, CycleSettings};
 use crate::stream::{StreamCheck, Verdict};
@@ -87,6 +88,8 @@ pub struct ControlCycle {
     /// The external-torque observer and the contact detection (module
     /// `contact`).
     contact: ContactWatch,
+    /// What a contact does to the torque (module `reaction`).
+    reaction: ContactReaction,
     command: TorqueCommand,
     telemetry: Box<Telemetry>,
     counters: CycleCounters,
@@ -138,6 +141,7 @@ impl ControlCycle {
             setpoints,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
             contact: ContactWatch::new(&settings.contact),
+            reaction: ContactReaction::new(&settings.contact),
             controller,
             n,
             limits,
@@ -195,6 +199,18 @@ impl ControlCycle {
     /// Whether the contact detection flags a contact.
     pub fn in_contact(&self) -> bool {
         self.contact.in_contact()
+    }
+
+    /// How far the contact reaction acts, in [0, 1] (0: the law as
+    /// configured; module `reaction`), and the law's stiffness factor κ.
+    pub fn reaction_level(&self) -> (f64, f64) {
+        (self.reaction.level(), self.controller.stiffness_scale())
+    }
+
+    /// Whether a contact hold is latched (`[contact] reaction = "hold"`; an
+    /// accepted setpoint releases it).
+    pub fn holding(&self) -> bool {
+        self.reaction.held()
     }
 
     /// Whether the peer is lost (a stale timeout since the last state).
@@ -440,6 +456,14 @@ impl ControlCycle {
         let n = self.n;
         // Transitions move by one nominal period per used state (deterministic).
         self.setpoints.advance(self.period_s, &mut self.controller);
+        // The contact reaction, from the flag of the previous state (module `reaction`).
+        self.reaction.before_law(
+            self.contact.in_contact(),
+            self.contact.began(),
+            self.setpoints.accepted(),
+            self.period_s,
+            &mut self.controller,
+        );
         // With a rate limit the robot's torque lags the law's: the law's
         // velocity barrier is told what is applied (hcc_control::safety).
         let applied = self.filter.rate_limited_previous().map(|p| &p[..n]);
@@ -454,6 +478,8 @@ impl ControlCycle {
         };
         tau[..n].copy_from_slice(out.tau.as_slice());
         self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
+        let gravity = self.gravity_compensation.then_some(&self.gravity_last[..n]);
+        self.reaction.blend(&mut tau[..n], gravity, state.qd());
         self.have_valid = true;
         let singular = out.any_singular;
         // The observer reads the model terms the law computed at this state

@@ -39,6 +39,7 @@
 mod contact;
 pub mod control_cycle;
 pub mod counters;
+mod reaction;
 pub mod schedule;
 pub mod setpoints;
 pub mod settings;

@@ -3,12 +3,15 @@
 //! timeouts and a setpoint every cycle (accepted, queued and rejected ones),
 //! with the torque filter on, and the contact observer estimating and
 //! flagging contacts (low thresholds: the states' q̇ = 0 while q moves is an
-//! "external torque" to it, and every rejected state resets it). Counted by `RtAllocator`, this test binary's
-//! global allocator.
+//! "external torque" to it, and every rejected state resets it) — with each
+//! contact reaction (`report`, `soften`, `hold`: the reaction acts within the
+//! counted window). Counted by `RtAllocator`, this test binary's global
+//! allocator.
 
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
+use hcc_config::contact::Reaction;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{CommandMode, JointState, Setpoint};
@@ -26,6 +29,12 @@ fn scenario() -> Scenario {
 
 #[test]
 fn the_cycle_allocates_nothing() {
+    for reaction in [Reaction::Report, Reaction::Soften, Reaction::Hold] {
+        allocates_nothing_with(reaction);
+    }
+}
+
+fn allocates_nothing_with(reaction: Reaction) {
     let scenario = scenario();
     let n = scenario.model.nq();
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
@@ -34,6 +43,8 @@ fn the_cycle_allocates_nothing() {
     settings.torque_filter.torque_rate_limit = Some(10.0);
     settings.torque_filter.low_pass_hz = Some(100.0);
     settings.contact.threshold.fill(0.05);
+    settings.contact.reaction = reaction;
+    settings.contact.ramp_s = 0.005;
     let mut cycle = ControlCycle::new(controller, &settings).unwrap();
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let mut states = Vec::new();
@@ -100,8 +111,10 @@ fn the_cycle_allocates_nothing() {
     let before = thread_stats();
     let mut answers = [0u64; 2];
     let mut setpoint_answers = [0u64; 2];
+    let mut reacted = 0.0_f64;
     for k in WARM_UP..2 * WARM_UP {
         let (answer, code) = step(&mut cycle, k);
+        reacted = reacted.max(cycle.reaction_level().0);
         setpoint_answers[usize::from(code != 0)] += 1;
         match answer {
             Answer::Command(CommandMode::SafeHold) => answers[1] += 1,
@@ -111,7 +124,11 @@ fn the_cycle_allocates_nothing() {
     }
     let during = thread_stats().since(before);
     drop(rt);
-    println!("cycle, {WARM_UP} states (normal, safe hold): {answers:?}; {during:?}");
+    println!(
+        "cycle ({reaction:?}), {WARM_UP} states (normal, safe hold): {answers:?}; \
+         largest reaction level {reacted:.2}; {during:?}"
+    );
+    assert_eq!(reacted > 0.0, reaction != Reaction::Report, "{reacted}");
     assert!(answers[0] > 0 && answers[1] > 0, "{answers:?}");
     let c = cycle.counters().telemetry;
     assert!(c.rate_limited > 0 && c.low_passed > 0, "{c:?}");

@@ -73,6 +73,8 @@ pub struct SetpointHandler {
     count: u64,
     zeros: [f64; MAX_TASK_DIM],
     pending: Pending,
+    /// Setpoints accepted so far (a contact hold's release).
+    accepted: u64,
 }
 
 impl SetpointHandler {
@@ -136,6 +138,7 @@ impl SetpointHandler {
             count: 0,
             zeros: [0.0; MAX_TASK_DIM],
             pending: Pending::new(),
+            accepted: 0,
         })
     }
 
@@ -160,6 +163,7 @@ impl SetpointHandler {
             Err(_) => 0.0,
         };
         let code = answer_code(result);
+        self.accepted += u64::from(code == ANSWER_ACCEPTED);
         self.record(setpoint, code, duration, late);
         code
     }
@@ -210,6 +214,11 @@ impl SetpointHandler {
             taken += 1;
         }
         taken
+    }
+
+    /// Setpoints accepted so far.
+    pub fn accepted(&self) -> u64 {
+        self.accepted
     }
 
     /// Setpoints waiting for their state.
