@@ -48,7 +48,7 @@ use serde::Deserialize;
 
 use crate::context::Ctx;
 use crate::error::ConfigError;
-use crate::schema::PerJoint;
+use crate::values::PerJoint;
 
 /// Default K_O, 1/s (module docs).
 pub const DEFAULT_OBSERVER_GAIN: f64 = 100.0;

@@ -6,7 +6,7 @@ use std::path::Path;
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{ConfigError, invalid};
-use crate::schema::{GainValue, PerJoint};
+use crate::values::{GainValue, PerJoint};
 
 /// Loader context: the file, its text, and helpers that build located errors.
 #[derive(Clone, Copy)]

@@ -46,6 +46,7 @@ pub mod schedule;
 pub mod schema;
 pub mod setpoint_limits;
 pub mod torque_filter;
+pub mod values;
 
 mod context;
 mod daemons;

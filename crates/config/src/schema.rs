@@ -76,23 +76,7 @@ fn yes() -> bool {
     true
 }
 
-/// A task-space gain (stiffness or damping): a scalar (times identity), the
-/// diagonal, or the full symmetric matrix (rows).
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
-pub enum GainValue {
-    Scalar(f64),
-    Diagonal(Vec<f64>),
-    Matrix(Vec<Vec<f64>>),
-}
-
-/// A per-joint quantity: one value for every joint, or one per joint.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
-pub enum PerJoint {
-    Scalar(f64),
-    Vector(Vec<f64>),
-}
+pub use crate::values::{GainValue, PerJoint};
 
 /// Kind of task (the `task` key of a `[[level]]`, the `kind` key of a `[[level.task]]`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
