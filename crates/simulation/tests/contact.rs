@@ -5,6 +5,8 @@
 //! timing; free motion of the shipped scenarios flags no contact with the
 //! default thresholds (the largest |r| per joint printed); and the observer
 //! only observes: the torques are bit for bit the same whatever it flags.
+//! The wrench estimate F̂ = pinv(Jᵀ) r at the position level's frame against
+//! the push at the TCP, in the cycle and in the trajectory's `f_ext_<k>`.
 
 use std::path::PathBuf;
 
@@ -30,27 +32,44 @@ fn load(name: &str, extra: &str) -> Scenario {
     Scenario::from_toml_str(&text, &path).unwrap()
 }
 
-/// One cycle as the test sees it: t, q, r, the contact flag.
+/// One cycle as the test sees it: t, q, r, the contact flag, F̂.
 struct Sample {
     t: f64,
     q: Vec<f64>,
     r: Vec<f64>,
     contact: bool,
+    f: Vec<f64>,
 }
 
 fn run(scenario: &Scenario) -> Vec<Sample> {
     let mut out = Vec::new();
     hcc_simulation::run_observed(scenario, &mut |v| {
-        out.push(Sample {
-            t: v.t,
-            q: v.state.q().to_vec(),
-            r: v.cycle.telemetry().tau_ext().to_vec(),
-            contact: v.cycle.telemetry().contact(),
-        });
+        out.push(sample(v));
         Ok(())
     })
     .unwrap();
     out
+}
+
+fn sample(v: &hcc_simulation::CycleView<'_>) -> Sample {
+    Sample {
+        t: v.t,
+        q: v.state.q().to_vec(),
+        r: v.cycle.telemetry().tau_ext().to_vec(),
+        contact: v.cycle.telemetry().contact(),
+        f: v.cycle.external_wrench().to_vec(),
+    }
+}
+
+/// [`run`], with the trajectory `hcc simulate` writes.
+fn simulate(scenario: &Scenario) -> (Vec<Sample>, hcc_report::Trajectory) {
+    let mut out = Vec::new();
+    let run = hcc_simulation::simulate_observed(scenario, &mut |v| {
+        out.push(sample(v));
+        Ok(())
+    })
+    .unwrap();
+    (out, run.trajectory)
 }
 
 /// Timing of the flag against a push over [start, end): the delay to the
@@ -112,7 +131,7 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
     );
     let mut scenario = load("panda-pose-posture.toml", &extra);
     scenario.set_duration(2.5).unwrap();
-    let samples = run(&scenario);
+    let (samples, trajectory) = simulate(&scenario);
     // The reference: Jᵀ F at each sampled state while the push acts.
     let model = &scenario.model;
     let mut data = hcc_model::Data::new(model);
@@ -136,6 +155,58 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
     let (err, peak) = relative_error(&samples, &reference, PUSH_START + 5.0 / k_o, end);
     let what = format!("15 N at the TCP (peak |Jᵀ F| {peak:.3} N·m)");
     check_push(&what, &samples, err, end);
+    check_wrench(
+        &samples,
+        &trajectory,
+        [0.0, 15.0, 0.0],
+        PUSH_START + 5.0 / k_o,
+        end,
+    );
+}
+
+/// F̂ at the TCP (the scenario's first level: its position, 3 rows) within
+/// 5 % of the force `applied` over [from, to), and the same figures in the
+/// trajectory's `f_ext_<k>` columns; prints the worst error, and the largest
+/// |F̂| in free motion before the push.
+fn check_wrench(
+    samples: &[Sample],
+    trajectory: &hcc_report::Trajectory,
+    applied: [f64; 3],
+    from: f64,
+    to: f64,
+) {
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let columns: Vec<Vec<f64>> = (1..=3)
+        .map(|k| trajectory.require(&format!("f_ext_{k}")).unwrap())
+        .collect();
+    assert!(
+        trajectory.column("f_ext_4").is_none(),
+        "one column per task row"
+    );
+    let (mut worst, mut free) = (0.0_f64, 0.0_f64);
+    for (row, s) in samples.iter().enumerate() {
+        assert_eq!(s.f.len(), 3);
+        for (k, f) in s.f.iter().enumerate() {
+            assert_eq!(
+                columns[k][row].to_bits(),
+                f.to_bits(),
+                "row {row}, f_ext_{}",
+                k + 1
+            );
+        }
+        if s.t >= from && s.t < to {
+            let e: Vec<f64> = s.f.iter().zip(applied).map(|(a, b)| a - b).collect();
+            worst = worst.max(norm(&e) / norm(&applied));
+        }
+        if s.t < PUSH_START {
+            free = free.max(norm(&s.f));
+        }
+    }
+    println!(
+        "F̂ at the TCP: worst |F̂ − F| / |F| after 5/K_O = {:.2} %; largest |F̂| before the push {free:.2e} N",
+        100.0 * worst
+    );
+    assert!(worst < 0.05, "F̂ off by {:.2} % of |F|", 100.0 * worst);
 }
 
 /// Prints the figures of a push over [PUSH_START, end) and checks them: r
@@ -189,6 +260,7 @@ fn run_with_joint_torque(scenario: &Scenario, joint: usize, torque: f64) -> Vec<
             q: q.iter().copied().collect(),
             r: cycle.external_torque().to_vec(),
             contact: cycle.in_contact(),
+            f: cycle.external_wrench().to_vec(),
         });
         Ok(())
     })
