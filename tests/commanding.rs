@@ -86,9 +86,22 @@ fn goals_gains_rejections_and_the_monitor() {
         assert_eq!(lines.len(), 3, "{}", out.stdout);
         for line in lines {
             let v: serde_json::Value = serde_json::from_str(line).unwrap();
-            for key in ["stamp_ns", "mode", "levels", "tau", "counters"] {
+            for key in [
+                "stamp_ns",
+                "mode",
+                "levels",
+                "tau",
+                "counters",
+                "contact",
+                "tau_ext",
+                "tau_ext_max",
+                "tau_ext_max_joint",
+            ] {
                 assert!(!v[key].is_null(), "{key} missing in {line}");
             }
+            // Settled, untouched: the contact watch sees nothing.
+            assert_eq!(v["contact"], false, "{line}");
+            assert!(v["tau_ext_max"].as_f64().unwrap() < 2.0, "{line}");
             let l = &v["levels"][0];
             for key in ["level", "name", "error", "error_norm", "goal", "storage"] {
                 assert!(!l[key].is_null(), "{key} missing in {line}");

@@ -32,7 +32,7 @@ use hcc_config::Scenario;
 use hcc_cycle::Answer;
 use hcc_msgs::{CommandMode, JointState, SeqEvent, SequenceChecker, Telemetry, TorqueCommand};
 use hcc_record::mcap_log::{self, Entry, META_RUN, META_SCENARIO, ReadSummary};
-use hcc_record::{Cycle, LawTerms, Recorder, RowSink};
+use hcc_record::{Cycle, LawTerms, Recorder, RowSink, WithWrench};
 use hcc_report::{RunDescription, RunWriter};
 use hcc_simulation::describe;
 use std::collections::BTreeMap;
@@ -131,12 +131,17 @@ impl<'a> RowBuilder<'a> {
         } else {
             self.rows_without_law += 1;
         }
+        // F̂ is the replayed cycle's (the telemetry does not carry it).
+        let output = WithWrench {
+            output: tel,
+            wrench: r.cycle.external_wrench(),
+        };
         let cycle = Cycle {
             // The drivers number their states k = 0, 1, … (t_k = k T).
             t: state.header.seq as f64 * self.period,
             q: state.q(),
             qd: state.qd(),
-            output: tel,
+            output: &output,
             law: law_ran.then_some(r.cycle.controller() as &dyn LawTerms),
         };
         self.recorder.record(&cycle, sink)?;

@@ -1,5 +1,7 @@
 //! `hcc monitor`: a running controller's telemetry, watched through
-//! hcc-client — a table refreshed in place, or JSON lines.
+//! hcc-client — a table refreshed in place, or JSON lines. Besides the
+//! levels and the counters it shows the contact watch: the contact flag and
+//! the largest |τ_ext,j| of the observer's estimate (docs/contact.md).
 
 use std::io::{IsTerminal, Write};
 use std::time::{Duration, Instant};
@@ -60,6 +62,21 @@ fn check_names(names: &[String], dims: &[usize], t: &Telemetry) -> anyhow::Resul
     Ok(())
 }
 
+/// The largest |τ_ext,j| of the sample and its joint j (1-based; 0 for a
+/// robot without joints).
+fn largest_external_torque(t: &Telemetry) -> (f64, usize) {
+    t.tau_ext()
+        .iter()
+        .enumerate()
+        .fold((0.0, 0), |(m, j), (k, r)| {
+            if r.abs() > m {
+                (r.abs(), k + 1)
+            } else {
+                (m, j)
+            }
+        })
+}
+
 /// One telemetry sample as the monitor's JSON object; `names` name the
 /// levels (missing ones: "level N").
 pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
@@ -93,6 +110,10 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "mode": mode_name(t.mode),
         "levels": levels,
         "tau": t.tau(),
+        "contact": t.contact(),
+        "tau_ext": t.tau_ext(),
+        "tau_ext_max": largest_external_torque(t).0,
+        "tau_ext_max_joint": largest_external_torque(t).1,
         "counters": counters,
         "compute_ns": t.timings.compute_ns,
         "wakeup_latency_ns": t.timings.wakeup_latency_ns,
@@ -133,6 +154,13 @@ fn table(t: &Telemetry, names: &[String]) -> String {
             t.goal(i)
         );
     }
+    let (r_max, joint) = largest_external_torque(t);
+    s += &format!(
+        "contact {}  max |tau_ext| {:.3} N·m (joint {})\n",
+        if t.contact() { "YES" } else { "no" },
+        r_max,
+        joint
+    );
     let c: &TelemetryCounters = &t.counters;
     s += &format!(
         "cycles {}  saturated {}  rate-limited {}  singular {}  invalid {}  missed {}\n",
@@ -192,4 +220,46 @@ pub fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hcc_msgs::TELEMETRY_FLAG_CONTACT;
+
+    /// A 4-joint sample of two levels with r = (0.5, −3.25, 1, 0).
+    fn sample(contact: bool) -> Box<Telemetry> {
+        let mut t = Box::new(Telemetry::zeroed());
+        t.set_shape(4, &[2, 2]).unwrap();
+        t.tau_ext[..4].copy_from_slice(&[0.5, -3.25, 1.0, 0.0]);
+        if contact {
+            t.flags |= TELEMETRY_FLAG_CONTACT;
+        }
+        t
+    }
+
+    #[test]
+    fn the_json_carries_the_contact_flag_and_the_largest_external_torque() {
+        for contact in [false, true] {
+            let v = sample_json(&sample(contact), &[]);
+            assert_eq!(v["contact"], contact);
+            assert_eq!(v["tau_ext_max"], 3.25);
+            assert_eq!(v["tau_ext_max_joint"], 2);
+            assert_eq!(v["tau_ext"], serde_json::json!([0.5, -3.25, 1.0, 0.0]));
+        }
+    }
+
+    #[test]
+    fn the_table_shows_the_contact_flag_and_the_largest_external_torque() {
+        let quiet = table(&sample(false), &[]);
+        assert!(
+            quiet.contains("contact no  max |tau_ext| 3.250 N·m (joint 2)"),
+            "{quiet}"
+        );
+        let pushed = table(&sample(true), &[]);
+        assert!(
+            pushed.contains("contact YES  max |tau_ext| 3.250 N·m"),
+            "{pushed}"
+        );
+    }
 }

@@ -244,6 +244,20 @@ impl ControllerSpec {
         self.levels.iter().map(|l| l.dim(n)).collect()
     }
 
+    /// The level at whose frame the contact wrench is estimated
+    /// (F̂ = pinv(J_iᵀ) r, hcc-cycle): the first level whose tasks are all
+    /// [`TaskSpec::Position`] or [`TaskSpec::Pose`], so that its rows are
+    /// forces along world axes (and, for a pose, moments about them); `None`
+    /// when no level is.
+    pub fn wrench_level(&self) -> Option<usize> {
+        self.levels.iter().position(|l| {
+            !l.tasks.is_empty()
+                && l.tasks
+                    .iter()
+                    .all(|t| matches!(t, TaskSpec::Position { .. } | TaskSpec::Pose { .. }))
+        })
+    }
+
     /// Checks of the hierarchy that need no configuration: frames and joint indices
     /// exist, goals, K_i and D_i have the task's dimension, K_i and D_i are symmetric
     /// positive definite, Σ_{j<r} m_j < n, `singular_ratio` in (0, 1), two levels

@@ -61,6 +61,7 @@ use crate::settings::{CycleError, CycleSettings};
 use crate::stream::{StreamCheck, Verdict};
 use crate::telemetry;
 use crate::torque_filter::TorqueFilter;
+use crate::wrench::WrenchEstimate;
 
 /// What [`ControlCycle::decide`] made of a state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -90,6 +91,8 @@ pub struct ControlCycle {
     contact: ContactWatch,
     /// What a contact does to the torque (module `reaction`).
     reaction: ContactReaction,
+    /// F̂, the external wrench at the wrench level's frame (module `wrench`).
+    wrench: WrenchEstimate,
     command: TorqueCommand,
     telemetry: Box<Telemetry>,
     counters: CycleCounters,
@@ -135,6 +138,13 @@ impl ControlCycle {
         let mut limits = [f64::INFINITY; MAX_JOINTS];
         limits[..n].copy_from_slice(&settings.torque_limits);
         let setpoints = SetpointHandler::new(&controller, &settings.setpoint_limits)?;
+        let spec = controller.spec();
+        let wrench_level = spec.wrench_level();
+        let wrench = WrenchEstimate::new(
+            wrench_level,
+            wrench_level.map_or(0, |i| dims[i]),
+            spec.singular_ratio,
+        );
         setpoints.fill(&mut telemetry);
         Ok(ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
@@ -142,6 +152,7 @@ impl ControlCycle {
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
             contact: ContactWatch::new(&settings.contact),
             reaction: ContactReaction::new(&settings.contact),
+            wrench,
             controller,
             n,
             limits,
@@ -194,6 +205,21 @@ impl ControlCycle {
     /// `contact`).
     pub fn external_torque(&self) -> &[f64] {
         self.contact.residual()
+    }
+
+    /// F̂ = pinv(J_iᵀ) r, the estimate of the external wrench at the frame
+    /// of level [`ControlCycle::wrench_level`] at the last used state (its
+    /// task rows: N along world axes, then N·m for a pose; empty without such
+    /// a level; module `wrench`).
+    pub fn external_wrench(&self) -> &[f64] {
+        self.wrench.wrench()
+    }
+
+    /// The level (0-based) whose frame [`ControlCycle::external_wrench`] is
+    /// at: the first position or pose level
+    /// (`hcc_control::ControllerSpec::wrench_level`).
+    pub fn wrench_level(&self) -> Option<usize> {
+        self.wrench.level()
     }
 
     /// Whether the contact detection flags a contact.
@@ -311,6 +337,7 @@ impl ControlCycle {
         if law_mode.is_none() {
             // A fault: the observer starts again (module `contact`).
             self.contact.reset();
+            self.wrench.clear();
         }
         // Whether tau contains g(q_v) = gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
@@ -412,6 +439,7 @@ impl ControlCycle {
                     c.core.peer_restarts += 1;
                     self.controller.reset();
                     self.contact.reset();
+                    self.wrench.clear();
                 }
                 Some(Ok(()))
             }
@@ -492,6 +520,10 @@ impl ControlCycle {
             self.period_s,
             &mut self.counters.core,
         );
+        if let Some(i) = self.wrench.level() {
+            let r = self.contact.residual();
+            self.wrench.update(self.controller.task_jacobian(i), r);
+        }
         if singular {
             self.counters.telemetry.singular_cycles += 1;
             Some(CommandMode::Singular)

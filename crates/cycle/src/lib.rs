@@ -28,7 +28,9 @@
 //!   as a client would send them.
 //! * `contact`: the generalized-momentum observer of the external joint
 //!   torque and the contact detection on every used state
-//!   ([`ControlCycle::external_torque`], [`ControlCycle::in_contact`]).
+//!   ([`ControlCycle::external_torque`], [`ControlCycle::in_contact`]);
+//!   `wrench`: from it, the external wrench at the first position or pose
+//!   level's frame ([`ControlCycle::external_wrench`]).
 //! * [`counters`]: every counter of the cycle, defined once.
 //! * [`settings`]: [`CycleSettings`] from a scenario, and [`CycleError`].
 //!
@@ -46,6 +48,7 @@ pub mod settings;
 pub mod stream;
 mod telemetry;
 pub mod torque_filter;
+mod wrench;
 
 pub use control_cycle::{Answer, ControlCycle};
 pub use counters::{CoreCounters, CycleCounters};

@@ -140,6 +140,9 @@ fn allocates_nothing_with(reaction: Reaction) {
         "{core:?}"
     );
     assert!(cycle.external_torque().iter().any(|r| *r != 0.0));
+    // And the wrench at the position level's frame from it.
+    assert_eq!(cycle.wrench_level(), Some(0));
+    assert!(cycle.external_wrench().iter().any(|f| *f != 0.0));
     // Setpoints accepted and rejected, every cycle.
     assert!(
         setpoint_answers[0] > 0 && setpoint_answers[1] > 0,

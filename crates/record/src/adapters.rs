@@ -38,6 +38,44 @@ impl CycleOutput for Telemetry {
     }
 }
 
+/// A cycle's output with the external wrench F̂ the control cycle estimated
+/// (`hcc_cycle::ControlCycle::external_wrench`), which the telemetry does
+/// not carry: everything else is `output`'s.
+pub struct WithWrench<'a> {
+    pub output: &'a dyn CycleOutput,
+    pub wrench: &'a [f64],
+}
+
+impl CycleOutput for WithWrench<'_> {
+    fn tau(&self) -> &[f64] {
+        self.output.tau()
+    }
+    fn level_torque(&self, i: usize) -> &[f64] {
+        self.output.level_torque(i)
+    }
+    fn tau_mu(&self) -> &[f64] {
+        self.output.tau_mu()
+    }
+    fn task_error(&self, i: usize) -> &[f64] {
+        self.output.task_error(i)
+    }
+    fn level_energy(&self, i: usize) -> f64 {
+        self.output.level_energy(i)
+    }
+    fn p_mu(&self) -> f64 {
+        self.output.p_mu()
+    }
+    fn external_torque(&self) -> Option<&[f64]> {
+        self.output.external_torque()
+    }
+    fn contact(&self) -> Option<bool> {
+        self.output.contact()
+    }
+    fn external_wrench(&self) -> Option<&[f64]> {
+        Some(self.wrench)
+    }
+}
+
 /// The terms of the law after its step at the recorded state.
 impl LawTerms for Controller {
     fn task_jacobian(&self, i: usize) -> &DMatrix<f64> {

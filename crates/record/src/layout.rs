@@ -115,5 +115,13 @@ pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     c.push(columns::E_POT.to_string());
     c.extend((1..=n).map(columns::external_torque));
     c.push(columns::CONTACT.to_string());
+    c.extend((1..=wrench_rows(scenario)).map(columns::external_wrench));
     c
+}
+
+/// The rows of the external wrench estimate: those of the first position or
+/// pose level (`hcc_control::ControllerSpec::wrench_level`), 0 without one.
+pub fn wrench_rows(scenario: &Scenario) -> usize {
+    let dims = scenario.task_dims();
+    scenario.spec.wrench_level().map_or(0, |i| dims[i])
 }

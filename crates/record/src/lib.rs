@@ -24,7 +24,11 @@
 //!   V_i(x̃_i) (the potential of eq. 28),
 //! - `E_kin`, `E_pot`: the mechanical energy of the plant ([`EnergyModel`]),
 //! - `tau_ext_<k>`, `contact`: the estimate of the external joint torque and
-//!   the contact flag, from the telemetry (NaN where the output has none).
+//!   the contact flag, from the telemetry (NaN where the output has none);
+//! - `f_ext_<k>`: the estimate of the external wrench at the first position or
+//!   pose level's frame, its task rows, from the control cycle
+//!   ([`WithWrench`]; NaN where the output has none; no columns without such
+//!   a level).
 //!
 //! The recorder is streaming: [`Recorder::record`] takes one cycle and pushes
 //! one row into a [`RowSink`]; the in-memory [`hcc_report::Trajectory`] is one
@@ -48,7 +52,8 @@ mod layout;
 pub mod mcap_log;
 mod recorder;
 
-pub use layout::{column_names, describe};
+pub use adapters::WithWrench;
+pub use layout::{column_names, describe, wrench_rows};
 pub use recorder::{Cycle, CycleOutput, EnergyModel, LawTerms, Recorder, RowSink};
 
 /// Errors of the recorder; each names the time of the cycle concerned.

@@ -33,6 +33,13 @@ pub trait CycleOutput {
     fn contact(&self) -> Option<bool> {
         None
     }
+    /// The estimate F̂ of the external wrench at the first position or pose
+    /// level's frame, its task rows (`None`: not known, the `f_ext_<k>`
+    /// columns are NaN; the telemetry does not carry it, the control cycle
+    /// does — [`crate::WithWrench`]).
+    fn external_wrench(&self) -> Option<&[f64]> {
+        None
+    }
 }
 
 /// Terms of the control law at the recorded state that the derived columns
@@ -109,6 +116,8 @@ pub struct Recorder {
     n: usize,
     /// m_i, the task dimensions.
     dims: Vec<usize>,
+    /// The rows of the `f_ext_<k>` columns.
+    wrench_rows: usize,
     with_v: bool,
     data: Data,
     /// Cholesky factor of M(q).
@@ -152,6 +161,7 @@ impl Recorder {
             model,
             n,
             dims,
+            wrench_rows: crate::layout::wrench_rows(scenario),
             with_v,
             energy,
         })
@@ -285,7 +295,8 @@ impl Recorder {
         row.extend_from_slice(out.tau_mu());
     }
 
-    /// `tau_ext_<k>` and `contact` (NaN where the output does not know them).
+    /// `tau_ext_<k>`, `contact` and `f_ext_<k>` (NaN where the output does
+    /// not know them).
     fn push_contact_columns(&mut self, out: &dyn CycleOutput) {
         match out.external_torque() {
             Some(r) if r.len() == self.n => self.row.extend_from_slice(r),
@@ -293,6 +304,12 @@ impl Recorder {
         }
         self.row
             .push(out.contact().map_or(f64::NAN, |c| f64::from(u8::from(c))));
+        match out.external_wrench() {
+            Some(f) if f.len() == self.wrench_rows => self.row.extend_from_slice(f),
+            _ => self
+                .row
+                .extend(std::iter::repeat_n(f64::NAN, self.wrench_rows)),
+        }
     }
 
     /// M⁻¹ τ_j for every level j, then M⁻¹ τ_μ (by Cholesky solves).

@@ -163,6 +163,9 @@ fn one_row_per_cycle_in_the_layout_of_column_names() {
     assert_eq!(get("E_pot"), 0.4);
     assert_eq!(get("tau_ext_3"), 2.0);
     assert_eq!(get("contact"), 1.0);
+    // Joint levels only: no frame for a wrench estimate, no `f_ext_<k>`.
+    assert_eq!(hcc_record::wrench_rows(&s), 0);
+    assert!(table.column("f_ext_1").is_none());
 }
 
 #[test]

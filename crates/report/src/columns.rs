@@ -18,7 +18,11 @@
 //! - `E_kin`, `E_pot`: mechanical energy of the plant,
 //! - `tau_ext_<k>`: the controller's estimate r of the external joint torque
 //!   at joint k (generalized-momentum observer, hcc-control's `contact`),
-//! - `contact`: 1 while the contact detection flags a contact, else 0.
+//! - `contact`: 1 while the contact detection flags a contact, else 0,
+//! - `f_ext_<k>`: the controller's estimate F̂ = pinv(J_iᵀ) r of the external
+//!   wrench at the frame of the first position or pose level i, task row k
+//!   (N along the level's world axes, then N·m for a pose); absent when no
+//!   level is a position or a pose.
 
 /// Time column.
 pub const TIME: &str = "t";
@@ -67,6 +71,10 @@ pub fn level_torque(i: usize, k: usize) -> String {
 /// The estimate of the external torque at joint `k`: `tau_ext_<k>`.
 pub fn external_torque(k: usize) -> String {
     format!("tau_ext_{k}")
+}
+/// The estimate of the external wrench, task row `k`: `f_ext_<k>`.
+pub fn external_wrench(k: usize) -> String {
+    format!("f_ext_{k}")
 }
 /// τ_μ at joint `k`: `tau_mu_<k>`.
 pub fn mu_torque(k: usize) -> String {

@@ -5,7 +5,7 @@ use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings, Schedule};
 use hcc_msgs::{CommandMode, JointState, TelemetryTimings};
 use hcc_plant::{SimDriver, SimError};
-use hcc_record::{Cycle, LawTerms, RecordError};
+use hcc_record::{Cycle, LawTerms, RecordError, WithWrench};
 use hcc_report::{RunDescription, Trajectory};
 
 use crate::energy::recorder;
@@ -50,11 +50,15 @@ pub fn simulate_observed(
     let description = run_observed(scenario, &mut |view| {
         observe(view)?;
         let law_ran = view.cycle.command().mode != CommandMode::SafeHold.code();
+        let output = WithWrench {
+            output: view.cycle.telemetry(),
+            wrench: view.cycle.external_wrench(),
+        };
         let row = Cycle {
             t: view.t,
             q: view.state.q(),
             qd: view.state.qd(),
-            output: view.cycle.telemetry(),
+            output: &output,
             law: law_ran.then_some(view.cycle.controller() as &dyn LawTerms),
         };
         recorder.record(&row, &mut trajectory).map_err(record_error)

@@ -5,6 +5,10 @@
 //! timing; free motion of the shipped scenarios flags no contact with the
 //! default thresholds (the largest |r| per joint printed); and the observer
 //! only observes: the torques are bit for bit the same whatever it flags.
+//! The wrench estimate F̂ = pinv(Jᵀ) r at the position level's frame against
+//! the push at the TCP, in the cycle and in the trajectory's `f_ext_<k>`.
+//! Free motion with model errors (plant friction, an unmodelled payload):
+//! the |r| they cause, printed against the default threshold.
 
 use std::path::PathBuf;
 
@@ -30,27 +34,44 @@ fn load(name: &str, extra: &str) -> Scenario {
     Scenario::from_toml_str(&text, &path).unwrap()
 }
 
-/// One cycle as the test sees it: t, q, r, the contact flag.
+/// One cycle as the test sees it: t, q, r, the contact flag, F̂.
 struct Sample {
     t: f64,
     q: Vec<f64>,
     r: Vec<f64>,
     contact: bool,
+    f: Vec<f64>,
 }
 
 fn run(scenario: &Scenario) -> Vec<Sample> {
     let mut out = Vec::new();
     hcc_simulation::run_observed(scenario, &mut |v| {
-        out.push(Sample {
-            t: v.t,
-            q: v.state.q().to_vec(),
-            r: v.cycle.telemetry().tau_ext().to_vec(),
-            contact: v.cycle.telemetry().contact(),
-        });
+        out.push(sample(v));
         Ok(())
     })
     .unwrap();
     out
+}
+
+fn sample(v: &hcc_simulation::CycleView<'_>) -> Sample {
+    Sample {
+        t: v.t,
+        q: v.state.q().to_vec(),
+        r: v.cycle.telemetry().tau_ext().to_vec(),
+        contact: v.cycle.telemetry().contact(),
+        f: v.cycle.external_wrench().to_vec(),
+    }
+}
+
+/// [`run`], with the trajectory `hcc simulate` writes.
+fn simulate(scenario: &Scenario) -> (Vec<Sample>, hcc_report::Trajectory) {
+    let mut out = Vec::new();
+    let run = hcc_simulation::simulate_observed(scenario, &mut |v| {
+        out.push(sample(v));
+        Ok(())
+    })
+    .unwrap();
+    (out, run.trajectory)
 }
 
 /// Timing of the flag against a push over [start, end): the delay to the
@@ -112,7 +133,7 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
     );
     let mut scenario = load("panda-pose-posture.toml", &extra);
     scenario.set_duration(2.5).unwrap();
-    let samples = run(&scenario);
+    let (samples, trajectory) = simulate(&scenario);
     // The reference: Jᵀ F at each sampled state while the push acts.
     let model = &scenario.model;
     let mut data = hcc_model::Data::new(model);
@@ -136,6 +157,58 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
     let (err, peak) = relative_error(&samples, &reference, PUSH_START + 5.0 / k_o, end);
     let what = format!("15 N at the TCP (peak |Jᵀ F| {peak:.3} N·m)");
     check_push(&what, &samples, err, end);
+    check_wrench(
+        &samples,
+        &trajectory,
+        [0.0, 15.0, 0.0],
+        PUSH_START + 5.0 / k_o,
+        end,
+    );
+}
+
+/// F̂ at the TCP (the scenario's first level: its position, 3 rows) within
+/// 5 % of the force `applied` over [from, to), and the same figures in the
+/// trajectory's `f_ext_<k>` columns; prints the worst error, and the largest
+/// |F̂| in free motion before the push.
+fn check_wrench(
+    samples: &[Sample],
+    trajectory: &hcc_report::Trajectory,
+    applied: [f64; 3],
+    from: f64,
+    to: f64,
+) {
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let columns: Vec<Vec<f64>> = (1..=3)
+        .map(|k| trajectory.require(&format!("f_ext_{k}")).unwrap())
+        .collect();
+    assert!(
+        trajectory.column("f_ext_4").is_none(),
+        "one column per task row"
+    );
+    let (mut worst, mut free) = (0.0_f64, 0.0_f64);
+    for (row, s) in samples.iter().enumerate() {
+        assert_eq!(s.f.len(), 3);
+        for (k, f) in s.f.iter().enumerate() {
+            assert_eq!(
+                columns[k][row].to_bits(),
+                f.to_bits(),
+                "row {row}, f_ext_{}",
+                k + 1
+            );
+        }
+        if s.t >= from && s.t < to {
+            let e: Vec<f64> = s.f.iter().zip(applied).map(|(a, b)| a - b).collect();
+            worst = worst.max(norm(&e) / norm(&applied));
+        }
+        if s.t < PUSH_START {
+            free = free.max(norm(&s.f));
+        }
+    }
+    println!(
+        "F̂ at the TCP: worst |F̂ − F| / |F| after 5/K_O = {:.2} %; largest |F̂| before the push {free:.2e} N",
+        100.0 * worst
+    );
+    assert!(worst < 0.05, "F̂ off by {:.2} % of |F|", 100.0 * worst);
 }
 
 /// Prints the figures of a push over [PUSH_START, end) and checks them: r
@@ -159,10 +232,21 @@ fn check_push(what: &str, samples: &[Sample], err: f64, end: f64) {
 /// torque the plant receives during the push (held over each period), the
 /// cycle unaware of it.
 fn run_with_joint_torque(scenario: &Scenario, joint: usize, torque: f64) -> Vec<Sample> {
+    let plant = hcc_plant::plant_for(scenario).unwrap();
+    run_against(scenario, plant, Some((joint, torque)))
+}
+
+/// The closed loop of the control cycle of `scenario` and `plant` (its own
+/// model, friction, wrenches), with `push` = (joint, torque) added to the
+/// torque the plant receives during [PUSH_START, PUSH_START + PUSH_S).
+fn run_against(
+    scenario: &Scenario,
+    mut plant: hcc_plant::Plant,
+    push: Option<(usize, f64)>,
+) -> Vec<Sample> {
     let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
     let mut cycle = ControlCycle::new(controller, &CycleSettings::from_scenario(scenario)).unwrap();
     let s = &scenario.simulation;
-    let mut plant = hcc_plant::plant_for(scenario).unwrap();
     let timing = LoopTiming {
         control_period_s: 1.0 / s.control_rate_hz,
         substeps: s.substeps,
@@ -181,7 +265,9 @@ fn run_with_joint_torque(scenario: &Scenario, joint: usize, torque: f64) -> Vec<
         cycle.step(&state, k as u64 * period_ns, || None);
         tau.as_mut_slice()
             .copy_from_slice(&cycle.command().tau[..n]);
-        if (PUSH_START..PUSH_START + PUSH_S).contains(&t) {
+        if let Some((joint, torque)) = push
+            && (PUSH_START..PUSH_START + PUSH_S).contains(&t)
+        {
             tau[joint] += torque;
         }
         out.push(Sample {
@@ -189,6 +275,7 @@ fn run_with_joint_torque(scenario: &Scenario, joint: usize, torque: f64) -> Vec<
             q: q.iter().copied().collect(),
             r: cycle.external_torque().to_vec(),
             contact: cycle.in_contact(),
+            f: cycle.external_wrench().to_vec(),
         });
         Ok(())
     })
@@ -291,3 +378,91 @@ fn the_observer_only_observes() {
         );
     }
 }
+
+/// `model` with a point mass `mass` at `frame` (a payload the controller's
+/// model does not know), lumped into the inertia of the frame's body.
+fn with_payload(model: &hcc_model::Model, frame: &str, mass: f64) -> hcc_model::Model {
+    let mut model = model.clone();
+    let f = model
+        .frames
+        .iter()
+        .find(|f| f.name == frame)
+        .unwrap()
+        .clone();
+    let body = f.body.expect("a frame on a moving body");
+    let p = f.placement.translation.vector;
+    let i = &mut model.joints[body].inertia;
+    let total = i.mass + mass;
+    let com = (i.com * i.mass + p * mass) / total;
+    // Parallel axes: both parts' inertia about the new centre of mass.
+    let shift = |m: f64, d: nalgebra::Vector3<f64>| {
+        (nalgebra::Matrix3::identity() * d.norm_squared() - d * d.transpose()) * m
+    };
+    i.inertia += shift(i.mass, i.com - com) + shift(mass, p - com);
+    i.mass = total;
+    i.com = com;
+    model
+}
+
+/// Largest |r_j| per joint, the cycles flagged, and the largest |F̂| over a run.
+fn free_motion_figures(samples: &[Sample]) -> (Vec<f64>, usize, f64) {
+    let n = samples[0].r.len();
+    let mut largest = vec![0.0_f64; n];
+    let mut f_max = 0.0_f64;
+    for s in samples {
+        for (m, r) in largest.iter_mut().zip(&s.r) {
+            *m = m.max(r.abs());
+        }
+        f_max = f_max.max(s.f.iter().map(|x| x * x).sum::<f64>().sqrt());
+    }
+    let flagged = samples.iter().filter(|s| s.contact).count();
+    (largest, flagged, f_max)
+}
+
+/// What the observer makes of model errors in free motion (no contact):
+/// viscous joint friction in the plant, and a payload the controller does
+/// not know. Prints the figures of docs/contact.md.
+#[test]
+fn free_motion_with_friction_and_a_wrong_payload() {
+    let base = load("panda-pose-posture.toml", "");
+    let n = base.model.nq();
+    // Viscous friction F_v q̇ in the plant only, 0.2 N·m·s/rad per joint.
+    let mut rough = base.clone();
+    rough.simulation.joint_friction = DVector::from_element(n, FRICTION);
+    let friction = run(&rough);
+    // 0.5 kg at the TCP in the plant's model only.
+    let mut heavy = base.clone();
+    heavy.model = with_payload(&base.model, "panda_hand_tcp", PAYLOAD_KG);
+    let plant = hcc_plant::plant_for(&heavy).unwrap();
+    let payload = run_against(&base, plant, None);
+    let threshold = base.contact.threshold[0];
+    for (what, samples) in [
+        (format!("viscous friction {FRICTION} N·m·s/rad"), &friction),
+        (format!("{PAYLOAD_KG} kg unmodelled at the TCP"), &payload),
+    ] {
+        let (largest, flagged, f_max) = free_motion_figures(samples);
+        let text: Vec<String> = largest.iter().map(|m| format!("{m:.2}")).collect();
+        let last = samples.last().unwrap();
+        let f_end: Vec<String> = last.f.iter().map(|x| format!("{x:.2}")).collect();
+        println!(
+            "{what}: largest |r| per joint [{}] N·m; threshold {threshold} N·m; \
+             {flagged} of {} cycles flagged; largest |F̂| {f_max:.2} N, F̂ at the end [{}] N",
+            text.join(", "),
+            samples.len(),
+            f_end.join(", ")
+        );
+        // The estimate sees the model error: far above the exact model's
+        // (below 1e-4 N·m, the test above).
+        assert!(largest.iter().any(|m| *m > 1e-2), "{what}");
+    }
+    // The payload's weight at the TCP, m g = 4.9 N down, is what F̂ reads at rest.
+    let f_end = &payload.last().unwrap().f;
+    let weight = PAYLOAD_KG * 9.81;
+    assert!(
+        (f_end[2] + weight).abs() < 0.05 * weight,
+        "F̂ at the end {f_end:?}"
+    );
+}
+
+const FRICTION: f64 = 0.2;
+const PAYLOAD_KG: f64 = 0.5;
