@@ -49,7 +49,7 @@ use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
     wait_until_controller_listens,
 };
-use crate::run_schedule::Scheduler;
+use crate::run_schedule::{ScheduleReport, Scheduler};
 use crate::view_child::ViewChild;
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
@@ -621,6 +621,58 @@ fn start_receiver(args: &RunArgs, launch: &Launch) -> anyhow::Result<Receiver> {
     Ok(receiver)
 }
 
+/// The recording's closing metadata: how the run ended and how many samples
+/// the writer fell behind on.
+fn end_metadata(end: &End, dropped: u64) -> BTreeMap<String, String> {
+    let mut meta = BTreeMap::new();
+    meta.insert("dropped_writer_behind".into(), dropped.to_string());
+    let how = match end {
+        End::Finished => "finished",
+        End::Interrupted => "interrupted",
+        End::Failed(_) => "a daemon failed",
+    };
+    meta.insert("end".into(), how.to_string());
+    meta
+}
+
+/// The run's summary on the terminal: the simulator's report, the setpoint
+/// schedule, the daemons' own output and where the results are.
+fn print_results(
+    out: &Path,
+    written: bool,
+    schedule: Option<&ScheduleReport>,
+    children: &mut Children,
+    quiet: bool,
+) {
+    if written && let Some(line) = sim_report(out) {
+        println!("{line}");
+    }
+    if let Some(report) = schedule {
+        println!("{}", report.line());
+        if report.late > 0 {
+            println!(
+                "  warning: {} scheduled setpoint(s) reached the controller after their cycle and were applied on receipt",
+                report.late
+            );
+        }
+    }
+    if !quiet {
+        for line in children
+            .sim
+            .stdout_lines()
+            .iter()
+            .chain(children.controller.stdout_lines().iter())
+        {
+            if !line.trim().is_empty() {
+                eprintln!("  | {line}");
+            }
+        }
+    }
+    if written {
+        println!("results in {}", out.display());
+    }
+}
+
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut scenario = Scenario::load(&args.config)?;
     if let Some(d) = args.duration {
@@ -693,17 +745,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         live.see(&m);
         recorder.record(&m)
     })?;
-    let mut end_meta = BTreeMap::new();
-    end_meta.insert("dropped_writer_behind".into(), dropped.to_string());
-    end_meta.insert(
-        "end".into(),
-        match &end {
-            End::Finished => "finished".to_string(),
-            End::Interrupted => "interrupted".to_string(),
-            End::Failed(_) => "a daemon failed".to_string(),
-        },
-    );
-    let stats = recorder.finish(end_meta)?;
+    let stats = recorder.finish(end_metadata(&end, dropped))?;
     if !args.quiet {
         eprintln!("hcc run: recorded {}", capture::stats_line(&stats));
     }
@@ -717,31 +759,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .as_ref()
             .map(|report| report.json(&scenario.setpoints)),
     )?;
-    if written && let Some(line) = sim_report(&launch.out) {
-        println!("{line}");
-    }
-    if let Some(report) = &schedule {
-        println!("{}", report.line());
-        if report.late > 0 {
-            println!(
-                "  warning: {} scheduled setpoint(s) reached the controller after their cycle and were applied on receipt",
-                report.late
-            );
-        }
-    }
-    for line in children
-        .sim
-        .stdout_lines()
-        .iter()
-        .chain(children.controller.stdout_lines().iter())
-    {
-        if !line.trim().is_empty() && !args.quiet {
-            eprintln!("  | {line}");
-        }
-    }
-    if written {
-        println!("results in {}", launch.out.display());
-    }
+    print_results(
+        &launch.out,
+        written,
+        schedule.as_ref(),
+        &mut children,
+        args.quiet,
+    );
     outcome(end, live.sim_stopped, written, &launch.out, started)?;
     match &schedule {
         Some(report) => report.check(&scenario.setpoints),

@@ -185,76 +185,40 @@ fn positive(
     }
 }
 
-/// Checks `[franka]` and fills in libfranka's defaults.
-pub(crate) fn resolve(file: &Path, text: &str, s: &FrankaSection) -> Result<Franka, ConfigError> {
-    let d = Franka::default();
-    let c = &d.collision;
-    let collision = CollisionBehavior {
-        lower_torque_thresholds_acceleration: array(
-            file,
-            text,
-            "lower_torque_thresholds_acceleration",
-            &s.lower_torque_thresholds_acceleration,
-            c.lower_torque_thresholds_acceleration,
-        )?,
-        upper_torque_thresholds_acceleration: array(
-            file,
-            text,
-            "upper_torque_thresholds_acceleration",
-            &s.upper_torque_thresholds_acceleration,
-            c.upper_torque_thresholds_acceleration,
-        )?,
-        lower_torque_thresholds_nominal: array(
-            file,
-            text,
-            "lower_torque_thresholds_nominal",
-            &s.lower_torque_thresholds_nominal,
-            c.lower_torque_thresholds_nominal,
-        )?,
-        upper_torque_thresholds_nominal: array(
-            file,
-            text,
-            "upper_torque_thresholds_nominal",
-            &s.upper_torque_thresholds_nominal,
-            c.upper_torque_thresholds_nominal,
-        )?,
-        lower_force_thresholds_acceleration: array(
-            file,
-            text,
-            "lower_force_thresholds_acceleration",
-            &s.lower_force_thresholds_acceleration,
-            c.lower_force_thresholds_acceleration,
-        )?,
-        upper_force_thresholds_acceleration: array(
-            file,
-            text,
-            "upper_force_thresholds_acceleration",
-            &s.upper_force_thresholds_acceleration,
-            c.upper_force_thresholds_acceleration,
-        )?,
-        lower_force_thresholds_nominal: array(
-            file,
-            text,
-            "lower_force_thresholds_nominal",
-            &s.lower_force_thresholds_nominal,
-            c.lower_force_thresholds_nominal,
-        )?,
-        upper_force_thresholds_nominal: array(
-            file,
-            text,
-            "upper_force_thresholds_nominal",
-            &s.upper_force_thresholds_nominal,
-            c.upper_force_thresholds_nominal,
-        )?,
-    };
-    check_lower_below_upper(file, text, &collision)?;
-    let torque_limits = array(
-        file,
-        text,
-        "torque_limits",
-        &s.torque_limits,
-        d.torque_limits,
-    )?;
+/// `[franka]`'s collision thresholds, each defaulting to libfranka's.
+fn resolve_collision(
+    file: &Path,
+    text: &str,
+    s: &FrankaSection,
+    default: &CollisionBehavior,
+) -> Result<CollisionBehavior, ConfigError> {
+    macro_rules! thresholds {
+        ($($name:ident),+ $(,)?) => {
+            CollisionBehavior {
+                $($name: array(file, text, stringify!($name), &s.$name, default.$name)?,)+
+            }
+        };
+    }
+    Ok(thresholds!(
+        lower_torque_thresholds_acceleration,
+        upper_torque_thresholds_acceleration,
+        lower_torque_thresholds_nominal,
+        upper_torque_thresholds_nominal,
+        lower_force_thresholds_acceleration,
+        upper_force_thresholds_acceleration,
+        lower_force_thresholds_nominal,
+        upper_force_thresholds_nominal,
+    ))
+}
+
+/// `[franka] torque_limits`: positive and never above the robot's own limits.
+fn resolve_torque_limits(
+    file: &Path,
+    text: &str,
+    s: &FrankaSection,
+    default: [f64; FRANKA_JOINTS],
+) -> Result<[f64; FRANKA_JOINTS], ConfigError> {
+    let torque_limits = array(file, text, "torque_limits", &s.torque_limits, default)?;
     if let Some(k) = torque_limits
         .iter()
         .zip(&FRANKA_TORQUE_LIMITS)
@@ -270,6 +234,15 @@ pub(crate) fn resolve(file: &Path, text: &str, s: &FrankaSection) -> Result<Fran
             ),
         ));
     }
+    Ok(torque_limits)
+}
+
+/// Checks `[franka]` and fills in libfranka's defaults.
+pub(crate) fn resolve(file: &Path, text: &str, s: &FrankaSection) -> Result<Franka, ConfigError> {
+    let d = Franka::default();
+    let collision = resolve_collision(file, text, s, &d.collision)?;
+    check_lower_below_upper(file, text, &collision)?;
+    let torque_limits = resolve_torque_limits(file, text, s, d.torque_limits)?;
     Ok(Franka {
         collision,
         torque_limits,
