@@ -50,6 +50,9 @@ TELEMETRY_FLAG_PEER_LOST: int = 1 << 16
 #: :attr:`Telemetry.flags` bit: the controller's contact detection flags a contact
 #: (some ``|tau_ext[j]|`` above its threshold, not yet all below the release level).
 TELEMETRY_FLAG_CONTACT: int = 1 << 17
+#: :attr:`Telemetry.flags` bit: the contact reaction ``hold`` is latched (gravity and a
+#: joint damper until a client's accepted setpoint releases it).
+TELEMETRY_FLAG_CONTACT_HOLD: int = 1 << 18
 #: Clients whose last answer :class:`Telemetry` carries (the most recent ones).
 MAX_SETPOINT_CLIENTS: int = 8
 #: Setpoints the controller keeps waiting for their application point
@@ -516,6 +519,10 @@ class Telemetry(ctypes.Structure):
     def contact(self) -> bool:
         """Whether this sample flags a contact."""
         return bool(self.flags & TELEMETRY_FLAG_CONTACT)
+
+    def contact_hold(self) -> bool:
+        """Whether the contact reaction ``hold`` is latched (a setpoint releases it)."""
+        return bool(self.flags & TELEMETRY_FLAG_CONTACT_HOLD)
 
     def is_singular(self, level: int) -> bool:
         """Whether level ``level`` (0-based) is flagged singular."""

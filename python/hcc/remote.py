@@ -52,7 +52,7 @@ QUATERNION_STAMPED = ("geometry_msgs/msg/QuaternionStamped",
 FLOAT64_MULTI_ARRAY = ("std_msgs/msg/Float64MultiArray",
                        "RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f")
 TELEMETRY = ("hcc_msgs/msg/Telemetry",
-             "RIHS01_e0bbf54ff60d2d5156d39751fc92f855e337272829f6b97e62202fb41e53f56e")
+             "RIHS01_8924b9911a67b8db34f9b5408d4f58c1ce82330aa0e4131504cee874f9fdc6d7")
 GOAL_TYPES = (POSE_STAMPED, POINT_STAMPED, QUATERNION_STAMPED, FLOAT64_MULTI_ARRAY)
 
 #: Codes of the bridge's own refusals (RemoteAnswer.code).
@@ -328,6 +328,8 @@ class RemoteTelemetry:
     answers: list[Answer]
     bridge_client_id: int
     remote_answers: list[RemoteAnswer]
+    #: The controller's estimate of the external joint torque (N·m per joint).
+    tau_ext: list[float]
 
     @classmethod
     def decode(cls, data: bytes) -> "RemoteTelemetry":
@@ -345,7 +347,8 @@ class RemoteTelemetry:
         bridge_id = r.u64()
         remote = r.seq(lambda: RemoteAnswer(bytes(r.u8() for _ in range(16)), r.i64(), r.u32(),
                                             r.u32(), r.string(), r.f64()))
-        return cls(stamp, *head, tau, p_mu, levels, counters, answers, bridge_id, remote)
+        tau_ext = r.seq(r.f64)
+        return cls(stamp, *head, tau, p_mu, levels, counters, answers, bridge_id, remote, tau_ext)
 
     def levels(self) -> int:
         return len(self.level_list)
@@ -376,6 +379,15 @@ class RemoteTelemetry:
 
     def peer_lost(self) -> bool:
         return bool(self.flags & (1 << 16))
+
+    def tau_ext_list(self) -> list[float]:
+        return list(self.tau_ext)
+
+    def contact(self) -> bool:
+        return bool(self.flags & (1 << 17))
+
+    def contact_hold(self) -> bool:
+        return bool(self.flags & (1 << 18))
 
     def answer_for(self, client_id: int) -> Answer | None:
         return next((a for a in self.answers if a.client_id == client_id), None)

@@ -131,6 +131,7 @@ def check_telemetry(ts: Any, samples: list[tuple[bytes, bytes | None]], telemetr
             t.state_seq, t.command_seq, t.header.stamp_ns, t.mode, t.flags)
         assert bits(m.tau) == bits(t.tau_list())
         assert bits([m.p_mu]) == bits([t.p_mu])
+        assert bits(m.tau_ext) == bits(t.tau_ext_list())
         assert [lv.name for lv in m.levels] == ["TCP position", "TCP orientation", "posture"]
         for i, lv in enumerate(m.levels):
             assert lv.dim == t.task_dims[i]

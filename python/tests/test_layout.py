@@ -40,12 +40,13 @@ def test_constants(rust: dict[str, Any]) -> None:
     assert flags["command_gravity_included"] == msgs.COMMAND_FLAG_GRAVITY_INCLUDED
     assert flags["telemetry_peer_lost"] == msgs.TELEMETRY_FLAG_PEER_LOST
     assert flags["telemetry_contact"] == msgs.TELEMETRY_FLAG_CONTACT
+    assert flags["telemetry_contact_hold"] == msgs.TELEMETRY_FLAG_CONTACT_HOLD
     for key in [
         "setpoint_goal", "setpoint_velocity", "setpoint_stiffness", "setpoint_damping",
         "setpoint_fields_known", "gain_stiffness_full", "gain_damping_full", "gain_layout_known",
     ]:
         assert flags[key] == getattr(msgs, key.upper()), key
-    assert len(flags) == 14, "a flag is not compared"
+    assert len(flags) == 15, "a flag is not compared"
     setpoint = rust["setpoint"]
     assert set(setpoint) == {
         "max_setpoint_clients", "max_pending_setpoints", "max_gain_entries", "max_transition_s",

@@ -42,7 +42,7 @@ pub const FLOAT64_MULTI_ARRAY: RosType = RosType {
 /// `hcc_msgs/msg/Telemetry` (`ros/hcc_msgs/msg/Telemetry.msg`).
 pub const TELEMETRY: RosType = RosType {
     name: "hcc_msgs/msg/Telemetry",
-    hash: "RIHS01_e0bbf54ff60d2d5156d39751fc92f855e337272829f6b97e62202fb41e53f56e",
+    hash: "RIHS01_8924b9911a67b8db34f9b5408d4f58c1ce82330aa0e4131504cee874f9fdc6d7",
 };
 
 /// `builtin_interfaces/msg/Time`.
@@ -244,6 +244,7 @@ pub fn write_telemetry(w: &mut CdrWriter, t: &Telemetry, stamp: RosTime, x: &Tel
             .string(&a.reason)
             .f64(a.duration_s);
     }
+    w.seq_f64(t.tau_ext());
 }
 
 /// A goal message as received, before it is checked against its level.
@@ -382,6 +383,7 @@ mod tests {
         t.state_seq = 10;
         t.tau[..2].copy_from_slice(&[1.5, -2.5]);
         t.p_mu = 1e-12;
+        t.tau_ext[..2].copy_from_slice(&[0.125, -7.0]);
         t.task_error[1][..2].copy_from_slice(&[0.25, 0.5]);
         t.singular_levels = 0b10;
         t.setpoint_answers[3] = hcc_msgs::SetpointAnswer {
@@ -464,6 +466,8 @@ mod tests {
         );
         assert_eq!(r.string("reason").unwrap(), "rate");
         assert_eq!(r.f64("d").unwrap(), 0.5);
+        r.seq_f64("tau_ext", &mut v).unwrap();
+        assert_eq!(v, [0.125, -7.0]);
         assert_eq!(r.remaining(), 0);
     }
 

@@ -111,6 +111,7 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "levels": levels,
         "tau": t.tau(),
         "contact": t.contact(),
+        "contact_hold": t.contact_hold(),
         "tau_ext": t.tau_ext(),
         "tau_ext_max": largest_external_torque(t).0,
         "tau_ext_max_joint": largest_external_torque(t).1,
@@ -156,10 +157,15 @@ fn table(t: &Telemetry, names: &[String]) -> String {
     }
     let (r_max, joint) = largest_external_torque(t);
     s += &format!(
-        "contact {}  max |tau_ext| {:.3} N·m (joint {})\n",
+        "contact {}  max |tau_ext| {:.3} N·m (joint {}){}\n",
         if t.contact() { "YES" } else { "no" },
         r_max,
-        joint
+        joint,
+        if t.contact_hold() {
+            "  HOLD (gravity and damping; a setpoint releases it)"
+        } else {
+            ""
+        }
     );
     let c: &TelemetryCounters = &t.counters;
     s += &format!(
@@ -225,7 +231,7 @@ pub fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hcc_msgs::TELEMETRY_FLAG_CONTACT;
+    use hcc_msgs::{TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD};
 
     /// A 4-joint sample of two levels with r = (0.5, −3.25, 1, 0).
     fn sample(contact: bool) -> Box<Telemetry> {
@@ -261,5 +267,10 @@ mod tests {
             pushed.contains("contact YES  max |tau_ext| 3.250 N·m"),
             "{pushed}"
         );
+        assert!(!pushed.contains("HOLD"), "{pushed}");
+        let mut held = sample(true);
+        held.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
+        assert!(table(&held, &[]).contains("HOLD"));
+        assert_eq!(sample_json(&held, &[])["contact_hold"], true);
     }
 }

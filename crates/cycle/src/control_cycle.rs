@@ -49,8 +49,8 @@ use hcc_control::Controller;
 use hcc_msgs::ipc::SETPOINT_BUFFER;
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, Setpoint,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings, TorqueCommand,
-    monotonic_now_ns,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
+    TelemetryTimings, TorqueCommand, monotonic_now_ns,
 };
 
 use crate::contact::ContactWatch;
@@ -417,6 +417,9 @@ impl ControlCycle {
         if self.contact.in_contact() {
             t.flags |= TELEMETRY_FLAG_CONTACT;
         }
+        if self.reaction.held() {
+            t.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
+        }
         t.counters = self.counters.telemetry;
         new_loss
     }
@@ -582,6 +585,9 @@ impl ControlCycle {
         t.flags = self.command.flags;
         if self.contact.in_contact() {
             t.flags |= TELEMETRY_FLAG_CONTACT;
+        }
+        if self.reaction.held() {
+            t.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
         }
         t.tau[..n].copy_from_slice(&self.command.tau[..n]);
         t.tau_ext[..n].copy_from_slice(self.contact.residual());

@@ -18,8 +18,8 @@ use hcc_msgs::{
     Rejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
     SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
     STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
-    TelemetryTimings, TorqueCommand, ipc,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
+    TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -143,6 +143,7 @@ fn main() {
         ("command_gravity_included", COMMAND_FLAG_GRAVITY_INCLUDED),
         ("telemetry_peer_lost", TELEMETRY_FLAG_PEER_LOST),
         ("telemetry_contact", TELEMETRY_FLAG_CONTACT),
+        ("telemetry_contact_hold", TELEMETRY_FLAG_CONTACT_HOLD),
         ("setpoint_goal", SETPOINT_GOAL),
         ("setpoint_velocity", SETPOINT_VELOCITY),
         ("setpoint_stiffness", SETPOINT_STIFFNESS),

@@ -175,8 +175,8 @@ pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
     JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
     STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND, Telemetry, TelemetryCounters,
-    TelemetryTimings, TorqueCommand,
+    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND,
+    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
 };
 
 /// Version of the driver-facing part of the contract: [`JointState`],

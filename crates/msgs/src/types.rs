@@ -56,6 +56,11 @@ pub const TELEMETRY_FLAG_PEER_LOST: u32 = 1 << 16;
 /// not every one has fallen below its release level since (hcc-control's
 /// `contact` module). Never set in a command.
 pub const TELEMETRY_FLAG_CONTACT: u32 = 1 << 17;
+/// [`Telemetry::flags`] bit: the contact reaction `hold` is latched — the
+/// controller commands gravity and a joint damper, not the law, until a
+/// client's accepted setpoint releases it (hcc-cycle's `reaction` module).
+/// Never set in a command.
+pub const TELEMETRY_FLAG_CONTACT_HOLD: u32 = 1 << 18;
 
 /// Header shared by all messages. It belongs to both parts of the contract:
 /// a change of its layout bumps both versions (its type name carries both).
@@ -915,6 +920,12 @@ impl Telemetry {
     /// Whether this sample flags a contact ([`TELEMETRY_FLAG_CONTACT`]).
     pub fn contact(&self) -> bool {
         self.flags & TELEMETRY_FLAG_CONTACT != 0
+    }
+
+    /// Whether the contact reaction `hold` is latched
+    /// ([`TELEMETRY_FLAG_CONTACT_HOLD`]).
+    pub fn contact_hold(&self) -> bool {
+        self.flags & TELEMETRY_FLAG_CONTACT_HOLD != 0
     }
 
     /// Whether this sample reports a lost driver ([`TELEMETRY_FLAG_PEER_LOST`]).

@@ -91,7 +91,13 @@ fn run(scenario: &Scenario) -> Vec<Sample> {
             tau: v.cycle.command().tau().to_vec(),
             gravity: law.output().gravity.iter().copied().collect(),
             contact: v.cycle.in_contact(),
-            holding: v.cycle.holding(),
+            // As clients see it: the telemetry's flag, the cycle's own state.
+            holding: {
+                let flagged =
+                    v.cycle.telemetry().flags & hcc_msgs::TELEMETRY_FLAG_CONTACT_HOLD != 0;
+                assert_eq!(flagged, v.cycle.holding(), "t = {}", v.t);
+                flagged
+            },
             h,
             kappa,
             kinetic: 0.5 * qd.dot(&(m * &qd)),
