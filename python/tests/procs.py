@@ -62,12 +62,15 @@ def run_pair(
     timeout: float = 600.0,
     controller_extra: list[str] | None = None,
     on_started: Callable[[str, str, subprocess.Popen], None] | None = None,
+    record: bool = False,
 ) -> dict[str, pathlib.Path]:
     """Runs the MuJoCo driver against hcc-controller on ``scenario`` until the driver ends.
 
     Unique namespace and file prefix; both processes are stopped afterwards.
     ``on_started(namespace, file_prefix, driver_process)`` is called once
-    both run (e.g. to attach a client until the driver ends). Returns the paths of the driver's records and the logs.
+    both run (e.g. to attach a client until the driver ends). With ``record``,
+    ``hcc record`` subscribes before the controller starts and writes the whole
+    run to ``paths["recording"]`` (stopped by SIGINT once the driver ends). Returns the paths of the driver's records and the logs.
     """
     ns = unique("pyt")
     prefix = f"{unique('hccpy')}_"[:32]
@@ -78,6 +81,8 @@ def run_pair(
         "driver_log": tmp / "mujoco.log",
         "controller_log": tmp / "controller.log",
         "contact": tmp / "contact.csv",
+        "recording": tmp / "run.mcap",
+        "recorder_log": tmp / "recorder.log",
     }
     driver = [sys.executable, "-m", "hcc.mujoco", str(scenario), "--namespace", ns]
     driver += ["--lockstep"] if lockstep else ["--realtime"]
@@ -87,19 +92,34 @@ def run_pair(
     driver += ["--contact-csv", str(paths["contact"]), *(extra or [])]
     controller = [str(binary("hcc-controller")), str(scenario), "--namespace", ns]
     controller += controller_extra or []
+    recorder = [str(binary("hcc")), "record", "--namespace", ns, "--file-prefix", prefix]
+    recorder += ["--config", str(scenario), "--out", str(paths["recording"]), "--quiet"]
     try:
-        with started(driver, env, paths["driver_log"]) as d:
-            with started(controller, env, paths["controller_log"]) as c:
-                if on_started is not None:
-                    on_started(ns, prefix, d)
+        with contextlib.ExitStack() as stack:
+            d = stack.enter_context(started(driver, env, paths["driver_log"]))
+            r = stack.enter_context(started(recorder, env, paths["recorder_log"])) if record else None
+            c = stack.enter_context(started(controller, env, paths["controller_log"]))
+            if on_started is not None:
+                on_started(ns, prefix, d)
+            try:
+                rc = d.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                raise AssertionError(
+                    f"the MuJoCo driver did not finish: {paths['driver_log'].read_text()}"
+                ) from None
+            assert rc == 0, paths["driver_log"].read_text()
+            assert c.poll() is None, f"controller exited: {paths['controller_log'].read_text()}"
+            if r is not None:
+                # The controller goes on publishing (peer-lost telemetry): the
+                # recorder stops on Ctrl-C, draining its queues and closing the file.
+                r.send_signal(signal.SIGINT)
                 try:
-                    rc = d.wait(timeout=timeout)
+                    rc = r.wait(timeout=60.0)
                 except subprocess.TimeoutExpired:
                     raise AssertionError(
-                        f"the MuJoCo driver did not finish: {paths['driver_log'].read_text()}"
+                        f"hcc record did not finish: {paths['recorder_log'].read_text()}"
                     ) from None
-                assert rc == 0, paths["driver_log"].read_text()
-                assert c.poll() is None, f"controller exited: {paths['controller_log'].read_text()}"
+                assert rc == 0, paths["recorder_log"].read_text()
     finally:
         remove_ipc_files(prefix)
     return paths

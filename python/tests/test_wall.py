@@ -9,6 +9,11 @@ posture) keep converging in the remaining redundancy.
 The release in the same run: a client (hcc.Client) sets level 1's goal 5 cm
 in front of the wall, to apply at the state of t = 3 s, and the arm leaves the
 wall and comes to it.
+
+Felt without a sensor, in the same run (recorded by ``hcc record``): the
+controller's momentum observer flags the contact when the tool meets the wall
+and clears it after the release, and its wrench estimate F̂ at the TCP agrees
+with MuJoCo's contact force along the wall's normal.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ import numpy as np
 
 from hcc import Client, SetpointAnswer, Telemetry
 
-from conftest import ROOT
+from conftest import ROOT, binary
 from procs import read_csv, run_pair
 
 SCENARIO = ROOT / "config" / "panda-wall.toml"
@@ -79,6 +84,7 @@ def test_wall_force_is_stiffness_times_penetration_and_the_arm_comes_back(
         SCENARIO, tmp_path, lockstep=True, duration=6.0,
         extra=["--scene", str(SCENE)],
         on_started=release_and_collect(list(map(float, free_goal)), telemetry, answers),
+        record=True,
     )
     assert answers and answers[0].accepted(), "the release was not accepted"
     assert answers[0].late == 0, (
@@ -135,9 +141,74 @@ def test_wall_force_is_stiffness_times_penetration_and_the_arm_comes_back(
     assert f_normal[-1] == 0.0
     assert np.linalg.norm(tip_end - free_goal) < 1e-3
 
+    check_contact_estimate(paths, c, normal)
+
     # A client's setpoint, a driver in another language that stops and leaves:
     # the controller's torque path made no system allocation after warm-up.
     log = paths["controller_log"].read_text()
     m = re.search(r"rt system allocations on the torque path after warm-up (\d+)", log)
     assert m is not None, log[-2000:]
     assert m.group(1) == "0", log[-2000:]
+
+
+#: MuJoCo's contact force above which the tool is taken to touch the wall, N.
+TOUCH_N = 0.5
+#: How long after the touch the flag may come (the impact builds up the
+#: estimate within a few observer time constants, 1/K_O = 20 ms by default), s.
+DETECTION_WINDOW_S = 0.05
+#: How long after the tool leaves the wall the flag may stay (the estimate's
+#: decay to the hysteresis' release level), s.
+RELEASE_WINDOW_S = 0.1
+
+
+def check_contact_estimate(
+    paths: dict[str, pathlib.Path], contact: np.ndarray, normal: np.ndarray
+) -> None:
+    """The controller's own view of the wall (from the run's recording) against
+    MuJoCo's: contact flagged when the tool meets the wall and only then, F̂ at
+    the TCP along the wall's normal within 10 % of MuJoCo's contact force."""
+    table = paths["recording"].with_suffix(".csv")
+    subprocess.run(
+        [str(binary("hcc")), "export", str(paths["recording"]), "--csv", str(table)],
+        cwd=ROOT, check=True, capture_output=True,
+    )
+    header, rows = read_csv(table)
+    traj = np.array(rows)
+    col = {name: k for k, name in enumerate(header)}
+    f_cols = sorted((n for n in header if n.startswith("f_ext_")), key=lambda n: int(n[6:]))
+    assert len(f_cols) == 3, f"expected F̂ of the TCP position level, got {f_cols}"
+    t_ctl = traj[:, col["t"]]
+    flagged = traj[:, col["contact"]] > 0.5
+    f_hat = traj[:, [col[n] for n in f_cols]]
+    # Both tables are on the driver's clock, t = k·T: match rows by time.
+    t_sim, f_sim = contact[:, 0], contact[:, 4]
+    f_true = np.interp(t_ctl, t_sim, f_sim)
+    touching = f_true > TOUCH_N
+    assert touching.any(), "the tool never touched the wall"
+    t_touch = t_ctl[np.argmax(touching)]
+    t_leave = t_ctl[np.flatnonzero(touching)[-1]]
+    assert flagged.any(), "the controller never flagged the contact"
+    t_flag = t_ctl[np.argmax(flagged)]
+    t_clear = t_ctl[np.flatnonzero(flagged)[-1]]
+    # The estimate along the normal into the wall: the wall pushes the robot
+    # along +normal, so F̂·n is the pressing force.
+    f_hat_n = f_hat @ normal
+    pressed = (t_ctl >= RELEASE_SEQ * 1e-3 - 1.0) & (t_ctl < RELEASE_SEQ * 1e-3 - 0.01)
+    rel = np.abs(f_hat_n[pressed] - f_true[pressed]) / f_true[pressed]
+    free = ~touching & ((t_ctl < t_touch) | (t_ctl > t_leave + RELEASE_WINDOW_S))
+    tau_cols = [col[n] for n in header if n.startswith("tau_ext_")]
+    free_peak = np.abs(traj[free][:, tau_cols]).max(axis=0)
+    print(
+        f"contact: tool on the wall {t_touch:.3f}–{t_leave:.3f} s, flagged {t_flag:.3f}–"
+        f"{t_clear:.3f} s; pressed: F̂·n {f_hat_n[pressed][-1]:.3f} N vs MuJoCo "
+        f"{f_true[pressed][-1]:.3f} N (largest relative difference over the last second "
+        f"{rel.max():.2e}); MuJoCo's force when the flag cleared {f_true[t_ctl == t_clear][0]:.3f} N; "
+        f"largest |r| in free motion {[float(f'{x:.2e}') for x in free_peak]} N·m"
+    )
+    assert 0.0 <= t_flag - t_touch <= DETECTION_WINDOW_S
+    # The flag clears as the pressing force fades (below the release level
+    # before the tool has quite left), never later than the window after.
+    assert t_clear <= t_leave + RELEASE_WINDOW_S
+    assert f_true[t_ctl == t_clear][0] < 0.25 * f_true[pressed][-1]
+    assert not flagged[free].any(), "contact flagged in free motion"
+    assert rel.max() < 0.10

@@ -164,6 +164,95 @@ fn a_push_at_the_tcp_is_estimated_and_flagged() {
         PUSH_START + 5.0 / k_o,
         end,
     );
+    push_plot(&samples, &reference, 15.0);
+}
+
+/// With `HCC_CONTACT_PLOTS=<dir>` set: r against the injected Jᵀ F for the
+/// joints the push loads most, F̂_y against F, and the contact flag, around
+/// the push, as `<dir>/contact-push.png` (the figure of docs/contact.md).
+fn push_plot(samples: &[Sample], reference: &[Vec<f64>], force: f64) {
+    let Some(dir) = std::env::var_os("HCC_CONTACT_PLOTS") else {
+        return;
+    };
+    let dir = PathBuf::from(dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let shown: Vec<usize> = (0..samples.len())
+        .filter(|&i| (PUSH_START - 0.2..PUSH_START + PUSH_S + 0.3).contains(&samples[i].t))
+        .collect();
+    let t: Vec<f64> = shown.iter().map(|&i| samples[i].t).collect();
+    let peak = |k: usize| reference.iter().map(|r| r[k].abs()).fold(0.0, f64::max);
+    let mut joints: Vec<usize> = (0..reference[0].len()).collect();
+    joints.sort_by(|&a, &b| peak(b).total_cmp(&peak(a)));
+    // The two most loaded joints whose curves do not lie on each other.
+    let mut chosen: Vec<usize> = Vec::new();
+    for &k in &joints {
+        if chosen.len() < 2
+            && chosen
+                .iter()
+                .all(|&c| (peak(c) - peak(k)).abs() > 0.05 * peak(c))
+        {
+            chosen.push(k);
+        }
+    }
+    let mut torque = Vec::new();
+    for &k in &chosen {
+        torque.push((
+            format!("r_{} (observer)", k + 1),
+            shown.iter().map(|&i| samples[i].r[k]).collect(),
+        ));
+        torque.push((
+            format!("(J^T F)_{} (injected)", k + 1),
+            shown.iter().map(|&i| reference[i][k]).collect(),
+        ));
+    }
+    let applied: Vec<f64> = shown
+        .iter()
+        .map(|&i| {
+            let t = samples[i].t;
+            if (PUSH_START..PUSH_START + PUSH_S).contains(&t) {
+                force
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let panels = [
+        hcc_report::TimePanel {
+            title: "External joint torque: the momentum observer's r against the injected J^T F"
+                .into(),
+            y_label: "tau_ext [Nm]".into(),
+            series: torque,
+        },
+        hcc_report::TimePanel {
+            title: "Force at the TCP along y: the estimate F_hat = pinv(J^T) r against F".into(),
+            y_label: "F_y [N]".into(),
+            series: vec![
+                (
+                    "F_hat_y (estimate)".into(),
+                    shown.iter().map(|&i| samples[i].f[1]).collect(),
+                ),
+                ("F_y (injected)".into(), applied),
+            ],
+        },
+        hcc_report::TimePanel {
+            title: "Contact flag (default thresholds)".into(),
+            y_label: "contact".into(),
+            series: vec![(
+                "flag".into(),
+                shown
+                    .iter()
+                    .map(|&i| f64::from(u8::from(samples[i].contact)))
+                    .collect(),
+            )],
+        },
+    ];
+    hcc_report::plot_time_series(
+        &dir.join("contact-push.png"),
+        "panda-pose-posture: 15 N at the TCP for 0.5 s",
+        &t,
+        &panels,
+    )
+    .unwrap();
 }
 
 /// F̂ at the TCP (the scenario's first level: its position, 3 rows) within

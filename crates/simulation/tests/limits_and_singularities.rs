@@ -51,6 +51,10 @@ struct Sample {
     tau_step: f64,
     /// The command was the safe command (the law failed numerically).
     safe_hold: bool,
+    /// The contact detection flagged a contact (`[contact]` defaults).
+    contact: bool,
+    /// r, the momentum observer's estimate of the external joint torque (N·m).
+    r: Vec<f64>,
 }
 
 /// The log of a run of the control cycle (the daemon's), per cycle.
@@ -106,6 +110,8 @@ impl Logged {
             twin_tau,
             twin_rate,
             conditioning: out.conditioning.clone(),
+            contact: v.cycle.in_contact(),
+            r: v.cycle.external_torque().to_vec(),
         });
     }
 }
@@ -539,6 +545,10 @@ struct GoalRun {
     beyond: f64,
     /// Why it is not settled at the end ([`Unsettled`]), if it is not.
     class: Option<Unsettled>,
+    /// Cycles the contact detection flagged (free motion: none expected).
+    contact_cycles: usize,
+    /// Largest |r_k| per joint over the run (N·m).
+    r_peak: Vec<f64>,
 }
 
 /// Seeded random Panda goals (`config/panda-pose-posture.toml` with its torque
@@ -558,7 +568,9 @@ struct GoalRun {
 /// (the Franka's torque-discontinuity rule, through the shipped torque
 /// filter). Printed: when the goals settle (at rest, max |q̇| < 0.01 rad/s, or
 /// converged for good) — median, p95, max and the share by 3, 6, 12, 20 s —
-/// with the classes of those not settled. Asserted with the defaults (30 s
+/// with the classes of those not settled, and the contact observer's largest
+/// |r| per joint (free motion: no goal may be flagged as a contact with the
+/// `[contact]` defaults). Asserted with the defaults (30 s
 /// per goal): every goal settled, ≥ 87.5 % by 12 s (the target is 95 %), none faster than 0.05 rad/s
 /// at 12 s.
 #[test]
@@ -638,6 +650,13 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             tau_step: log.iter().skip(1).map(|s| s.tau_step).fold(0.0, f64::max),
             beyond,
             class: settle.is_infinite().then(|| classify(&log, seconds, eps)),
+            contact_cycles: log.iter().filter(|s| s.contact).count(),
+            r_peak: log.iter().fold(vec![0.0; joints.len()], |mut m, s| {
+                for (m, r) in m.iter_mut().zip(&s.r) {
+                    *m = m.max(r.abs());
+                }
+                m
+            }),
         };
         if detail && (run.settle > 12.0 || run.speed_ratio > 0.9) {
             let last = log.last().unwrap();
@@ -678,6 +697,11 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             r.tau_step <= 1.0 + 1e-9,
             "goal {g}: a torque step of {} N·m",
             r.tau_step
+        );
+        assert_eq!(
+            r.contact_cycles, 0,
+            "goal {g}: free motion flagged as a contact (largest |r| {:.3?} N·m)",
+            r.r_peak
         );
     }
     if seconds >= 30.0 && only.is_none() && !overridden {
@@ -785,6 +809,14 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         classes.entry(r.1).or_insert_with(Vec::new).push(r.0);
     }
     println!("sweep: not settled within {seconds} s, by class (goals): {classes:?}");
+    let joints = runs.first().map_or(0, |r| r.r_peak.len());
+    let r_peak: Vec<f64> = (0..joints)
+        .map(|k| runs.iter().map(|r| r.r_peak[k]).fold(0.0, f64::max))
+        .collect();
+    println!(
+        "sweep: contact observer in free motion: largest |r| per joint {r_peak:.1e?} N·m; goals flagged as a contact: {}",
+        runs.iter().filter(|r| r.contact_cycles > 0).count()
+    );
 }
 
 /// `SWEEP_SAFETY=field=value,…`: the `[safety]` fields of a comparison run (numeric
