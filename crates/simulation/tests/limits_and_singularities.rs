@@ -810,11 +810,13 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
     }
     println!("sweep: not settled within {seconds} s, by class (goals): {classes:?}");
     let joints = runs.first().map_or(0, |r| r.r_peak.len());
-    let r_peak: Vec<f64> = (0..joints)
+    let r_peak: Vec<String> = (0..joints)
         .map(|k| runs.iter().map(|r| r.r_peak[k]).fold(0.0, f64::max))
+        .map(|x| format!("{x:.1e}"))
         .collect();
     println!(
-        "sweep: contact observer in free motion: largest |r| per joint {r_peak:.1e?} N·m; goals flagged as a contact: {}",
+        "sweep: contact observer in free motion: largest |r| per joint [{}] N·m; goals flagged as a contact: {}",
+        r_peak.join(", "),
         runs.iter().filter(|r| r.contact_cycles > 0).count()
     );
 }
