@@ -57,6 +57,13 @@ struct Sample {
     r: Vec<f64>,
 }
 
+/// `SWEEP_TRACE=t0,t1`: print every cycle in [t0, t1) (energy terms, fades, powers).
+fn trace_window() -> Option<(f64, f64)> {
+    let v = std::env::var("SWEEP_TRACE").ok()?;
+    let (a, b) = v.split_once(',')?;
+    Some((a.parse().ok()?, b.parse().ok()?))
+}
+
 /// The log of a run of the control cycle (the daemon's), per cycle.
 struct Logged {
     period_s: f64,
@@ -66,6 +73,8 @@ struct Logged {
     prev_twin: DVector<f64>,
     /// The previous command's torque (none before the first).
     prev_tau: Option<Vec<f64>>,
+    /// [`trace_window`], read once.
+    trace: Option<(f64, f64)>,
     log: Vec<Sample>,
 }
 
@@ -90,6 +99,30 @@ impl Logged {
                 .zip(tau)
                 .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()))
         });
+        if let Some((t0, t1)) = self.trace
+            && (t0..t1).contains(&v.t)
+        {
+            let filter_power: f64 = tau
+                .iter()
+                .zip(out.tau.iter())
+                .zip(qd)
+                .map(|((c, l), w)| (c - l) * w)
+                .sum();
+            println!(
+                "trace t {:.3} E {:.6} tank {:.4} V {:.4?} fade {:.4?} guard {:.5} P_safety {:.4} P_mu {:.2e} P_filter {:.4} safety_tau {:.3?} qd {:.4?}",
+                v.t,
+                out.safety.energy,
+                out.safety.tank,
+                out.potential,
+                out.fade,
+                out.safety.guard_potential,
+                out.safety.power,
+                out.p_mu,
+                filter_power,
+                out.safety.tau.as_slice(),
+                qd
+            );
+        }
         self.prev_tau = Some(tau.to_vec());
         self.log.push(Sample {
             safe_hold: v.cycle.command().mode == hcc_msgs::CommandMode::SafeHold.code(),
@@ -151,6 +184,7 @@ fn run_logged(
         twin,
         prev_twin: DVector::zeros(n),
         prev_tau: None,
+        trace: trace_window(),
         log: Vec::new(),
     };
     run_observed(&scenario, &mut |v| {
@@ -560,8 +594,10 @@ struct GoalRun {
 /// limits_and_singularities sweep -- --nocapture` runs the full sweep of
 /// docs/limits-and-singularities.md. `SWEEP_DETAIL` prints every goal not
 /// settled by 12 s and every one above 0.9 of a velocity limit; `SWEEP_ONLY=g`
-/// runs goal g alone and prints its course every 0.5 s; `SWEEP_SAFETY`
-/// changes `[safety]` fields for a comparison, e.g. `velocity_damping=50`.
+/// runs goal g alone and prints its course every 0.5 s (`SWEEP_TRACE=t0,t1`:
+/// every cycle in [t0, t1), with the storage, the fades and the powers);
+/// `SWEEP_SAFETY` changes `[safety]` fields (and `torque_rate_limit`, 0: off)
+/// for a comparison, e.g. `velocity_damping=50`.
 ///
 /// Asserted on every goal: no NaN, no joint beyond its position limits, every
 /// joint speed ≤ 0.95 × its URDF velocity limit, every torque step ≤ 1 N·m
@@ -618,8 +654,9 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         if only.is_some() {
             for smp in log.iter().step_by(500) {
                 println!(
-                    "goal {g} t {:5.1}: |q̇| {:.3?} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
+                    "goal {g} t {:5.1}: E {:.6} J |q̇| {:.3?} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
                     smp.t,
+                    smp.energy,
                     smp.qd.iter().map(|x| x.abs()).collect::<Vec<_>>(),
                     smp.errors,
                     smp.conditioning
