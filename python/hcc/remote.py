@@ -38,6 +38,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 import zenoh
 
+from .msgs import TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST
+
 #: Polling interval of the waits, s.
 POLL_S: float = 0.001
 
@@ -378,16 +380,16 @@ class RemoteTelemetry:
         return self.level_list[level].singular
 
     def peer_lost(self) -> bool:
-        return bool(self.flags & (1 << 16))
+        return bool(self.flags & TELEMETRY_FLAG_PEER_LOST)
 
     def tau_ext_list(self) -> list[float]:
         return list(self.tau_ext)
 
     def contact(self) -> bool:
-        return bool(self.flags & (1 << 17))
+        return bool(self.flags & TELEMETRY_FLAG_CONTACT)
 
     def contact_hold(self) -> bool:
-        return bool(self.flags & (1 << 18))
+        return bool(self.flags & TELEMETRY_FLAG_CONTACT_HOLD)
 
     def answer_for(self, client_id: int) -> Answer | None:
         return next((a for a in self.answers if a.client_id == client_id), None)

@@ -239,6 +239,19 @@ impl ControlCycle {
         self.reaction.held()
     }
 
+    /// The telemetry flags of the contact watch: a contact flagged, a hold
+    /// latched.
+    fn contact_flags(&self) -> u32 {
+        let mut flags = 0;
+        if self.contact.in_contact() {
+            flags |= TELEMETRY_FLAG_CONTACT;
+        }
+        if self.reaction.held() {
+            flags |= TELEMETRY_FLAG_CONTACT_HOLD;
+        }
+        flags
+    }
+
     /// Whether the peer is lost (a stale timeout since the last state).
     pub fn peer_lost(&self) -> bool {
         self.peer_lost
@@ -410,16 +423,11 @@ impl ControlCycle {
             self.counters.telemetry.peer_lost_events += 1;
         }
         self.telemetry_seq += 1;
+        let flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST | self.contact_flags();
         let t = &mut *self.telemetry;
         t.header.seq = self.telemetry_seq;
         t.header.stamp_ns = now_ns;
-        t.flags = self.command.flags | TELEMETRY_FLAG_PEER_LOST;
-        if self.contact.in_contact() {
-            t.flags |= TELEMETRY_FLAG_CONTACT;
-        }
-        if self.reaction.held() {
-            t.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
-        }
+        t.flags = flags;
         t.counters = self.counters.telemetry;
         new_loss
     }
@@ -577,18 +585,13 @@ impl ControlCycle {
     fn fill_telemetry_of(&mut self, state_seq: u64, mode: CommandMode, fresh: bool) {
         let n = self.n;
         self.telemetry_seq += 1;
+        let flags = self.command.flags | self.contact_flags();
         let t = &mut *self.telemetry;
         t.header.seq = self.telemetry_seq;
         t.state_seq = state_seq;
         t.command_seq = self.command_seq;
         t.mode = mode.code();
-        t.flags = self.command.flags;
-        if self.contact.in_contact() {
-            t.flags |= TELEMETRY_FLAG_CONTACT;
-        }
-        if self.reaction.held() {
-            t.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
-        }
+        t.flags = flags;
         t.tau[..n].copy_from_slice(&self.command.tau[..n]);
         t.tau_ext[..n].copy_from_slice(self.contact.residual());
         t.counters = self.counters.telemetry;
