@@ -34,6 +34,9 @@ pub(crate) fn safety_spec(
         null_space_damping: s.null_space_damping.unwrap_or(d.null_space_damping),
         conflict_fade_ratio: s.conflict_fade_ratio.unwrap_or(d.conflict_fade_ratio),
         fade_tank_max: s.fade_tank_max.unwrap_or(d.fade_tank_max),
+        passivity_damping: s.passivity_damping.unwrap_or(d.passivity_damping),
+        passivity_budget: s.passivity_budget.unwrap_or(d.passivity_budget),
+        passivity_damping_rate: s.passivity_damping_rate.unwrap_or(d.passivity_damping_rate),
         control_period_s: 1.0 / control_rate_hz,
         torque_rate_limit,
     };

@@ -394,11 +394,11 @@ pub struct SafetySection {
     pub spring_saturation: Option<bool>,
     /// The velocity governor (the springs stop driving a joint near its velocity limit).
     pub velocity_governor: Option<bool>,
-    /// Velocity-limit joint damping rate, 1/s (default 100; 0: off).
     /// The velocity barrier (default true).
     pub velocity_barrier: Option<bool>,
     /// The velocity barrier's rate α, 1/s (default 20).
     pub velocity_barrier_rate: Option<f64>,
+    /// Velocity-limit joint damping rate, 1/s (default 100; 0: off).
     pub velocity_damping: Option<f64>,
     /// Null-space damping rate of faded levels, 1/s.
     pub null_space_damping: Option<f64>,
@@ -407,4 +407,11 @@ pub struct SafetySection {
     pub conflict_fade_ratio: Option<f64>,
     /// Capacity of the energy tank that pays fade-ins, J.
     pub fade_tank_max: Option<f64>,
+    /// The passivity damping (default true).
+    pub passivity_damping: Option<bool>,
+    /// Energy the hierarchy may feed into the arm after a goal or gains change
+    /// before the passivity damping acts, J (default 1).
+    pub passivity_budget: Option<f64>,
+    /// The passivity damping's largest rate, 1/s (default 50).
+    pub passivity_damping_rate: Option<f64>,
 }

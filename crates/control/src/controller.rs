@@ -122,6 +122,8 @@ struct Level {
     xdot: DVector<f64>,
     f: DVector<f64>,
     potential: f64,
+    /// (∂V_i/∂x_i) J_i q̇: the rate of V_i the arm's motion makes (not the goal's).
+    spring_rate: f64,
     // decomposition
     z: DMatrix<f64>,
     zdot: DMatrix<f64>,
@@ -223,6 +225,7 @@ impl Level {
             err: DVector::zeros(m),
             grad: DVector::zeros(m),
             xdot: DVector::zeros(m),
+            spring_rate: 0.0,
             f: DVector::zeros(m),
             potential: 0.0,
             z: DMatrix::zeros(d, n),
@@ -707,6 +710,7 @@ impl Controller {
             l.goal.as_mut_slice().copy_from_slice(goal);
             l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
             self.safety.release_conflict(i);
+            self.safety.refill_passivity_budget();
         }
         Ok(())
     }
@@ -744,6 +748,7 @@ impl Controller {
             l.damping.copy_from(d);
         }
         self.safety.set_spring_radius(i, &l.stiffness, &l.damping);
+        self.safety.refill_passivity_budget();
         Ok(())
     }
 
@@ -861,8 +866,9 @@ impl Controller {
         self.out.safety.spring_saturated_cycles += u64::from(self.out.safety.spring_saturated);
         self.level_torques(qd);
         self.coriolis_cancellation(qd)?;
-        // Safety layer: null-space damping of faded levels, joint position and
-        // velocity limits (crate::safety); zero and not added where nothing acts.
+        // Safety layer: null-space damping of faded levels, the passivity
+        // damping, joint position and velocity limits (crate::safety); zero and
+        // not added where nothing acts.
         self.safety_torque(q, qd);
         // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
         copy(&mut self.out.tau, &self.out.tau_mu);
@@ -956,9 +962,38 @@ impl Controller {
         }
     }
 
+    /// The power the hierarchy's torques (τ_i of every level, τ_μ) put into the
+    /// storage E = ½ q̇ᵀ M q̇ + Σ β_i V_i through the arm's motion:
+    /// q̇ᵀ (Σ τ_i + τ_μ) + Σ β_i (∂V_i/∂x_i) J_i q̇ (the dampers' dissipation
+    /// included, a moving goal's work on the springs not). In free motion it is
+    /// ≤ 0 once the levels above each level have converged (Sec. IV); before that
+    /// the projections of eqs. (20), (21) can feed energy in.
+    fn hierarchy_power(&self, qd: &DVector<f64>) -> f64 {
+        let mut p = self.out.tau_mu.dot(qd);
+        for (i, l) in self.levels.iter().enumerate() {
+            p += self.out.tau_level[i].dot(qd) + self.out.fade[i] * l.spring_rate;
+        }
+        if self.spec.form == Form::KinematicProjector {
+            // The comparison law's C q̇: q̇ᵀ C q̇ = ½ q̇ᵀ Ṁ q̇.
+            let n = self.n;
+            let mut s = 0.0;
+            for a in 0..n {
+                for b in 0..n {
+                    s += qd[a] * self.mdot[(a, b)] * qd[b];
+                }
+            }
+            p += 0.5 * s;
+        }
+        p
+    }
+
     /// The torque of the safety layer (crate::safety) into `out.safety`.
     fn safety_torque(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
+        let hierarchy_power = self.hierarchy_power(qd);
+        let goal_moving = self.levels.iter().any(|l| l.goal_moving);
         let terms = crate::safety::CycleTerms {
+            hierarchy_power,
+            goal_moving,
             q,
             qd,
             m: &self.data.m,
@@ -1319,6 +1354,7 @@ impl Controller {
             l.grad *= kappa;
         }
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
+        l.spring_rate = l.grad.dot(&l.xdot);
         if l.goal_moving {
             // A moving equilibrium: damp the velocity relative to it.
             l.xdot -= &l.goal_velocity;

@@ -52,14 +52,42 @@
 //! −c_i (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≤ 0 — also with the damped inverse (G + δI)⁻¹ ≤ G⁺
 //! that is used where G is singular, since ẋᵀ G⁺ ẋ ≤ q̇ᵀ M q̇ for ẋ = J_aug q̇.
 //!
+//! **Passivity damping.** The paper's law is passive only conditionally (Sec. IV,
+//! Proposition 1): level i's projected spring–damper (eqs. 20, 21) can feed energy
+//! into the arm while the levels above it still move, and stops doing so once they
+//! have converged. In free motion they do; held at a joint limit (the guard, or an
+//! end stop) level 1 cannot converge, and the exchange can keep an oscillation going
+//! for good — the storage E rising in every swing although every damper dissipates.
+//! With the hierarchy's power into E
+//!
+//! P_h = q̇ᵀ (Σ_i τ_i + τ_μ) + Σ_i β_i (∂V_i/∂x_i) J_i q̇
+//!
+//! (the dampers' dissipation included; a moving goal's work left out, and while a
+//! goal moves nothing is counted), the energy the hierarchy may feed in is
+//! budgeted: after a goal or gains change (and once a moving goal stands) the
+//! budget is `passivity_budget` plus [`PASSIVITY_TRANSIENT_SHARE`] of E — the
+//! sequential convergence of Sec. IV feeds energy while it lasts (the paper's
+//! simulations 9 % and 21 % of their E, within 0.25 s) — and that share decays
+//! with [`PASSIVITY_TRANSIENT_TIME`]. Each cycle with P_h > 0 pays P_h T from it.
+//! As the last half of `passivity_budget` ([`PASSIVITY_ONSET`]) runs out, a
+//! growing share w P_h (w the smoothstep of the spent fraction: no torque jump)
+//! is damped out instead — first in the null space of level 1 with the
+//! dynamically consistent projector, −α (M q̇ − J_1ᵀ G⁻¹ J_1 q̇), then, as far as
+//! the motion is level 1's own, over the whole arm, −α' M q̇; α, α' ≤
+//! `passivity_damping_rate`. Once the budget is spent, E no longer grows but by
+//! what the rate cap leaves; the equilibria are the law's. A regular hierarchy
+//! (P_h ≤ 0, or within the budget) is untouched bit for bit.
+//!
 //! **Joint-limit guard.** A dissipative safety layer below the hierarchy (not a task of
 //! it): within `joint_limit_margin` of a URDF position limit, with penetration
 //! p = q − (upper − margin) (resp. (lower + margin) − q) ≥ 0, the joint gets the
 //! spring torque k p² (k = torque / (margin/2)², `torque` = `joint_limit_torque` or the
 //! URDF effort limit, i.e. the effort limit at half the margin and four times it at the
-//! limit) and the damping −s(p/margin) · min(2ζ √(2 k margin · m_k), m_k / T) q̇ with s
-//! the smoothstep, m_k = 1/(M⁻¹)_kk the joint's effective inertia and T the control
-//! period (a damping above m_k / T is more than the sampled loop carries, crate::rate). Both vanish with
+//! limit) and the damping −s(p/(0.1 margin)) · min(2ζ √(2 k p · m_k), m_k / T) q̇ — the
+//! damping ratio ζ against the spring's local stiffness 2 k p, brought in over the
+//! first tenth of the margin ([`GUARD_RAMP`]) — with s the smoothstep,
+//! m_k = 1/(M⁻¹)_kk the joint's effective inertia and T the control period (a damping
+//! above m_k / T is more than the sampled loop carries, crate::rate). Both vanish with
 //! their first derivative at p = 0: no torque jump and no torque-rate jump at
 //! activation. The spring has the potential k p³/3 (in [`SafetyOutput::guard_potential`]).
 //!
@@ -138,7 +166,7 @@ pub struct SafetySpec {
     /// Guard spring torque at half the margin (N·m or N); `None`: the URDF effort
     /// limit, or 100 where the URDF gives none.
     pub joint_limit_torque: Option<f64>,
-    /// Damping ratio ζ of the guard at full penetration, ≥ 0.
+    /// Damping ratio ζ of the guard (against its spring's local stiffness), ≥ 0.
     pub joint_limit_damping_ratio: f64,
     /// Fraction f_on of the URDF velocity limit at which the velocity governor
     /// (and the velocity damping) comes in, in (0, 1).
@@ -171,6 +199,16 @@ pub struct SafetySpec {
     pub conflict_fade_ratio: f64,
     /// Capacity of the energy tank that pays fade-ins (J), ≥ 0.
     pub fade_tank_max: f64,
+    /// The passivity damping: once the hierarchy has fed `passivity_budget`
+    /// into the storage E since the last goal or gains change, what it feeds in
+    /// more is damped out in the null space of level 1 (module docs).
+    pub passivity_damping: bool,
+    /// Energy (J) the hierarchy may feed into E after a goal or gains change
+    /// before the passivity damping acts (on top of a decaying share of E for
+    /// the transient, module docs), ≥ 0.
+    pub passivity_budget: f64,
+    /// The passivity damping's largest rate (1/s), > 0; rate · T ≤ 1.
+    pub passivity_damping_rate: f64,
     /// Control period (s), for the energy the tank collects per cycle, > 0.
     pub control_period_s: f64,
     /// The rate limit R (N·m/s per joint) of the torque filter that follows the
@@ -198,6 +236,9 @@ impl Default for SafetySpec {
             null_space_damping: 20.0,
             conflict_fade_ratio: 1e-5,
             fade_tank_max: 5.0,
+            passivity_damping: true,
+            passivity_budget: 1.0,
+            passivity_damping_rate: 50.0,
             control_period_s: 1e-3,
             torque_rate_limit: None,
         }
@@ -268,6 +309,18 @@ impl SafetySpec {
         if !nonneg(self.fade_tank_max) {
             return bad("fade_tank_max", "must be non-negative");
         }
+        if !nonneg(self.passivity_budget) {
+            return bad("passivity_budget", "must be non-negative");
+        }
+        if !pos(self.passivity_damping_rate) {
+            return bad("passivity_damping_rate", "must be positive");
+        }
+        if self.passivity_damping_rate * t > 1.0 {
+            return bad(
+                "passivity_damping_rate",
+                "times the control period must be at most 1 (the rate the loop carries)",
+            );
+        }
         if !pos(self.control_period_s) {
             return bad("control_period_s", "must be positive");
         }
@@ -283,7 +336,8 @@ impl SafetySpec {
 /// What the safety layer did in the last cycle (part of [`crate::StepOutput`]).
 #[derive(Clone, Debug)]
 pub struct SafetyOutput {
-    /// τ_safety: null-space damping + joint-limit guard + velocity damping, added to τ.
+    /// τ_safety: null-space damping + passivity damping + joint-limit guard +
+    /// velocity damping, added to τ.
     pub tau: DVector<f64>,
     /// Any of its parts acted in this cycle (else `tau` is zero and τ untouched).
     pub active: bool,
@@ -322,6 +376,14 @@ pub struct SafetyOutput {
     pub fade_in_limited_cycles: u64,
     /// Energy in the tank that pays fade-ins (J).
     pub tank: f64,
+    /// The hierarchy's power into E (W; module docs, "Passivity damping").
+    pub hierarchy_power: f64,
+    /// What is left of the passivity budget (J).
+    pub passivity_budget: f64,
+    /// The passivity damping acted in this cycle.
+    pub passivity_active: bool,
+    /// Cycles in which the passivity damping acted, since construction.
+    pub passivity_cycles: u64,
     /// Potential of the guard springs, Σ k p³/3 (J).
     pub guard_potential: f64,
     /// E = ½ q̇ᵀ M q̇ + V_1 + Σ β_i V_i + guard potential (J; module docs).
@@ -351,6 +413,10 @@ impl SafetyOutput {
             velocity_limit_cycles: 0,
             fade_in_limited_cycles: 0,
             tank: 0.0,
+            hierarchy_power: 0.0,
+            passivity_budget: 0.0,
+            passivity_active: false,
+            passivity_cycles: 0,
             guard_potential: 0.0,
             energy: 0.0,
             power: 0.0,
@@ -360,6 +426,10 @@ impl SafetyOutput {
 
 /// The state the controller hands the safety layer each cycle.
 pub(crate) struct CycleTerms<'a> {
+    /// The hierarchy's power into E (W; `Controller::hierarchy_power`).
+    pub hierarchy_power: f64,
+    /// A level's goal moves (its work on the arm is not the law's).
+    pub goal_moving: bool,
     pub q: &'a DVector<f64>,
     pub qd: &'a DVector<f64>,
     /// M and its Cholesky factor.
@@ -405,6 +475,9 @@ pub(crate) struct Safety {
     /// Per level: faded for a conflict, not yet released.
     conflict_latched: Vec<bool>,
     tank: f64,
+    /// What the hierarchy may still feed into E (J; NaN: refilled, to be set
+    /// from this cycle's E).
+    budget: f64,
     /// Power dissipated in the last cycle that goes to the tank (W).
     fill_power: f64,
     xdot: DVector<f64>,
@@ -421,6 +494,22 @@ pub const CONFLICT_RELEASE_FACTOR: f64 = 5.0;
 /// Fastest fall of the velocity governor's gain (1/s): from 1 to 0 in at
 /// least 0.2 s.
 pub const GOVERNOR_RELEASE_RATE: f64 = 5.0;
+
+/// The share of the joint-limit margin over which the guard's damping comes in.
+pub const GUARD_RAMP: f64 = 0.1;
+
+/// The share of the storage E at a goal change that the hierarchy may feed in
+/// while it converges level by level (Sec. IV) — on top of `passivity_budget`,
+/// decaying with [`PASSIVITY_TRANSIENT_TIME`]. The paper's two simulations feed
+/// 9 % and 21 % of theirs within 0.25 s.
+pub const PASSIVITY_TRANSIENT_SHARE: f64 = 0.5;
+
+/// Time constant (s) of the decay of that allowance.
+pub const PASSIVITY_TRANSIENT_TIME: f64 = 0.5;
+
+/// The share of `passivity_budget` over which the passivity damping comes in
+/// (from nothing at this much left to all of the excess at none).
+pub const PASSIVITY_ONSET: f64 = 0.5;
 
 /// Fastest rise of an effective fade β_i (1/s).
 pub const FADE_IN_RATE: f64 = 1.0;
@@ -504,6 +593,7 @@ impl Safety {
             governor_prev: 0.0,
             conflict_latched: vec![false; r],
             tank: 0.0,
+            budget: f64::NAN,
             fill_power: 0.0,
             xdot: DVector::zeros(ktop),
             y: DVector::zeros(ktop),
@@ -606,6 +696,13 @@ impl Safety {
         self.conflict_latched.fill(false);
         self.tank = 0.0;
         self.fill_power = 0.0;
+        self.refill_passivity_budget();
+    }
+
+    /// A goal or gains changed: the hierarchy may feed `passivity_budget` into E
+    /// again before the passivity damping acts.
+    pub(crate) fn refill_passivity_budget(&mut self) {
+        self.budget = f64::NAN;
     }
 
     /// The effective β_i of the last cycle (1 before the first).
@@ -713,16 +810,26 @@ impl Safety {
         for i in 1..c.potential.len() {
             potential += c.fade[i] * c.potential[i];
         }
+        out.hierarchy_power = c.hierarchy_power;
+        out.passivity_active = false;
         if self.spec.enabled {
             self.null_space_damping(c, out);
+            self.passivity(c, kinetic + potential, out);
             self.joint_limits(c, out);
             out.active = out.null_space_damping_active
+                || out.passivity_active
                 || out.joint_limit_active
                 || out.velocity_limit_active;
             out.power = out.tau.dot(c.qd);
             // The governor scaled a spring (in the levels' F_i, not in τ_safety).
             out.velocity_limit_active |= out.spring_scale.iter().any(|&s| s < 1.0);
         }
+        out.passivity_cycles += u64::from(out.passivity_active);
+        out.passivity_budget = if self.budget.is_nan() {
+            self.spec.passivity_budget
+        } else {
+            self.budget
+        };
         out.joint_limit_cycles += u64::from(out.joint_limit_active);
         out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
         out.energy = kinetic + potential + out.guard_potential;
@@ -730,12 +837,10 @@ impl Safety {
 
     /// τ_N,i = −c_i (M q̇ − J_augᵀ G⁻¹ J_aug q̇) for every faded level i ≥ 2.
     fn null_space_damping(&mut self, c: &CycleTerms, out: &mut SafetyOutput) {
-        let n = c.qd.len();
-        if self.spec.null_space_damping == 0.0 {
+        let rate = self.spec.null_space_damping;
+        if rate == 0.0 {
             return;
         }
-        let ktop = c.jtop.nrows();
-        let mut xdot_done = false;
         for i in 1..c.fade.len() {
             // Faded, or singular itself (Λ_i, eq. 18): the motion it no longer controls.
             let own = crate::fade::fade_factor(c.conditioning[i], c.singular_ratio);
@@ -743,44 +848,140 @@ impl Safety {
             if beta >= 1.0 {
                 continue;
             }
-            if !xdot_done {
-                gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
-                xdot_done = true;
-            }
-            let k = self.k_above[i].min(ktop);
-            let g = &mut self.g[i];
-            for a in 0..k {
-                for b in 0..k {
-                    g[(a, b)] = c.w[(a, b)];
-                }
-            }
-            damped_spd_inverse_only(
-                g,
-                &mut self.g_inv[i],
-                &mut self.spd[i],
-                c.singular_ratio,
-                1e-12,
-            );
-            for a in 0..k {
-                let mut s = 0.0;
-                for b in 0..k {
-                    s += self.g_inv[i][(a, b)] * self.xdot[b];
-                }
-                self.y[a] = s;
-            }
-            let ci = (1.0 - beta) * self.spec.null_space_damping;
-            let mut p = 0.0;
-            for col in 0..n {
-                let mut jty = 0.0;
-                for a in 0..k {
-                    jty += c.jtop[(a, col)] * self.y[a];
-                }
-                let t = -ci * (self.mqd[col] - jty);
-                out.tau[col] += t;
-                p -= t * c.qd[col];
-            }
-            self.fill_power += p.max(0.0);
+            let k = self.project_above(i, c);
+            let ci = (1.0 - beta) * rate;
+            let p = self.add_null_space_damping(k, ci, c, out);
+            self.fill_power += p;
             out.null_space_damping_active = true;
+        }
+    }
+
+    /// y = G⁻¹ J_aug q̇ (damped inverse where G is singular) for the levels
+    /// above level `i` into `self.y`; returns their rows k.
+    fn project_above(&mut self, i: usize, c: &CycleTerms) -> usize {
+        let ktop = c.jtop.nrows();
+        let k = self.k_above[i].min(ktop);
+        gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+        let g = &mut self.g[i];
+        for a in 0..k {
+            for b in 0..k {
+                g[(a, b)] = c.w[(a, b)];
+            }
+        }
+        damped_spd_inverse_only(
+            g,
+            &mut self.g_inv[i],
+            &mut self.spd[i],
+            c.singular_ratio,
+            1e-12,
+        );
+        for a in 0..k {
+            let mut s = 0.0;
+            for b in 0..k {
+                s += self.g_inv[i][(a, b)] * self.xdot[b];
+            }
+            self.y[a] = s;
+        }
+        k
+    }
+
+    /// Adds −rate (M q̇ − J_augᵀ y) over the top `k` rows (after
+    /// [`Safety::project_above`]) to `out.tau`; returns the power it removes,
+    /// rate (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≥ 0.
+    fn add_null_space_damping(
+        &mut self,
+        k: usize,
+        rate: f64,
+        c: &CycleTerms,
+        out: &mut SafetyOutput,
+    ) -> f64 {
+        let mut p = 0.0;
+        for col in 0..c.qd.len() {
+            let mut jty = 0.0;
+            for a in 0..k {
+                jty += c.jtop[(a, col)] * self.y[a];
+            }
+            let t = -rate * (self.mqd[col] - jty);
+            out.tau[col] += t;
+            p -= t * c.qd[col];
+        }
+        p.max(0.0)
+    }
+
+    /// 2 × the kinetic energy in the null space of the top `k` rows (after
+    /// [`Safety::project_above`]): q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug ≥ 0.
+    fn null_space_kinetic2(&self, k: usize, c: &CycleTerms) -> f64 {
+        let mut s = 0.0;
+        for col in 0..c.qd.len() {
+            let mut jty = 0.0;
+            for a in 0..k {
+                jty += c.jtop[(a, col)] * self.y[a];
+            }
+            s += c.qd[col] * (self.mqd[col] - jty);
+        }
+        s.max(0.0)
+    }
+
+    /// The passivity damping (module docs): the hierarchy's power into E is paid
+    /// from the budget; what the budget does not cover is damped out in the null
+    /// space of level 1, at most at `passivity_damping_rate`.
+    /// `energy`: E of this cycle (J).
+    fn passivity(&mut self, c: &CycleTerms, energy: f64, out: &mut SafetyOutput) {
+        if !self.spec.passivity_damping || c.fade.len() < 2 {
+            return;
+        }
+        if c.goal_moving {
+            // A moving goal works on the arm; the law is judged once it stands.
+            self.refill_passivity_budget();
+        }
+        let t = self.spec.control_period_s;
+        let base = self.spec.passivity_budget;
+        if self.budget.is_nan() {
+            // Refilled: the budget and a share of the storage for the transient.
+            self.budget = base + PASSIVITY_TRANSIENT_SHARE * energy.max(0.0);
+        } else if self.budget > base {
+            // The transient's share decays: what is above the budget proper.
+            self.budget = base + (self.budget - base) * (-t / PASSIVITY_TRANSIENT_TIME).exp();
+        }
+        let p = c.hierarchy_power;
+        // A NaN power counts as none.
+        if c.goal_moving || p.is_nan() || p <= 0.0 {
+            return;
+        }
+        // The damping takes over as the budget's last half runs out, smoothly
+        // (no torque jump): it pays w p, the budget (1 − w) p.
+        let soft = PASSIVITY_ONSET * base;
+        let w = if self.budget >= soft {
+            0.0
+        } else if soft > 0.0 {
+            smoothstep(1.0 - self.budget / soft)
+        } else {
+            1.0
+        };
+        self.budget = (self.budget - (1.0 - w) * p * t).max(0.0);
+        let excess = w * p;
+        if excess.is_nan() || excess <= 0.0 {
+            return;
+        }
+        // Not to the fade's tank: this is the energy the hierarchy fed in.
+        let cap = self.spec.passivity_damping_rate;
+        let k = self.project_above(1, c);
+        let k2 = self.null_space_kinetic2(k, c);
+        let mut left = excess;
+        if k2 > 0.0 {
+            let rate = (excess / k2).min(cap);
+            left -= self.add_null_space_damping(k, rate, c, out);
+            out.passivity_active = true;
+        }
+        // What the null space of level 1 cannot take (the motion is level 1's
+        // own): the whole arm's −α M q̇, power −α q̇ᵀ M q̇.
+        let kinetic2 = c.qd.dot(&self.mqd);
+        if left > 0.0 && kinetic2 > 0.0 {
+            let rate = (left / kinetic2).min(cap);
+            for col in 0..c.qd.len() {
+                out.tau[col] -= rate * self.mqd[col];
+            }
+            out.passivity_active = true;
         }
     }
 
@@ -969,10 +1170,12 @@ impl Safety {
                 // At most m_k / T: a heavier damping than the joint's own inertia
                 // carries at the control period would drive an oscillation
                 // (crate::rate, b ≤ 1).
-                let d =
-                    (self.spec.joint_limit_damping_ratio * 2.0 * (2.0 * kg * margin * m_k).sqrt())
-                        .min(m_k / self.spec.control_period_s);
-                out.tau[k] += -sign * kg * p * p - smoothstep(p / margin) * d * qd;
+                // The damping ratio ζ against the spring's local stiffness 2 k p
+                // wherever it is deeper than GUARD_RAMP · margin (a joint resting
+                // shallow in the margin is damped as well as a deep one).
+                let d = (self.spec.joint_limit_damping_ratio * 2.0 * (2.0 * kg * p * m_k).sqrt())
+                    .min(m_k / self.spec.control_period_s);
+                out.tau[k] += -sign * kg * p * p - smoothstep(p / (GUARD_RAMP * margin)) * d * qd;
                 out.guard_potential += kg * p * p * p / 3.0;
                 out.joint_limit_active = true;
             }

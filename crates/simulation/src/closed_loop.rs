@@ -169,6 +169,7 @@ impl InProcess {
             ("velocity_limit_cycles", safety.velocity_limit_cycles),
             ("spring_saturation_cycles", safety.spring_saturated_cycles),
             ("conflict_fade_cycles", safety.conflict_fade_cycles),
+            ("passivity_damping_cycles", safety.passivity_cycles),
             ("end_stop_contacts", stops.contacts()),
             ("end_stop_steps", stops.contact_steps()),
             (
