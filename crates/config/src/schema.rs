@@ -410,7 +410,7 @@ pub struct SafetySection {
     /// The passivity damping (default true).
     pub passivity_damping: Option<bool>,
     /// Energy the hierarchy may feed into the arm after a goal or gains change
-    /// before the passivity damping acts, J (default 1).
+    /// before the passivity damping acts, J (default 0.25).
     pub passivity_budget: Option<f64>,
     /// The passivity damping's largest rate, 1/s (default 50).
     pub passivity_damping_rate: Option<f64>,

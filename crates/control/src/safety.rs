@@ -237,7 +237,7 @@ impl Default for SafetySpec {
             conflict_fade_ratio: 1e-5,
             fade_tank_max: 5.0,
             passivity_damping: true,
-            passivity_budget: 1.0,
+            passivity_budget: 0.25,
             passivity_damping_rate: 50.0,
             control_period_s: 1e-3,
             torque_rate_limit: None,
