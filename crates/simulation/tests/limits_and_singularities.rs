@@ -780,7 +780,7 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         // The target is 95 % by 12 s, which the 500-goal run meets (95.2 %,
         // docs/limits-and-singularities.md); of these 40, 36 settle by 12 s —
         // goals 5 and 31 follow transitions that end at 10.6 s and 12.7 s, 36
-        // and 39 creep along the reach boundary (singular level 1) until 20–27
+        // and 39 creep along the reach boundary (singular level 1) until 19–27
         // s. Held at what is reached, so that a regression shows.
         assert!(
             by(12.0) >= 0.875,
