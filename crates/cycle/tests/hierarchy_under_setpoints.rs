@@ -33,7 +33,11 @@ fn run_at(change: bool, rate_hz: f64, substeps: Option<usize>, at_rest: bool) ->
     let mut settings = CycleSettings::from_scenario(&sc);
     let period_ns = (1e9 / rate_hz).round() as u64;
     settings.period_ns = period_ns;
-    let mut c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    // The law's own period (its budgets and rate bounds count in it) is the
+    // cycle's, as a scenario at that rate would set it.
+    let mut spec = sc.spec.clone();
+    spec.safety.control_period_s = period_ns as f64 * 1e-9;
+    let mut c = Controller::new(&sc.model, spec, &sc.q0).unwrap();
     if at_rest {
         let q0: Vec<f64> = sc.q0.iter().copied().collect();
         let e: Vec<f64> = c.step(&q0, &vec![0.0; q0.len()]).unwrap().task_error[0]
