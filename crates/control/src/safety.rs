@@ -276,33 +276,25 @@ impl SafetySpec {
         // The rates act on the joint's own inertia m_k: rate · T ≤ 1 is what the
         // control period carries (crate::rate; b = rate · T).
         let t = self.control_period_s;
-        if !nonneg(self.velocity_damping) {
-            return bad("velocity_damping", "must be non-negative");
-        }
-        if self.velocity_damping * t > 1.0 {
-            return bad(
-                "velocity_damping",
-                "times the control period must be at most 1 (the rate the loop carries)",
-            );
-        }
-        if !pos(self.velocity_barrier_rate) {
-            return bad("velocity_barrier_rate", "must be positive");
-        }
-        if self.velocity_barrier_rate * t > 1.0 {
-            return bad(
-                "velocity_barrier_rate",
-                "times the control period must be at most 1 (the rate the loop carries)",
-            );
-        }
-        if !nonneg(self.null_space_damping) {
-            return bad("null_space_damping", "must be non-negative");
-        }
-        if self.null_space_damping * t > 1.0 {
-            return bad(
-                "null_space_damping",
-                "times the control period must be at most 1 (the rate the loop carries)",
-            );
-        }
+        // A rate (1/s): ≥ 0 (> 0 where `positive`), and at most 1/T.
+        let rate = |f: &str, x: f64, positive: bool| {
+            if positive && !pos(x) {
+                bad(f, "must be positive")
+            } else if !nonneg(x) {
+                bad(f, "must be non-negative")
+            } else if x * t > 1.0 {
+                bad(
+                    f,
+                    "times the control period must be at most 1 (the rate the loop carries)",
+                )
+            } else {
+                Ok(())
+            }
+        };
+        rate("velocity_damping", self.velocity_damping, false)?;
+        rate("velocity_barrier_rate", self.velocity_barrier_rate, true)?;
+        rate("null_space_damping", self.null_space_damping, false)?;
+        rate("passivity_damping_rate", self.passivity_damping_rate, true)?;
         if !(nonneg(self.conflict_fade_ratio) && self.conflict_fade_ratio < 0.01) {
             return bad("conflict_fade_ratio", "must be in [0, 0.01)");
         }
@@ -311,15 +303,6 @@ impl SafetySpec {
         }
         if !nonneg(self.passivity_budget) {
             return bad("passivity_budget", "must be non-negative");
-        }
-        if !pos(self.passivity_damping_rate) {
-            return bad("passivity_damping_rate", "must be positive");
-        }
-        if self.passivity_damping_rate * t > 1.0 {
-            return bad(
-                "passivity_damping_rate",
-                "times the control period must be at most 1 (the rate the loop carries)",
-            );
         }
         if !pos(self.control_period_s) {
             return bad("control_period_s", "must be positive");
