@@ -58,6 +58,8 @@ struct Sample {
     /// The hierarchy's power into E (W) and whether the passivity damping acted.
     hierarchy_power: f64,
     passivity: bool,
+    /// A level's goal moves (a transition under way).
+    goal_moving: bool,
 }
 
 /// `SWEEP_TRACE=t0,t1`: print every cycle in [t0, t1) (energy terms, fades, powers).
@@ -153,6 +155,12 @@ impl Logged {
             r: v.cycle.external_torque().to_vec(),
             hierarchy_power: out.safety.hierarchy_power,
             passivity: out.safety.passivity_active,
+            goal_moving: (0..out.tau_level.len()).any(|i| {
+                v.cycle
+                    .controller()
+                    .level_target(i)
+                    .is_some_and(|l| l.goal_velocity.iter().any(|&x| x != 0.0))
+            }),
         });
     }
 }
@@ -601,6 +609,8 @@ struct GoalRun {
     g: usize,
     /// When it settled for good ([`settle_time`]; infinity: not within the run).
     settle: f64,
+    /// When its transitions ended (the last cycle with a moving goal).
+    move_end: f64,
     /// max |q̇| over the 0.1 s before 12 s.
     speed_at_12: f64,
     /// Largest |q̇_k| / velocity limit, largest torque step (N·m per cycle).
@@ -704,6 +714,11 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         let run = GoalRun {
             g,
             settle,
+            move_end: log
+                .iter()
+                .rev()
+                .find(|s| s.goal_moving)
+                .map_or(0.0, |s| s.t),
             speed_at_12: if seconds >= 12.0 {
                 max_speed_between(&log, 11.9, 12.0)
             } else {
@@ -743,8 +758,14 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         }
         if shard.is_some() {
             println!(
-                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?}",
-                run.settle, run.speed_at_12, run.speed_ratio, run.tau_step, run.beyond, run.class
+                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {}",
+                run.settle,
+                run.speed_at_12,
+                run.speed_ratio,
+                run.tau_step,
+                run.beyond,
+                run.class,
+                run.move_end
             );
         }
         runs.push(run);
@@ -849,10 +870,13 @@ fn max_speed_between(log: &[Sample], from: f64, to: f64) -> f64 {
 /// and the classes of the goals not settled.
 fn report_sweep(runs: &[GoalRun], seconds: f64) {
     let n = runs.len().max(1) as f64;
-    let mut settle: Vec<f64> = runs.iter().map(|r| r.settle).collect();
-    settle.sort_by(f64::total_cmp);
-    let q =
-        |p: f64| settle[((p * (settle.len() as f64 - 1.0)).round() as usize).min(settle.len() - 1)];
+    let sorted = |f: &dyn Fn(&GoalRun) -> f64| {
+        let mut v: Vec<f64> = runs.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let settle = sorted(&|r| r.settle);
+    let q = |p: f64| quantile(&settle, p);
     let share = |t: f64| 100.0 * runs.iter().filter(|r| r.settle <= t).count() as f64 / n;
     let worst = |f: fn(&GoalRun) -> f64| runs.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
     println!(
@@ -874,6 +898,21 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         share(20.0),
         share(seconds),
     );
+    // The commanded motion, and the settling after it: from the end of each
+    // goal's transitions (0 for a goal settled while its posture goal still moves).
+    let (ends, after) = (
+        sorted(&|r| r.move_end),
+        sorted(&|r| (r.settle - r.move_end).max(0.0)),
+    );
+    println!(
+        "sweep: the transitions end after median {:.2} s, max {:.2} s ({} goals after 12 s); settled after their end: median {:.2} s, p95 {:.2} s, max {:.2} s",
+        quantile(&ends, 0.5),
+        quantile(&ends, 1.0),
+        runs.iter().filter(|r| r.move_end > 12.0).count(),
+        quantile(&after, 0.5),
+        quantile(&after, 0.95),
+        quantile(&after, 1.0),
+    );
     let mut classes = std::collections::BTreeMap::new();
     for r in runs.iter().filter_map(|r| r.class.map(|c| (r.g, c))) {
         classes.entry(r.1).or_insert_with(Vec::new).push(r.0);
@@ -889,6 +928,11 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         r_peak.join(", "),
         runs.iter().filter(|r| r.contact_cycles > 0).count()
     );
+}
+
+/// The p-quantile (nearest rank) of `sorted` (ascending, not empty).
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    sorted[((p * (sorted.len() as f64 - 1.0)).round() as usize).min(sorted.len() - 1)]
 }
 
 /// `SWEEP_SAFETY=field=value,…`: the `[safety]` fields of a comparison run (numeric
