@@ -611,6 +611,9 @@ struct GoalRun {
     settle: f64,
     /// When its transitions ended (the last cycle with a moving goal).
     move_end: f64,
+    /// max |q̇| over the 0.1 s before 12 s after `move_end` (NaN when the run
+    /// ends before).
+    speed_12_after: f64,
     /// max |q̇| over the 0.1 s before 12 s.
     speed_at_12: f64,
     /// Largest |q̇_k| / velocity limit, largest torque step (N·m per cycle).
@@ -647,9 +650,13 @@ struct GoalRun {
 /// converged for good) — median, p95, max and the share by 3, 6, 12, 20 s —
 /// with the classes of those not settled, and the contact observer's largest
 /// |r| per joint (free motion: no goal may be flagged as a contact with the
-/// `[contact]` defaults). Asserted with the defaults (30 s per goal): every
-/// goal settled, ≥ 87.5 % by 12 s (the target of 95 % is met by the 500-goal
-/// run), none faster than 0.05 rad/s at 12 s. `SWEEP_SHARD=i/n` runs every
+/// `[contact]` defaults). The goals' transitions (at the levels' shipped
+/// speed limits) last up to 14 s, so the settling is also counted from the
+/// end of each goal's transitions. Asserted with the defaults (30 s per
+/// goal): every goal settled, ≥ 87.5 % by 12 s (the 500-goal run: 95.2 %),
+/// none faster than 0.05 rad/s at 12 s; from the end of the transitions:
+/// ≥ 95 % within 12 s, every goal within 30 s, none faster than 0.05 rad/s
+/// 12 s after it. `SWEEP_SHARD=i/n` runs every
 /// n-th goal from i (one process per core) and prints each as a line to merge.
 #[test]
 fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
@@ -711,14 +718,20 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             trace_peak_speed(&joints, &log);
         }
         let settle = settle_time(&log);
+        let move_end = log
+            .iter()
+            .rev()
+            .find(|s| s.goal_moving)
+            .map_or(0.0, |s| s.t);
         let run = GoalRun {
             g,
             settle,
-            move_end: log
-                .iter()
-                .rev()
-                .find(|s| s.goal_moving)
-                .map_or(0.0, |s| s.t),
+            move_end,
+            speed_12_after: if seconds >= move_end + 12.0 {
+                max_speed_between(&log, move_end + 11.9, move_end + 12.0)
+            } else {
+                f64::NAN
+            },
             speed_at_12: if seconds >= 12.0 {
                 max_speed_between(&log, 11.9, 12.0)
             } else {
@@ -758,14 +771,15 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         }
         if shard.is_some() {
             println!(
-                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {}",
+                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {} after12 {}",
                 run.settle,
                 run.speed_at_12,
                 run.speed_ratio,
                 run.tau_step,
                 run.beyond,
                 run.class,
-                run.move_end
+                run.move_end,
+                run.speed_12_after
             );
         }
         runs.push(run);
@@ -816,6 +830,26 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         assert!(
             fast.is_empty(),
             "goals still faster than 0.05 rad/s at 12 s: {fast:?}"
+        );
+        // The same targets with the clock started when each goal's
+        // transitions end (the commanded motion over): ≥ 95 % settled
+        // within 12 s of it, every goal within 30 s, none faster than
+        // 0.05 rad/s 12 s after it.
+        let after = |t: f64| runs.iter().filter(|r| r.settle - r.move_end <= t).count() as f64 / n;
+        assert!(
+            after(12.0) >= 0.95,
+            "{:.1} % settled within 12 s of their transitions' end",
+            100.0 * after(12.0)
+        );
+        assert_eq!(after(30.0), 1.0);
+        let fast: Vec<_> = runs
+            .iter()
+            .filter(|r| !(r.speed_12_after < 0.05))
+            .map(|r| r.g)
+            .collect();
+        assert!(
+            fast.is_empty(),
+            "goals faster than 0.05 rad/s 12 s after their transitions' end: {fast:?}"
         );
     }
 }
@@ -905,13 +939,16 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         sorted(&|r| (r.settle - r.move_end).max(0.0)),
     );
     println!(
-        "sweep: the transitions end after median {:.2} s, max {:.2} s ({} goals after 12 s); settled after their end: median {:.2} s, p95 {:.2} s, max {:.2} s",
+        "sweep: the transitions end after median {:.2} s, max {:.2} s ({} goals after 12 s); settled after their end: median {:.2} s, p95 {:.2} s, max {:.2} s; by 12 s after it {:.1} %; largest |q̇| 12 s after it {:.4} rad/s ({} goals above 0.05)",
         quantile(&ends, 0.5),
         quantile(&ends, 1.0),
         runs.iter().filter(|r| r.move_end > 12.0).count(),
         quantile(&after, 0.5),
         quantile(&after, 0.95),
         quantile(&after, 1.0),
+        100.0 * after.iter().filter(|&&a| a <= 12.0).count() as f64 / n,
+        worst(|r| r.speed_12_after),
+        runs.iter().filter(|r| r.speed_12_after >= 0.05).count(),
     );
     let mut classes = std::collections::BTreeMap::new();
     for r in runs.iter().filter_map(|r| r.class.map(|c| (r.g, c))) {
