@@ -4,7 +4,7 @@
 //! ```toml
 //! [torque_filter]
 //! torque_rate_limit = 1000.0     # N·m/s per joint (off when absent)
-//! rate_limit_mode = "whole"      # "whole": scale Δτ as a whole (each joint ≥ 0.2 of the step); "per_joint": clip each joint
+//! rate_limit_mode = "whole"      # "whole": scale Δτ as a whole; "per_joint": clip each joint
 //! low_pass_hz = 100.0            # first-order low-pass cut-off (off when absent)
 //! ```
 //!
@@ -22,8 +22,7 @@ use crate::error::{ConfigError, invalid};
 #[serde(rename_all = "snake_case")]
 pub enum RateLimitMode {
     /// Δτ scaled as a whole so that no joint exceeds the limit (keeps the
-    /// direction of the change, like the saturation), each joint still moving
-    /// at least a fifth of the limit towards its own target.
+    /// direction of the change, like the saturation).
     #[default]
     Whole,
     /// Each joint's Δτ clipped on its own.

@@ -24,15 +24,9 @@
 //! **Whole or per joint.** `whole` scales the increment Δτ by one factor so
 //! that the largest |Δτ_k| equals r·Δt: the direction of the change — and
 //! with it the null-space structure of the hierarchy's increment — is kept,
-//! as the saturation keeps it for τ; except that each joint still moves at
-//! least [`WHOLE_FLOOR`] · r·Δt towards its own target (all of its change
-//! when that is smaller). Without the floor one joint whose torque swings
-//! far holds every other joint back with it, and a light wrist's brake (the
-//! velocity barrier's, hcc_control::safety) comes through too late.
-//! `per_joint` clips each joint and is faster to reach a new torque but
-//! bends the increment out of the levels' subspaces, and lets the velocity
-//! governor's spring scaling chatter on a light wrist resting in a joint
-//! limit's margin (docs/commanding.md). The default is `whole`.
+//! as the saturation keeps it for τ. `per_joint` clips each joint and is
+//! faster to reach a new torque but bends the increment out of the levels'
+//! subspaces. The default is `whole`.
 
 use hcc_config::torque_filter::{RateLimitMode, TorqueFilterSpec};
 use hcc_msgs::MAX_JOINTS;
@@ -120,11 +114,6 @@ impl TorqueFilter {
     }
 }
 
-/// In `whole` mode, the share of the rate step every joint may still take
-/// towards its own target however far another joint's change scales the
-/// increment down (module docs).
-pub const WHOLE_FLOOR: f64 = 0.2;
-
 /// Limits |τ_k − prev_k| to `max_step`, as a whole or per joint; true if τ changed.
 fn limit_rate(tau: &mut [f64], prev: &[f64], max_step: f64, mode: RateLimitMode) -> bool {
     let largest = tau
@@ -136,13 +125,9 @@ fn limit_rate(tau: &mut [f64], prev: &[f64], max_step: f64, mode: RateLimitMode)
     }
     match mode {
         RateLimitMode::Whole => {
-            // One factor for every joint, but each moves at least
-            // WHOLE_FLOOR of the step towards its own target.
             let scale = max_step / largest;
-            let floor = WHOLE_FLOOR * max_step;
             for (t, p) in tau.iter_mut().zip(prev) {
-                let d = *t - p;
-                *t = p + (scale * d.abs()).max(d.abs().min(floor)).copysign(d);
+                *t = p + scale * (*t - p);
             }
         }
         RateLimitMode::PerJoint => {
@@ -188,13 +173,7 @@ mod tests {
         let hold = [2.0, 0.0];
         let mut first = [6.0, 0.5];
         assert!(whole.apply(&mut first, &hold).rate_limited);
-        // Scaled as a whole (0.125 for joint 2), but no joint by less than
-        // WHOLE_FLOOR of the step (0.2 of 1 N·m).
-        assert_eq!(
-            first,
-            [3.0, WHOLE_FLOOR],
-            "from the held torque, as a whole"
-        );
+        assert_eq!(first, [3.0, 0.125], "from the held torque, as a whole");
         let mut first = [6.0, 0.5];
         assert!(per.apply(&mut first, &hold).rate_limited);
         assert_eq!(first, [3.0, 0.5], "from the held torque, per joint");
@@ -216,11 +195,6 @@ mod tests {
         let mut d = [50.5, -50.0];
         assert!(!whole.apply(&mut d, &hold).rate_limited);
         assert_eq!(d, [50.5, -50.0]);
-        // A joint whose own change is below the floor takes all of it.
-        let mut f = [60.0, -50.0 + 0.1];
-        assert!(whole.apply(&mut f, &hold).rate_limited);
-        assert_eq!(f, [51.5, -49.9]);
-        whole.bypass(&[50.5, -50.0]);
         let mut e = [0.0, 0.0];
         assert!(whole.apply(&mut e, &hold).rate_limited);
         let step = [e[0] - 50.5, e[1] + 50.0];
