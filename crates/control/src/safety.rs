@@ -463,9 +463,16 @@ pub(crate) struct Safety {
     budget: f64,
     /// Power dissipated in the last cycle that goes to the tank (W).
     fill_power: f64,
+    /// ẋ_aug = J_aug q̇ of the stacked levels above the lowest, and whether it
+    /// is this cycle's.
     xdot: DVector<f64>,
+    xdot_fresh: bool,
     y: DVector<f64>,
     mqd: DVector<f64>,
+    /// M q̇ − J_augᵀ y after [`Safety::project_above`]: the momentum in the
+    /// null space of the levels above (its power against q̇ is 2 × their
+    /// null-space kinetic energy).
+    null_momentum: DVector<f64>,
     e: DVector<f64>,
 }
 
@@ -579,8 +586,10 @@ impl Safety {
             budget: f64::NAN,
             fill_power: 0.0,
             xdot: DVector::zeros(ktop),
+            xdot_fresh: false,
             y: DVector::zeros(ktop),
             mqd: DVector::zeros(model.nq()),
+            null_momentum: DVector::zeros(model.nq()),
             e: DVector::zeros(model.nq()),
             spec: s,
         })
@@ -787,6 +796,7 @@ impl Safety {
         out.guard_potential = 0.0;
         out.power = 0.0;
         self.fill_power = 0.0;
+        self.xdot_fresh = false;
         gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
         let kinetic = 0.5 * c.qd.dot(&self.mqd);
         let mut potential = c.potential.first().copied().unwrap_or(0.0);
@@ -831,20 +841,23 @@ impl Safety {
             if beta >= 1.0 {
                 continue;
             }
-            let k = self.project_above(i, c);
+            self.project_above(i, c);
             let ci = (1.0 - beta) * rate;
-            let p = self.add_null_space_damping(k, ci, c, out);
+            let p = self.add_null_space_damping(ci, c, out);
             self.fill_power += p;
             out.null_space_damping_active = true;
         }
     }
 
     /// y = G⁻¹ J_aug q̇ (damped inverse where G is singular) for the levels
-    /// above level `i` into `self.y`; returns their rows k.
-    fn project_above(&mut self, i: usize, c: &CycleTerms) -> usize {
+    /// above level `i`, and from it `null_momentum` = M q̇ − J_augᵀ y.
+    fn project_above(&mut self, i: usize, c: &CycleTerms) {
         let ktop = c.jtop.nrows();
         let k = self.k_above[i].min(ktop);
-        gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+        if !self.xdot_fresh {
+            gemv(&mut self.xdot, 1.0, c.jtop, c.qd, 0.0);
+            self.xdot_fresh = true;
+        }
         let g = &mut self.g[i];
         for a in 0..k {
             for b in 0..k {
@@ -865,42 +878,33 @@ impl Safety {
             }
             self.y[a] = s;
         }
-        k
-    }
-
-    /// Adds −rate (M q̇ − J_augᵀ y) over the top `k` rows (after
-    /// [`Safety::project_above`]) to `out.tau`; returns the power it removes,
-    /// rate (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≥ 0.
-    fn add_null_space_damping(
-        &mut self,
-        k: usize,
-        rate: f64,
-        c: &CycleTerms,
-        out: &mut SafetyOutput,
-    ) -> f64 {
-        let mut p = 0.0;
         for col in 0..c.qd.len() {
             let mut jty = 0.0;
             for a in 0..k {
                 jty += c.jtop[(a, col)] * self.y[a];
             }
-            let t = -rate * (self.mqd[col] - jty);
+            self.null_momentum[col] = self.mqd[col] - jty;
+        }
+    }
+
+    /// Adds −rate (M q̇ − J_augᵀ y) (after [`Safety::project_above`]) to
+    /// `out.tau`; returns the power it removes, rate (q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug) ≥ 0.
+    fn add_null_space_damping(&self, rate: f64, c: &CycleTerms, out: &mut SafetyOutput) -> f64 {
+        let mut p = 0.0;
+        for col in 0..c.qd.len() {
+            let t = -rate * self.null_momentum[col];
             out.tau[col] += t;
             p -= t * c.qd[col];
         }
         p.max(0.0)
     }
 
-    /// 2 × the kinetic energy in the null space of the top `k` rows (after
+    /// 2 × the kinetic energy in the null space of the levels above (after
     /// [`Safety::project_above`]): q̇ᵀ M q̇ − ẋ_augᵀ G⁻¹ ẋ_aug ≥ 0.
-    fn null_space_kinetic2(&self, k: usize, c: &CycleTerms) -> f64 {
+    fn null_space_kinetic2(&self, c: &CycleTerms) -> f64 {
         let mut s = 0.0;
         for col in 0..c.qd.len() {
-            let mut jty = 0.0;
-            for a in 0..k {
-                jty += c.jtop[(a, col)] * self.y[a];
-            }
-            s += c.qd[col] * (self.mqd[col] - jty);
+            s += c.qd[col] * self.null_momentum[col];
         }
         s.max(0.0)
     }
@@ -948,12 +952,12 @@ impl Safety {
         }
         // Not to the fade's tank: this is the energy the hierarchy fed in.
         let cap = self.spec.passivity_damping_rate;
-        let k = self.project_above(1, c);
-        let k2 = self.null_space_kinetic2(k, c);
+        self.project_above(1, c);
+        let k2 = self.null_space_kinetic2(c);
         let mut left = excess;
         if k2 > 0.0 {
             let rate = (excess / k2).min(cap);
-            left -= self.add_null_space_damping(k, rate, c, out);
+            left -= self.add_null_space_damping(rate, c, out);
             out.passivity_active = true;
         }
         // What the null space of level 1 cannot take (the motion is level 1's
