@@ -418,6 +418,7 @@ impl Derived<'_> {
                 "telemetry": rec.telemetry.checker.missed(),
             },
             "telemetry_without_state": self.replayed.states_missing,
+            "telemetry_before_the_recording": self.replayed.cycles_before_recording,
             "stale_telemetry": self.replayed.stale,
             "states_not_answered_by_the_controller": self.replayed.states_skipped,
             "driver_missed_commands": last_state.map(|s| s.missed_commands),
@@ -464,11 +465,12 @@ impl Derived<'_> {
             self.latencies_ns.len()
         );
         println!(
-            "  recorder: gaps {} (states {}, commands {}, telemetry {}), telemetry without state {}, states not answered {}",
+            "  recorder: gaps {} (states {}, commands {}, telemetry {}), cycles before the recording {}, telemetry without state {}, states not answered {}",
             rec.gaps(),
             rec.states.checker.missed(),
             rec.commands.checker.missed(),
             rec.telemetry.checker.missed(),
+            self.replayed.cycles_before_recording,
             self.replayed.states_missing,
             self.replayed.states_skipped
         );

@@ -40,6 +40,9 @@ struct Comparison {
     compared: u64,
     /// Cycles at the end whose inputs the recording does not hold.
     incomplete: u64,
+    /// The cycle the comparison started at (the first whose inputs the
+    /// recording holds).
+    first_cycle: Option<u64>,
     first_difference: Option<Difference>,
 }
 
@@ -47,6 +50,11 @@ impl Comparison {
     /// Compares one cycle; whether to go on.
     fn cycle(&mut self, r: &Replayed<'_>, n: usize) -> anyhow::Result<bool> {
         let tel = r.telemetry;
+        if r.before_recording {
+            // The recording started mid-run (module `replay`): counted there.
+            return Ok(true);
+        }
+        self.first_cycle.get_or_insert(tel.header.seq);
         let inputs = (r.state, r.recorded, r.answer);
         let (Some(state), Some(recorded), Some(answer), 0) =
             (inputs.0, inputs.1, inputs.2, r.setpoints_missing)
@@ -159,6 +167,13 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         println!(
             "note: the last {} cycles lack their joint state, command or setpoints in the recording; replayed up to them",
             cmp.incomplete
+        );
+    }
+    if counts.cycles_before_recording > 0 {
+        println!(
+            "note: the recording starts mid-run: cycles answering a state or command from before it: {}; replayed from cycle {}",
+            counts.cycles_before_recording,
+            cmp.first_cycle.map_or("-".to_string(), |c| c.to_string())
         );
     }
     if cmp.compared == 0 {
