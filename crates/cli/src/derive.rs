@@ -439,6 +439,7 @@ impl Derived<'_> {
             "replay_max_tau_difference": self.rows.replay_tau_diff,
             "rows_without_the_law": self.rows.rows_without_law,
             "setpoints_missing_from_the_recording": self.replayed.setpoints_missing,
+            "setpoints_before_the_first_cycle": self.replayed.setpoints_before_first_cycle,
         })
     }
 

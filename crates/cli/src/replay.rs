@@ -30,7 +30,17 @@ use anyhow::anyhow;
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
-use hcc_msgs::{JointState, Setpoint, TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand};
+use hcc_msgs::{
+    JointState, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
+};
+
+/// The most telemetry samples held back waiting for their inputs. The
+/// recorder drains at most [`hcc_msgs::ipc::MAX_SUBSCRIBER_BUFFER`] samples of
+/// a stream at a time, so a cycle's inputs follow it within a drain or two;
+/// one still incomplete this many samples later was lost before the file,
+/// and the cycle is handed on without it (a bounded memory, whatever the
+/// recording's length).
+pub const MAX_PENDING: usize = 4096;
 
 /// What the replay counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -43,6 +53,9 @@ pub struct ReplayCounts {
     pub setpoints_taken: u64,
     /// Setpoints the controller answered that the recording does not hold.
     pub setpoints_missing: u64,
+    /// Recorded setpoints answered before the first replayed cycle (history
+    /// of a recording that starts mid-run; not taken again).
+    pub setpoints_before_first_cycle: u64,
     /// Cycles whose state the recording does not hold (not replayed).
     pub states_missing: u64,
     /// Recorded states no cycle consumed (the controller skipped them).
@@ -77,6 +90,13 @@ pub struct Replayed<'a> {
     pub before_recording: bool,
 }
 
+/// A client's setpoints answered so far (count, last seq).
+#[derive(Debug, Clone, Copy)]
+struct Answered {
+    count: u64,
+    seq: u64,
+}
+
 /// The replay state (module docs).
 pub struct Replay {
     cycle: ControlCycle,
@@ -88,8 +108,9 @@ pub struct Replay {
     last_command_seq: Option<u64>,
     /// Recorded setpoints per client, not yet taken.
     setpoints: BTreeMap<u64, VecDeque<Setpoint>>,
-    /// Setpoints answered per client so far, as the telemetry counts them.
-    answered: BTreeMap<u64, u64>,
+    /// Per client, the setpoints answered so far, as the telemetry counts
+    /// them, and the seq of the last one answered.
+    answered: BTreeMap<u64, Answered>,
     /// Telemetry waiting for its inputs to be read.
     pending: VecDeque<Box<Telemetry>>,
     last_state_seq: Option<u64>,
@@ -147,8 +168,18 @@ impl Replay {
         self.commands.insert(seq, c);
     }
 
-    /// A recorded setpoint.
+    /// A recorded setpoint (one the replay has already accounted for as
+    /// answered before its first cycle — read after it, its stream drained
+    /// later — is history and dropped).
     pub fn on_setpoint(&mut self, s: Setpoint) {
+        if self
+            .answered
+            .get(&s.client_id)
+            .is_some_and(|a| s.header.seq <= a.seq)
+        {
+            self.counts.setpoints_before_first_cycle += 1;
+            return;
+        }
         self.setpoints.entry(s.client_id).or_default().push_back(s);
     }
 
@@ -174,14 +205,14 @@ impl Replay {
                 continue;
             }
             let complete = self.inputs_read(tel);
-            if !complete && !end {
+            if !complete && !end && self.pending.len() <= MAX_PENDING {
                 // The cycle's state, command or setpoints come later in the file.
                 return Ok(true);
             }
             let Some(tel) = self.pending.pop_front() else {
                 break;
             };
-            if !self.replay(&tel, !complete, each)? {
+            if !self.replay(&tel, end && !complete, each)? {
                 return Ok(false);
             }
         }
@@ -199,13 +230,30 @@ impl Replay {
         self.last_state_seq.is_some_and(|s| s > tel.state_seq)
             && self.last_command_seq.is_some_and(|c| c >= tel.command_seq)
             && tel.setpoint_answers.iter().all(|a| {
-                let before = self.answered.get(&a.client_id).copied().unwrap_or(0);
                 let queued = self
                     .setpoints
                     .get(&a.client_id)
                     .map_or(0, |q| q.len() as u64);
-                a.answered <= before + queued
+                a.answered <= self.answered_before(a) + queued
             })
+    }
+
+    /// How many of the client's setpoints were answered before the cycle of
+    /// `a`: as counted so far; for a client first heard of in the first
+    /// replayed cycle, those the file does not hold (answered before the
+    /// recording started: the count less the recorded setpoints up to
+    /// `a.seq`); else none.
+    fn answered_before(&self, a: &SetpointAnswer) -> u64 {
+        match self.answered.get(&a.client_id) {
+            Some(known) => known.count,
+            None if !self.started => {
+                let recorded = self.setpoints.get(&a.client_id).map_or(0, |q| {
+                    q.iter().take_while(|s| s.header.seq <= a.seq).count() as u64
+                });
+                a.answered.saturating_sub(recorded)
+            }
+            None => 0,
+        }
     }
 
     /// Whether the cycle of `tel` consumed a state or answered with a command
@@ -233,7 +281,13 @@ impl Replay {
                     q.pop_front();
                 }
             }
-            self.answered.insert(a.client_id, a.answered);
+            self.answered.insert(
+                a.client_id,
+                Answered {
+                    count: a.answered,
+                    seq: a.seq,
+                },
+            );
         }
         each(&Replayed {
             telemetry: tel,
@@ -257,8 +311,9 @@ impl Replay {
         if self.before_recording(tel) {
             return self.skip_before_recording(tel, each);
         }
-        let first = !std::mem::replace(&mut self.started, true);
+        let first = !self.started;
         let setpoints_missing = self.take_setpoints(tel);
+        self.started = true;
         let want = tel.state_seq;
         while self.states.front().is_some_and(|s| s.header.seq < want) {
             self.states.pop_front();
@@ -304,7 +359,7 @@ impl Replay {
     fn take_setpoints(&mut self, tel: &Telemetry) -> u64 {
         let mut missing = 0;
         for a in tel.setpoint_answers.iter().filter(|a| a.answered > 0) {
-            let before = self.answered.get(&a.client_id).copied().unwrap_or(0);
+            let before = self.answered_before(a);
             for _ in before..a.answered {
                 match self
                     .setpoints
@@ -318,7 +373,9 @@ impl Replay {
                     None => missing += 1,
                 }
             }
-            self.answered.insert(a.client_id, a.answered.max(before));
+            let count = a.answered.max(before);
+            self.answered
+                .insert(a.client_id, Answered { count, seq: a.seq });
         }
         self.counts.setpoints_missing += missing;
         missing
@@ -331,31 +388,53 @@ mod tests {
     use hcc_msgs::TelemetryTimings;
 
     /// What a controller daemon published over `k` cycles of the paper's
-    /// arm held at rest: states, commands, telemetry (seq 1..=k).
-    fn daemon_run(
-        scenario: &Scenario,
-        k: u64,
-    ) -> (Vec<JointState>, Vec<TorqueCommand>, Vec<Box<Telemetry>>) {
+    /// arm held at rest: states, commands, telemetry (seq 1..=k), and the
+    /// setpoints `sent` (each with the state it arrived with).
+    struct Run {
+        states: Vec<JointState>,
+        commands: Vec<TorqueCommand>,
+        telemetry: Vec<Box<Telemetry>>,
+    }
+
+    fn daemon_run(scenario: &Scenario, k: u64, sent: &[(u64, Setpoint)]) -> Run {
         let mut replay = Replay::new(scenario).unwrap();
         let cycle = &mut replay.cycle;
         let n = scenario.model.nq();
-        let (mut states, mut commands, mut telemetry) = (vec![], vec![], vec![]);
+        let mut run = Run {
+            states: vec![],
+            commands: vec![],
+            telemetry: vec![],
+        };
         for seq in 1..=k {
             let mut s = JointState::zeroed();
             s.set_n_joints(n).unwrap();
             s.set_q(scenario.q0.as_slice()).unwrap();
             s.header.seq = seq;
             s.header.stamp_ns = seq * 1_000_000;
+            let mut arrived = sent.iter().filter(|(at, _)| *at == seq).map(|(_, sp)| *sp);
             assert!(matches!(
-                cycle.decide(&s, s.header.stamp_ns),
+                cycle.step(&s, s.header.stamp_ns, || arrived.next()),
                 Answer::Command(_)
             ));
-            commands.push(*cycle.stamp_command(s.header.stamp_ns + 5_000));
+            run.commands
+                .push(*cycle.stamp_command(s.header.stamp_ns + 5_000));
             let t = cycle.finish_telemetry(0, TelemetryTimings::default(), s.header.stamp_ns);
-            telemetry.push(Box::new(*t));
-            states.push(s);
+            run.telemetry.push(Box::new(*t));
+            run.states.push(s);
         }
-        (states, commands, telemetry)
+        run
+    }
+
+    fn paper_sim1() -> Scenario {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/paper-sim1.toml");
+        Scenario::load(path).unwrap()
+    }
+
+    /// A goal setpoint of the joint level (level 3) of client 7.
+    fn joint_goal(seq: u64, goal: f64) -> Setpoint {
+        Setpoint::for_level(7, seq, 2, 1)
+            .with_goal(&[goal])
+            .unwrap()
     }
 
     /// A recorder that attached mid-run heard the telemetry from cycle 20
@@ -368,9 +447,12 @@ mod tests {
     /// to 1e-9.
     #[test]
     fn a_recording_that_starts_mid_run_is_replayed_from_its_first_complete_cycle() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/paper-sim1.toml");
-        let scenario = Scenario::load(path).unwrap();
-        let (states, commands, telemetry) = daemon_run(&scenario, 60);
+        let scenario = paper_sim1();
+        let Run {
+            states,
+            commands,
+            telemetry,
+        } = daemon_run(&scenario, 60, &[]);
         let mut replay = Replay::new(&scenario).unwrap();
         let (mut before, mut compared, mut gaps) = (vec![], vec![], 0);
         let mut each = |r: &Replayed<'_>| {
@@ -427,9 +509,12 @@ mod tests {
     /// recording": the marking only ever covers the first cycles.
     #[test]
     fn a_state_lost_after_the_start_is_a_gap() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/paper-sim1.toml");
-        let scenario = Scenario::load(path).unwrap();
-        let (states, commands, telemetry) = daemon_run(&scenario, 30);
+        let scenario = paper_sim1();
+        let Run {
+            states,
+            commands,
+            telemetry,
+        } = daemon_run(&scenario, 30, &[]);
         let mut replay = Replay::new(&scenario).unwrap();
         let (mut before, mut missing) = (0, vec![]);
         let mut each = |r: &Replayed<'_>| {
@@ -452,5 +537,77 @@ mod tests {
         assert_eq!(before, 0);
         assert_eq!(missing, vec![12]);
         assert_eq!(replay.counts().states_missing, 1);
+    }
+
+    /// A recorder attached after a client's first setpoint (cycle 5; the
+    /// file from cycle 20 on) and before its second (cycle 40): the first
+    /// is history — not a setpoint the file lacks, and no reason to hold the
+    /// cycles back until the end of the file — and the second is taken again.
+    #[test]
+    fn setpoints_answered_before_a_mid_run_recording_are_history() {
+        let scenario = paper_sim1();
+        let sent = [(5, joint_goal(1, 0.36)), (40, joint_goal(2, 0.37))];
+        let run = daemon_run(&scenario, 60, &sent);
+        let mut replay = Replay::new(&scenario).unwrap();
+        let (mut handed, mut incomplete) = (vec![], 0);
+        let mut each = |r: &Replayed<'_>| {
+            assert!(!r.before_recording);
+            if r.at_end || r.setpoints_missing > 0 || r.state.is_none() {
+                incomplete += 1;
+            }
+            handed.push(r.telemetry.header.seq);
+            Ok(true)
+        };
+        for i in 19..60 {
+            if let Some((_, sp)) = sent.iter().find(|(at, _)| *at == i as u64 + 1) {
+                replay.on_setpoint(*sp);
+            }
+            replay.on_state(run.states[i]);
+            replay.on_command(run.commands[i]);
+            replay.on_telemetry(run.telemetry[i].clone());
+            assert!(replay.advance(false, &mut each).unwrap());
+            // Each cycle is handed on once the next state is read.
+            assert!(replay.pending.len() <= 1, "cycle {}", i + 1);
+        }
+        assert!(replay.advance(true, &mut each).unwrap());
+        assert_eq!(handed, (20..=60).collect::<Vec<_>>());
+        assert_eq!(incomplete, 1, "only the last cycle, at the end of the file");
+        let counts = replay.counts();
+        assert_eq!(counts.setpoints_taken, 1);
+        assert_eq!(counts.setpoints_missing, 0);
+    }
+
+    /// A setpoint the recorder lost (cycle 10's) holds its cycle back only
+    /// for a bounded time: the cycle is handed on with the setpoint counted
+    /// missing, and the telemetry waiting for inputs never exceeds
+    /// [`MAX_PENDING`] samples, however long the file.
+    #[test]
+    fn a_lost_setpoint_holds_the_replay_back_for_a_bounded_time() {
+        let scenario = paper_sim1();
+        let k = MAX_PENDING as u64 + 200;
+        let sent = [(10, joint_goal(1, 0.36))];
+        let run = daemon_run(&scenario, k, &sent);
+        let mut replay = Replay::new(&scenario).unwrap();
+        let (mut handed, mut missing_at, mut largest) = (0, vec![], 0);
+        let mut each = |r: &Replayed<'_>| {
+            handed += 1;
+            if r.setpoints_missing > 0 {
+                assert!(!r.at_end);
+                missing_at.push(r.telemetry.header.seq);
+            }
+            Ok(true)
+        };
+        for i in 0..k as usize {
+            replay.on_state(run.states[i]);
+            replay.on_command(run.commands[i]);
+            replay.on_telemetry(run.telemetry[i].clone());
+            assert!(replay.advance(false, &mut each).unwrap());
+            largest = largest.max(replay.pending.len());
+        }
+        assert!(replay.advance(true, &mut each).unwrap());
+        assert_eq!(handed, k);
+        assert_eq!(missing_at, vec![10]);
+        assert_eq!(replay.counts().setpoints_missing, 1);
+        assert!(largest <= MAX_PENDING, "{largest}");
     }
 }

@@ -169,10 +169,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             cmp.incomplete
         );
     }
-    if counts.cycles_before_recording > 0 {
+    if counts.cycles_before_recording > 0 || counts.setpoints_before_first_cycle > 0 {
         println!(
-            "note: the recording starts mid-run: cycles answering a state or command from before it: {}; replayed from cycle {}",
+            "note: the recording starts mid-run: cycles answering a state or command from before it: {}, setpoints recorded but answered before its first cycle: {}; replayed from cycle {}",
             counts.cycles_before_recording,
+            counts.setpoints_before_first_cycle,
             cmp.first_cycle.map_or("-".to_string(), |c| c.to_string())
         );
     }
