@@ -8,6 +8,10 @@
 //!   no setpoint and a one-dimensional null space (its basis unique up to a
 //!   sign the controller keeps), nothing of the daemon's history matters and
 //!   every torque is bit-identical;
+//! * a recording across a simulator killed and started again (as a user
+//!   swaps the simulator for a driver): the recorder counts the state
+//!   stream's restart, `hcc plot` derives every cycle, `hcc replay` follows
+//!   the new driver's states (numbered from the start again) bit for bit;
 //! * the controller's log accounts for the recorder's connections: made
 //!   while it waits (its connection upkeep), or — when the recorder attached
 //!   while the loop was busy or blocked on a late state — by the next send,
@@ -18,11 +22,13 @@
 
 mod monitor;
 
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use hcc_system_tests::*;
 use monitor::{Daemon, Monitor};
+
+const LONG: Duration = Duration::from_secs(60);
 
 /// The largest count of the controller's upkeep lines ("peer connections
 /// made or dropped while waiting: N") in `log`.
@@ -117,5 +123,111 @@ fn hcc_record_attached_to_daemons_started_by_hand() {
     let log = replay.log();
     println!("{log}");
     assert!(replay.status.success(), "{log}");
+    assert!(log.contains("every torque bit-identical"), "{log}");
+}
+
+#[test]
+fn hcc_record_across_a_simulator_restart() {
+    let dir = TempDir::new("record_restart");
+    let ns = unique_namespace("record_restart");
+    let prefix = unique_file_prefix();
+    let config = repo_root().join("config/paper-sim1.toml");
+    let file = dir.path().join("restart.mcap");
+    let out = dir.path().join("record.out");
+    {
+        let mut mon = Monitor::new(&ns, &prefix);
+        let mut ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller");
+        let mut sim = Daemon::sim(&ns, &prefix, dir.path(), "sim");
+        mon.wait_until("1500 cycles: the arm at rest", LONG, |m| {
+            m.telemetry.len() >= 1500
+        });
+        let mut rec = ChildGuard::spawn(
+            Command::new(bin("hcc"))
+                .env(FILE_PREFIX_ENV, &prefix)
+                .args(["record", "--namespace", &ns, "--quiet", "--config"])
+                .arg(&config)
+                .arg("--out")
+                .arg(&file)
+                .stdout(std::fs::File::create(&out).unwrap())
+                .stderr(Stdio::inherit()),
+        );
+        // The recorder is in once its file grows (its first chunk flushes
+        // within a second); then 300 more cycles before the crash.
+        let attached = std::time::Instant::now();
+        while std::fs::metadata(&file).map_or(0, |m| m.len()) == 0 {
+            assert!(attached.elapsed() < LONG, "hcc record wrote nothing");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let n = mon.telemetry.len();
+        mon.wait_until("300 recorded cycles", LONG, |m| {
+            m.telemetry.len() >= n + 300
+        });
+        sim.crash();
+        let n = mon.telemetry.len();
+        mon.wait_until("the peer lost", LONG, |m| {
+            m.telemetry[n..].iter().any(|t| t.peer_lost)
+        });
+        let mut sim2 = Daemon::sim(&ns, &prefix, dir.path(), "sim2");
+        let n = mon.telemetry.len();
+        mon.wait_until("300 cycles with the second simulator", LONG, |m| {
+            m.telemetry[n..].iter().filter(|t| !t.peer_lost).count() >= 300
+        });
+        // SAFETY: a signal to our own child, by pid.
+        unsafe { libc::kill(rec.pid() as libc::pid_t, libc::SIGTERM) };
+        let status = rec
+            .wait_timeout(LONG)
+            .expect("hcc record did not stop on SIGTERM");
+        let log = std::fs::read_to_string(&out).unwrap_or_default();
+        println!("{log}");
+        assert!(status.success(), "hcc record: {status}\n{log}");
+        assert!(
+            log.contains("joint_state") && log.contains("(1 restart)"),
+            "{log}"
+        );
+        assert!(!log.contains("out of sequence"), "{log}");
+        sim2.stop();
+        ctl.stop();
+    }
+    assert_clean(&ns, &prefix);
+
+    let plot = run_with_timeout(
+        Command::new(bin("hcc"))
+            .arg("plot")
+            .arg(&file)
+            .arg("--out")
+            .arg(dir.path().join("plot")),
+        dir.path(),
+        "plot",
+        Duration::from_secs(120),
+    );
+    assert!(plot.status.success(), "hcc plot failed:\n{}", plot.log());
+    let metrics = read_json(&dir.path().join("plot/metrics.json"));
+    let ipc = &metrics["run"]["settings"]["ipc"];
+    println!("{ipc:#}");
+    assert_eq!(ipc["driver_restarts"], 1, "{ipc:#}");
+    assert_eq!(ipc["telemetry_without_state"], 0, "{ipc:#}");
+    let (_, rows) = read_csv(&dir.path().join("plot/trajectory.csv"));
+    assert!(rows.len() > 550, "rows: {}", rows.len());
+    // t goes on across the restart (the new simulator numbers its states
+    // from the start again).
+    for w in rows.windows(2) {
+        assert!(
+            w[1][0] > w[0][0],
+            "t not increasing: {} then {}",
+            w[0][0],
+            w[1][0]
+        );
+    }
+
+    let replay = run_with_timeout(
+        Command::new(bin("hcc")).arg("replay").arg(&file),
+        dir.path(),
+        "replay",
+        Duration::from_secs(120),
+    );
+    let log = replay.log();
+    println!("{log}");
+    assert!(replay.status.success(), "{log}");
+    assert!(log.contains("1 driver restarts"), "{log}");
     assert!(log.contains("every torque bit-identical"), "{log}");
 }

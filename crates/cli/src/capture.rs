@@ -297,13 +297,21 @@ struct Stream {
 impl Stream {
     fn observe(&mut self, seq: u64) -> SeqEvent {
         self.stats.received += 1;
-        let e = self.checker.observe(seq);
+        let mut e = self.checker.observe(seq);
+        if let SeqEvent::Backwards { .. } = e {
+            // One publisher's samples arrive in order: a smaller number is a
+            // new publisher's (a restarted daemon), whose numbering starts
+            // again.
+            self.stats.restarts += 1;
+            self.checker.reset();
+            e = self.checker.observe(seq);
+        }
         if let SeqEvent::Gap { .. } = e {
             self.stats.gap_events += 1;
         }
         self.stats.gaps = self.checker.missed();
         self.stats.duplicates = self.checker.duplicates();
-        self.stats.backwards = self.checker.backwards();
+        self.stats.backwards = self.checker.backwards() - self.stats.restarts;
         e
     }
 }
@@ -389,6 +397,7 @@ impl StreamRecorder {
             sp.gap_events += s.stats.gap_events;
             sp.duplicates += s.stats.duplicates;
             sp.backwards += s.stats.backwards;
+            sp.restarts += s.stats.restarts;
         }
         let mut m = RecorderMsg {
             elapsed_s: self.started.elapsed().as_secs_f64(),
@@ -442,6 +451,10 @@ pub fn stats_line(m: &RecorderMsg) -> String {
                 " ({} out of sequence)",
                 x.duplicates + x.backwards
             ));
+        }
+        if x.restarts > 0 {
+            let s = if x.restarts == 1 { "" } else { "s" };
+            t.push_str(&format!(" ({} restart{s})", x.restarts));
         }
         t
     };

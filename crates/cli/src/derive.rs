@@ -10,7 +10,9 @@
 //! `/joint_state` it consumed (`telemetry.state_seq`), exactly as `hcc
 //! simulate` builds its rows from the in-process cycle:
 //! - `t` = k · T for the state of sequence number k (T = 1 / control rate:
-//!   the drivers number their states k = 0, 1, … per control period),
+//!   the drivers number their states k = 0, 1, … per control period); after
+//!   a driver restart (its states numbered from the start again) t goes on
+//!   from the last state's by the time between their stamps, in periods,
 //! - `q`, `qd` from the state; `tau` (τ as commanded), `e<i>_<k>`, `S<i>`
 //!   (eqs. 26, 28), `P_mu`, `tau_L<i>_<k>` (eqs. 20, 21) and `tau_mu_<k>`
 //!   (eq. 22) from the telemetry,
@@ -54,6 +56,10 @@ pub struct RowBuilder<'a> {
     pub rows_without_law: u64,
     /// The largest |τ replayed − τ recorded| over the rows.
     pub replay_tau_diff: f64,
+    /// The last row's state (seq, stamp), and the periods added to the seq
+    /// of the states since the last driver restart (t = (k + offset) · T).
+    last_state: Option<(u64, u64)>,
+    seq_offset: u64,
 }
 
 impl<'a> RowBuilder<'a> {
@@ -67,7 +73,26 @@ impl<'a> RowBuilder<'a> {
             rows_without_law: 0,
             recorder: hcc_simulation::recorder(scenario)?,
             replay_tau_diff: 0.0,
+            last_state: None,
+            seq_offset: 0,
         })
+    }
+
+    /// The state's time in control periods: its seq, plus the offset that
+    /// makes a restarted driver's states (numbered from the start again) go
+    /// on from the last one's by the time between their stamps (at least a
+    /// period).
+    fn periods(&mut self, state: &JointState) -> u64 {
+        let (seq, stamp) = (state.header.seq, state.header.stamp_ns);
+        if let Some((last_seq, last_stamp)) = self.last_state
+            && seq < last_seq
+        {
+            let gap = stamp.saturating_sub(last_stamp) as f64 * 1e-9 / self.period;
+            let gap = (gap.round() as u64).max(1);
+            self.seq_offset = last_seq + self.seq_offset + gap - seq;
+        }
+        self.last_state = Some((seq, stamp));
+        seq + self.seq_offset
     }
 
     /// Checks that the controller runs the hierarchy of the scenario.
@@ -138,7 +163,7 @@ impl<'a> RowBuilder<'a> {
         };
         let cycle = Cycle {
             // The drivers number their states k = 0, 1, … (t_k = k T).
-            t: state.header.seq as f64 * self.period,
+            t: self.periods(state) as f64 * self.period,
             q: state.q(),
             qd: state.qd(),
             output: &output,
@@ -198,10 +223,17 @@ impl Recording {
             + self.telemetry.checker.missed()
     }
 
-    /// Whether the state continues its stream (else it is not replayed).
+    /// Whether the state continues its stream or starts it again (a
+    /// restarted driver, numbering from below the last seq); a duplicate is
+    /// not replayed.
     fn on_state(&mut self, s: &JointState) -> bool {
-        if !self.states.observe(s.header.seq).is_accepted() {
-            return false;
+        match self.states.observe(s.header.seq) {
+            SeqEvent::Duplicate => return false,
+            SeqEvent::Backwards { .. } => {
+                self.states.checker.reset();
+                self.states.checker.observe(s.header.seq);
+            }
+            _ => {}
         }
         self.last_state = Some(*s);
         true
@@ -223,9 +255,9 @@ impl Recording {
         self.modes[k] += 1;
     }
 
-    /// Whether the sample continues its stream (else it is not replayed).
-    fn on_telemetry(&mut self, t: &Telemetry) -> bool {
-        self.telemetry.observe(t.header.seq).is_accepted()
+    /// How the sample relates to its stream.
+    fn on_telemetry(&mut self, t: &Telemetry) -> SeqEvent {
+        self.telemetry.observe(t.header.seq)
     }
 }
 
@@ -332,7 +364,8 @@ pub fn derive<'a>(
             }
             Entry::Telemetry(t) => {
                 let t = t.to_msg().map_err(bad)?;
-                if rec.on_telemetry(&t) {
+                // A restarted controller's samples too: the replay ends there.
+                if rec.on_telemetry(&t) != SeqEvent::Duplicate {
                     replay.on_telemetry(t);
                 }
             }
@@ -419,8 +452,11 @@ impl Derived<'_> {
             },
             "telemetry_without_state": self.replayed.states_missing,
             "telemetry_before_the_recording": self.replayed.cycles_before_recording,
+            "driver_restarts": self.replayed.driver_restarts,
+            "controller_restarted_after_cycle": self.replayed.controller_restarted_after,
             "stale_telemetry": self.replayed.stale,
             "states_not_answered_by_the_controller": self.replayed.states_skipped,
+            "states_dropped_unconsumed": self.replayed.states_dropped,
             "driver_missed_commands": last_state.map(|s| s.missed_commands),
             "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
             "controller_missed_states": last_tel.map(|t| t.counters.missed_states),
@@ -477,6 +513,11 @@ impl Derived<'_> {
         );
         if rec.setpoints > 0 {
             println!("  setpoints recorded: {}", rec.setpoints);
+        }
+        if let Some(after) = self.replayed.controller_restarted_after {
+            println!(
+                "  note: the controller restarted after cycle {after} (its telemetry numbered again): a new controller is another run; the results end there"
+            );
         }
         if self.rows.rows_without_law > 0 {
             println!(

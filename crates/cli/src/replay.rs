@@ -5,15 +5,18 @@
 //! `hcc plot FILE.mcap`, `hcc export`) reads the law's terms (J_i, J̄, V_i)
 //! at each recorded state from it.
 //!
-//! The recording says which state each cycle consumed (`telemetry.state_seq`),
+//! The recording says which state each cycle consumed (`telemetry.state_seq`,
+//! and the state's stamp that its command echoes: the two tell a restarted
+//! driver's states from the old one's, whose sequence numbers start again),
 //! when it woke (`state.stamp_ns + telemetry.timings.wakeup_latency_ns`,
 //! which the sequence plausibility uses), which setpoints it took (the
 //! answers counted in its telemetry), and where the controller reported a
 //! lost peer (a telemetry sample flagged `TELEMETRY_FLAG_PEER_LOST`): the
 //! replay repeats exactly that. The streams are drained one after the other
-//! into the file, so a cycle is replayed once its inputs have been read: a
-//! later state, its command (or a later one: then its own was lost), and the
-//! setpoints it answered. What the recording lacks (a state, a command, a
+//! into the file, so a cycle is replayed once its inputs have been read: its
+//! command (or a later one: then its own was lost), its state or a later one
+//! (by the stamp the command echoes; without the command, a later seq), and
+//! the setpoints it answered. What the recording lacks (a state, a command, a
 //! setpoint lost before the file) is counted and handed on, never guessed.
 //!
 //! A recording attached to a running controller (`hcc record`) starts
@@ -23,6 +26,13 @@
 //! Those cycles are handed on marked [`Replayed::before_recording`] and
 //! counted, not replayed; the replay starts at the first cycle whose inputs
 //! the file holds.
+//!
+//! A restarted driver (its states numbered from the start again) is
+//! followed: the states are matched by seq and stamp. A restarted
+//! controller (its telemetry numbered from the start again) is another run
+//! — a new controller, perhaps another scenario: the replay ends at the
+//! last cycle of the first one ([`ReplayCounts::controller_restarted_after`])
+//! and reads nothing after.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -60,6 +70,15 @@ pub struct ReplayCounts {
     pub states_missing: u64,
     /// Recorded states no cycle consumed (the controller skipped them).
     pub states_skipped: u64,
+    /// Times the state stream started again below its last sequence number
+    /// (a restarted or replaced driver).
+    pub driver_restarts: u64,
+    /// The controller's last cycle before its telemetry was numbered again
+    /// from below (a restarted controller): the replay ended there.
+    pub controller_restarted_after: Option<u64>,
+    /// Recorded states dropped unconsumed to bound the memory (more than
+    /// [`MAX_PENDING`] · 2 waiting: no cycle will consume them).
+    pub states_dropped: u64,
     /// Cycles at the start whose state or command was published before the
     /// recorder heard that stream (not replayed).
     pub cycles_before_recording: u64,
@@ -100,7 +119,8 @@ struct Answered {
 /// The replay state (module docs).
 pub struct Replay {
     cycle: ControlCycle,
-    /// Recorded states not yet consumed (seq ascending).
+    /// Recorded states not yet consumed, in the order read (the driver's
+    /// order: seq ascending, starting again after a driver restart).
     states: VecDeque<JointState>,
     /// Recorded commands by their seq, not yet handed on.
     commands: BTreeMap<u64, TorqueCommand>,
@@ -113,12 +133,21 @@ pub struct Replay {
     answered: BTreeMap<u64, Answered>,
     /// Telemetry waiting for its inputs to be read.
     pending: VecDeque<Box<Telemetry>>,
-    last_state_seq: Option<u64>,
-    /// The first recorded state's and command's seq.
-    first_state_seq: Option<u64>,
+    /// The last recorded state's (seq, stamp), and the largest stamp read.
+    last_state: Option<(u64, u64)>,
+    latest_stamp: u64,
+    /// The first recorded state's (seq, stamp) and command's seq.
+    first_state: Option<(u64, u64)>,
     first_command_seq: Option<u64>,
     /// Whether a cycle was handed on (the first one decides what was before).
     started: bool,
+    /// The last telemetry seq read.
+    last_telemetry_seq: Option<u64>,
+    /// States and commands read since a controller restart was seen.
+    since_restart: usize,
+    /// Everything of the first controller replayed after its restart: the
+    /// rest of the file is not read.
+    closed: bool,
     counts: ReplayCounts,
 }
 
@@ -137,10 +166,14 @@ impl Replay {
             setpoints: BTreeMap::new(),
             answered: BTreeMap::new(),
             pending: VecDeque::new(),
-            last_state_seq: None,
-            first_state_seq: None,
+            last_state: None,
+            latest_stamp: 0,
+            first_state: None,
             first_command_seq: None,
             started: false,
+            last_telemetry_seq: None,
+            since_restart: 0,
+            closed: false,
             counts: ReplayCounts::default(),
         })
     }
@@ -150,18 +183,34 @@ impl Replay {
         self.counts
     }
 
-    /// A recorded joint state (kept if it comes after the last one: a
-    /// duplicate was not answered again).
+    /// A recorded joint state (a repeat of the last one, the same seq and
+    /// stamp, was not answered again and is dropped; a seq below the last
+    /// one is a restarted driver's, kept).
     pub fn on_state(&mut self, s: JointState) {
-        if self.last_state_seq.is_none_or(|l| s.header.seq > l) {
-            self.first_state_seq.get_or_insert(s.header.seq);
-            self.last_state_seq = Some(s.header.seq);
-            self.states.push_back(s);
+        let key = (s.header.seq, s.header.stamp_ns);
+        if self.closed || self.last_state == Some(key) {
+            return;
         }
+        self.count_since_restart();
+        if self.states.len() >= 2 * MAX_PENDING {
+            self.states.pop_front();
+            self.counts.states_dropped += 1;
+        }
+        if self.last_state.is_some_and(|(seq, _)| key.0 < seq) {
+            self.counts.driver_restarts += 1;
+        }
+        self.first_state.get_or_insert(key);
+        self.last_state = Some(key);
+        self.latest_stamp = self.latest_stamp.max(key.1);
+        self.states.push_back(s);
     }
 
     /// A recorded torque command.
     pub fn on_command(&mut self, c: TorqueCommand) {
+        if self.closed {
+            return;
+        }
+        self.count_since_restart();
         let seq = c.header.seq;
         self.first_command_seq = Some(self.first_command_seq.map_or(seq, |f| f.min(seq)));
         self.last_command_seq = Some(self.last_command_seq.map_or(seq, |l| l.max(seq)));
@@ -172,6 +221,9 @@ impl Replay {
     /// answered before its first cycle — read after it, its stream drained
     /// later — is history and dropped).
     pub fn on_setpoint(&mut self, s: Setpoint) {
+        if self.closed {
+            return;
+        }
         if self
             .answered
             .get(&s.client_id)
@@ -183,9 +235,35 @@ impl Replay {
         self.setpoints.entry(s.client_id).or_default().push_back(s);
     }
 
-    /// A recorded telemetry sample (a cycle, or a stale event).
+    /// A recorded telemetry sample (a cycle, or a stale event). One numbered
+    /// at or below the last is a restarted controller's: it and every later
+    /// sample are not replayed (module docs).
     pub fn on_telemetry(&mut self, t: Box<Telemetry>) {
+        if self.closed || self.counts.controller_restarted_after.is_some() {
+            return;
+        }
+        let seq = t.header.seq;
+        if let Some(last) = self.last_telemetry_seq
+            && seq <= last
+        {
+            self.counts.controller_restarted_after = Some(last);
+            return;
+        }
+        self.last_telemetry_seq = Some(seq);
         self.pending.push_back(t);
+    }
+
+    fn count_since_restart(&mut self) {
+        if self.counts.controller_restarted_after.is_some() {
+            self.since_restart += 1;
+        }
+    }
+
+    /// Whether a cycle still waiting for its inputs must be handed on now:
+    /// [`MAX_PENDING`] samples read after it (telemetry, or states and
+    /// commands once no telemetry comes any more).
+    fn waited_enough(&self) -> bool {
+        self.pending.len() > MAX_PENDING || self.since_restart > MAX_PENDING
     }
 
     /// Replays the pending cycles whose inputs have been read (with `end`:
@@ -205,7 +283,7 @@ impl Replay {
                 continue;
             }
             let complete = self.inputs_read(tel);
-            if !complete && !end && self.pending.len() <= MAX_PENDING {
+            if !complete && !end && !self.waited_enough() {
                 // The cycle's state, command or setpoints come later in the file.
                 return Ok(true);
             }
@@ -216,19 +294,46 @@ impl Replay {
                 return Ok(false);
             }
         }
-        if end {
+        if self.counts.controller_restarted_after.is_some() && self.pending.is_empty() {
+            // The first controller's cycles are all replayed.
+            self.closed = true;
+        }
+        if self.closed {
+            // The second controller's inputs: not part of this replay.
+            self.states.clear();
+            self.commands.clear();
+            self.setpoints.clear();
+        } else if end {
             self.counts.states_skipped += self.states.len() as u64;
             self.states.clear();
         }
         Ok(true)
     }
 
-    /// Whether the inputs of `tel`'s cycle have been read: a later state (so
-    /// its own is in), its command or a later one, and the setpoints it
+    /// The state the cycle of `tel` consumed: its seq, and its stamp when
+    /// the recording holds the cycle's command (which echoes both).
+    fn wanted(&self, tel: &Telemetry) -> (u64, Option<u64>) {
+        let stamp = self
+            .commands
+            .get(&tel.command_seq)
+            .filter(|c| c.state_seq == tel.state_seq)
+            .map(|c| c.state_stamp_ns);
+        (tel.state_seq, stamp)
+    }
+
+    /// Whether the inputs of `tel`'s cycle have been read: its command or a
+    /// later one; its state or a later one (by the stamp its command echoes;
+    /// without the command, by seq: a later state); and the setpoints it
     /// answered.
     fn inputs_read(&self, tel: &Telemetry) -> bool {
-        self.last_state_seq.is_some_and(|s| s > tel.state_seq)
-            && self.last_command_seq.is_some_and(|c| c >= tel.command_seq)
+        if self.last_command_seq.is_none_or(|c| c < tel.command_seq) {
+            return false;
+        }
+        let state_read = match self.wanted(tel) {
+            (_, Some(stamp)) => self.latest_stamp >= stamp,
+            (seq, None) => self.last_state.is_some_and(|(last, _)| last > seq),
+        };
+        state_read
             && tel.setpoint_answers.iter().all(|a| {
                 let queued = self
                     .setpoints
@@ -258,12 +363,18 @@ impl Replay {
 
     /// Whether the cycle of `tel` consumed a state or answered with a command
     /// published before the recorder heard that stream: both streams are
-    /// numbered +1 per message and the cycles follow them in order, so
-    /// such a cycle can only come first.
+    /// numbered +1 per message (states stamped in order) and the cycles
+    /// follow them in order, so such a cycle can only come first.
     fn before_recording(&self, tel: &Telemetry) -> bool {
+        let Some((first_seq, first_stamp)) = self.first_state else {
+            return false;
+        };
+        let state_before = match self.wanted(tel) {
+            (_, Some(stamp)) => stamp < first_stamp,
+            (seq, None) => seq < first_seq,
+        };
         !self.started
-            && (self.first_state_seq.is_some_and(|f| tel.state_seq < f)
-                || self.first_command_seq.is_some_and(|f| tel.command_seq < f))
+            && (state_before || self.first_command_seq.is_some_and(|f| tel.command_seq < f))
     }
 
     /// Hands on a cycle before the recording (not replayed): the setpoints
@@ -314,18 +425,33 @@ impl Replay {
         let first = !self.started;
         let setpoints_missing = self.take_setpoints(tel);
         self.started = true;
-        let want = tel.state_seq;
-        while self.states.front().is_some_and(|s| s.header.seq < want) {
-            self.states.pop_front();
-            if first {
-                self.counts.states_before_first_cycle += 1;
-            } else {
-                self.counts.states_skipped += 1;
-            }
+        let (want, stamp) = self.wanted(tel);
+        let found = self
+            .states
+            .iter()
+            .position(|s| s.header.seq == want && stamp.is_none_or(|t| s.header.stamp_ns == t));
+        // The states read before it were not answered (or not by a cycle the
+        // recording holds); without it, those older than it.
+        let older = match found {
+            Some(i) => i,
+            None => self
+                .states
+                .iter()
+                .take_while(|s| match stamp {
+                    Some(t) => s.header.stamp_ns < t,
+                    None => s.header.seq < want,
+                })
+                .count(),
+        };
+        self.states.drain(..older);
+        if first {
+            self.counts.states_before_first_cycle += older as u64;
+        } else {
+            self.counts.states_skipped += older as u64;
         }
-        let state = match self.states.front() {
-            Some(s) if s.header.seq == want => self.states.pop_front(),
-            _ => None,
+        let state = match found {
+            Some(_) => self.states.pop_front(),
+            None => None,
         };
         let answer = state.map(|s| {
             let wake = s
@@ -385,7 +511,7 @@ impl Replay {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hcc_msgs::TelemetryTimings;
+    use hcc_msgs::{CommandMode, TelemetryTimings};
 
     /// What a controller daemon published over `k` cycles of the paper's
     /// arm held at rest: states, commands, telemetry (seq 1..=k), and the
@@ -397,6 +523,16 @@ mod tests {
     }
 
     fn daemon_run(scenario: &Scenario, k: u64, sent: &[(u64, Setpoint)]) -> Run {
+        daemon_run_on(scenario, (1..=k).map(|seq| (seq, seq * 1_000_000)), sent)
+    }
+
+    /// [`daemon_run`] on states of the given (seq, stamp); the setpoints
+    /// `sent` arrive with the k-th state (1-based).
+    fn daemon_run_on(
+        scenario: &Scenario,
+        keys: impl Iterator<Item = (u64, u64)>,
+        sent: &[(u64, Setpoint)],
+    ) -> Run {
         let mut replay = Replay::new(scenario).unwrap();
         let cycle = &mut replay.cycle;
         let n = scenario.model.nq();
@@ -405,13 +541,13 @@ mod tests {
             commands: vec![],
             telemetry: vec![],
         };
-        for seq in 1..=k {
+        for (k, (seq, stamp)) in (1..).zip(keys) {
             let mut s = JointState::zeroed();
             s.set_n_joints(n).unwrap();
             s.set_q(scenario.q0.as_slice()).unwrap();
             s.header.seq = seq;
-            s.header.stamp_ns = seq * 1_000_000;
-            let mut arrived = sent.iter().filter(|(at, _)| *at == seq).map(|(_, sp)| *sp);
+            s.header.stamp_ns = stamp;
+            let mut arrived = sent.iter().filter(|(at, _)| *at == k).map(|(_, sp)| *sp);
             assert!(matches!(
                 cycle.step(&s, s.header.stamp_ns, || arrived.next()),
                 Answer::Command(_)
@@ -566,12 +702,12 @@ mod tests {
             replay.on_command(run.commands[i]);
             replay.on_telemetry(run.telemetry[i].clone());
             assert!(replay.advance(false, &mut each).unwrap());
-            // Each cycle is handed on once the next state is read.
-            assert!(replay.pending.len() <= 1, "cycle {}", i + 1);
+            // Each cycle is handed on once its state and command are read.
+            assert!(replay.pending.is_empty(), "cycle {}", i + 1);
         }
         assert!(replay.advance(true, &mut each).unwrap());
         assert_eq!(handed, (20..=60).collect::<Vec<_>>());
-        assert_eq!(incomplete, 1, "only the last cycle, at the end of the file");
+        assert_eq!(incomplete, 0);
         let counts = replay.counts();
         assert_eq!(counts.setpoints_taken, 1);
         assert_eq!(counts.setpoints_missing, 0);
@@ -609,5 +745,115 @@ mod tests {
         assert_eq!(missing_at, vec![10]);
         assert_eq!(replay.counts().setpoints_missing, 1);
         assert!(largest <= MAX_PENDING, "{largest}");
+    }
+
+    /// A driver restarted mid-recording (its states numbered from 1 again,
+    /// stamped later): the controller answered the new states (the safe
+    /// command until it took them for a new peer, then the law), and the
+    /// replay follows it — every cycle replayed, bit-identical, the restart
+    /// counted; before, every state after the restart was dropped as "not
+    /// after the last one" and every later cycle was a gap.
+    #[test]
+    fn a_driver_restarted_mid_recording_is_followed() {
+        let scenario = paper_sim1();
+        let ms = 1_000_000;
+        let first = (1..=40).map(|seq| (seq, seq * ms));
+        let second = (1..=40).map(|seq| (seq, (60 + seq) * ms));
+        let run = daemon_run_on(&scenario, first.chain(second), &[]);
+        let mut replay = Replay::new(&scenario).unwrap();
+        let (mut compared, mut safe, mut gaps) = (0, 0, 0);
+        let mut each = |r: &Replayed<'_>| {
+            match (r.state, r.recorded, r.answer) {
+                (Some(_), Some(recorded), Some(Answer::Command(mode))) => {
+                    let bits = |t: &[f64]| t.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(recorded.tau()), bits(r.cycle.command().tau()));
+                    assert_eq!(recorded.mode, mode.code());
+                    compared += 1;
+                    if mode == CommandMode::SafeHold {
+                        safe += 1;
+                    }
+                }
+                _ => gaps += 1,
+            }
+            Ok(true)
+        };
+        for i in 0..run.states.len() {
+            replay.on_state(run.states[i]);
+            replay.on_command(run.commands[i]);
+            replay.on_telemetry(run.telemetry[i].clone());
+            assert!(replay.advance(false, &mut each).unwrap());
+        }
+        assert!(replay.advance(true, &mut each).unwrap());
+        assert_eq!((compared, gaps), (80, 0));
+        assert!(
+            safe > 0,
+            "the controller answered the restart with the safe command"
+        );
+        let counts = replay.counts();
+        assert_eq!(counts.driver_restarts, 1);
+        assert_eq!(counts.cycles, 80);
+        assert_eq!(counts.states_skipped, 0);
+    }
+
+    /// A controller restarted mid-recording (its telemetry and commands
+    /// numbered from 1 again, the driver's states going on): the replay
+    /// hands on the first controller's 30 cycles, bit-identical, says where
+    /// the restart was, and reads nothing of the second run — however long
+    /// it is, nothing of it is kept.
+    #[test]
+    fn a_controller_restart_ends_the_replay() {
+        let scenario = paper_sim1();
+        let ms = 1_000_000;
+        let first = daemon_run(&scenario, 30, &[]);
+        let k = 2 * MAX_PENDING as u64 + 100;
+        let second = daemon_run_on(&scenario, (31..=30 + k).map(|seq| (seq, seq * ms)), &[]);
+        let mut replay = Replay::new(&scenario).unwrap();
+        let mut handed = vec![];
+        let mut each = |r: &Replayed<'_>| {
+            let (Some(recorded), Some(Answer::Command(_))) = (r.recorded, r.answer) else {
+                panic!("cycle {} not replayed", r.telemetry.header.seq);
+            };
+            assert_eq!(recorded.tau(), r.cycle.command().tau());
+            handed.push(r.telemetry.header.seq);
+            Ok(true)
+        };
+        let runs = [&first, &second];
+        for run in runs {
+            for i in 0..run.states.len() {
+                replay.on_state(run.states[i]);
+                replay.on_command(run.commands[i]);
+                replay.on_telemetry(run.telemetry[i].clone());
+                assert!(replay.advance(false, &mut each).unwrap());
+                assert!(replay.states.len() <= 1 && replay.commands.len() <= 1);
+            }
+        }
+        assert!(replay.advance(true, &mut each).unwrap());
+        assert_eq!(handed, (1..=30).collect::<Vec<_>>());
+        let counts = replay.counts();
+        assert_eq!(counts.controller_restarted_after, Some(30));
+        assert_eq!(counts.cycles, 30);
+        assert!(replay.closed);
+    }
+
+    /// States that no telemetry consumes (the controller gone, the driver
+    /// still publishing) are kept up to 2 · [`MAX_PENDING`], the oldest
+    /// dropped and counted.
+    #[test]
+    fn states_without_cycles_are_bounded() {
+        let scenario = paper_sim1();
+        let mut replay = Replay::new(&scenario).unwrap();
+        let mut s = JointState::zeroed();
+        s.set_n_joints(4).unwrap();
+        for seq in 1..=3 * MAX_PENDING as u64 {
+            s.header.seq = seq;
+            s.header.stamp_ns = seq * 1_000_000;
+            replay.on_state(s);
+        }
+        assert_eq!(replay.states.len(), 2 * MAX_PENDING);
+        assert_eq!(replay.counts().states_dropped, MAX_PENDING as u64);
+        assert_eq!(
+            replay.states.front().unwrap().header.seq,
+            MAX_PENDING as u64 + 1
+        );
     }
 }

@@ -177,6 +177,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             cmp.first_cycle.map_or("-".to_string(), |c| c.to_string())
         );
     }
+    if let Some(after) = counts.controller_restarted_after {
+        println!(
+            "note: the controller restarted after cycle {after} (its telemetry numbered again): a new controller is another run; replayed up to the restart"
+        );
+    }
     if cmp.compared == 0 {
         bail!(
             "{} holds no controller cycle to replay",
@@ -184,11 +189,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "replayed {} cycles of {} ({} setpoints, {} stale events): every torque bit-identical to the recording",
+        "replayed {} cycles of {} ({} setpoints, {} stale events, {} driver restarts): every torque bit-identical to the recording",
         cmp.compared,
         args.recording.display(),
         counts.setpoints_taken,
-        counts.stale
+        counts.stale,
+        counts.driver_restarts
     );
     Ok(())
 }

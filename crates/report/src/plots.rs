@@ -117,8 +117,12 @@ fn draw_panels(path: &Path, title: &str, t: &[f64], panels: &[Panel]) -> Result<
         .titled(title, (FONT_FAMILY, 26).into_font())
         .map_err(&err)?;
     let areas = root.split_evenly((panels.len(), 1));
-    let t0 = t.first().copied().unwrap_or(0.0);
-    let t1 = t.last().copied().unwrap_or(1.0).max(t0 + 1e-9);
+    // The range of the finite times (not the first and last: a plot must
+    // never map a point far outside its area, whatever the data).
+    let finite = || t.iter().copied().filter(|v| v.is_finite());
+    let t0 = finite().fold(f64::INFINITY, f64::min);
+    let t0 = if t0.is_finite() { t0 } else { 0.0 };
+    let t1 = finite().fold(f64::NEG_INFINITY, f64::max).max(t0 + 1e-9);
     for (area, panel) in areas.iter().zip(panels) {
         let (lo, hi) = y_range(&panel.series);
         let span = hi - lo;
@@ -146,7 +150,7 @@ fn draw_panels(path: &Path, title: &str, t: &[f64], panels: &[Panel]) -> Result<
                 .draw_series(LineSeries::new(
                     t.iter()
                         .zip(&s.values)
-                        .filter(|(_, v)| v.is_finite())
+                        .filter(|(a, v)| a.is_finite() && v.is_finite())
                         .map(|(a, b)| (*a, *b)),
                     color.stroke_width(2),
                 ))

@@ -506,6 +506,11 @@ pub struct StreamStats {
     pub gap_events: u64,
     pub duplicates: u64,
     pub backwards: u64,
+    /// Times the stream started again below its last sequence number (a
+    /// restarted publisher: a new driver or controller), counted apart from
+    /// `backwards` and not as out of sequence.
+    #[serde(default)]
+    pub restarts: u64,
 }
 
 /// `/recorder`: what the recorder counted so far (once per second and at the end).

@@ -48,7 +48,8 @@ fn stream_stats() -> Value {
             "gaps": integer("samples lost (sum of the sequence gaps)"),
             "gap_events": integer("sequence gaps"),
             "duplicates": integer("duplicate sequence numbers"),
-            "backwards": integer("sequence numbers that went backwards"),
+            "backwards": integer("sequence numbers that went backwards (not restarts)"),
+            "restarts": integer("times the stream was numbered again from below (a restarted publisher)"),
         }
     })
 }
