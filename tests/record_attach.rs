@@ -22,6 +22,7 @@
 
 mod monitor;
 
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -41,6 +42,40 @@ fn upkeep_count(log: &str) -> u64 {
         })
         .max()
         .unwrap_or(0)
+}
+
+/// `hcc plot FILE --out DIR/plot`: its metrics and trajectory rows.
+fn plot(file: &Path, dir: &Path) -> (serde_json::Value, Vec<Vec<f64>>) {
+    let plot = run_with_timeout(
+        Command::new(bin("hcc"))
+            .arg("plot")
+            .arg(file)
+            .arg("--out")
+            .arg(dir.join("plot")),
+        dir,
+        "plot",
+        Duration::from_secs(120),
+    );
+    assert!(plot.status.success(), "hcc plot failed:\n{}", plot.log());
+    let metrics = read_json(&dir.join("plot/metrics.json"));
+    let (_, rows) = read_csv(&dir.join("plot/trajectory.csv"));
+    (metrics, rows)
+}
+
+/// `hcc replay FILE`, which must succeed with every torque bit-identical;
+/// its output.
+fn replay_bit_identical(file: &Path, dir: &Path) -> String {
+    let replay = run_with_timeout(
+        Command::new(bin("hcc")).arg("replay").arg(file),
+        dir,
+        "replay",
+        Duration::from_secs(120),
+    );
+    let log = replay.log();
+    println!("{log}");
+    assert!(replay.status.success(), "{log}");
+    assert!(log.contains("every torque bit-identical"), "{log}");
+    log
 }
 
 #[test]
@@ -95,35 +130,14 @@ fn hcc_record_attached_to_daemons_started_by_hand() {
     assert_clean(&ns, &prefix);
 
     // The file: every stream, from the attach on (not from the start).
-    let plot = run_with_timeout(
-        Command::new(bin("hcc"))
-            .arg("plot")
-            .arg(&file)
-            .arg("--out")
-            .arg(dir.path().join("plot")),
-        dir.path(),
-        "plot",
-        Duration::from_secs(120),
-    );
-    assert!(plot.status.success(), "hcc plot failed:\n{}", plot.log());
-    let metrics = read_json(&dir.path().join("plot/metrics.json"));
+    let (metrics, rows) = plot(&file, dir.path());
     println!("{metrics:#}");
-    let (_, rows) = read_csv(&dir.path().join("plot/trajectory.csv"));
     assert!(rows.len() > 1500, "rows: {}", rows.len());
     let t0 = rows[0][0];
     assert!(t0 >= 1.4, "the recording starts mid-run, not at t = {t0}");
 
     // Replay from the middle of the run.
-    let replay = run_with_timeout(
-        Command::new(bin("hcc")).arg("replay").arg(&file),
-        dir.path(),
-        "replay",
-        Duration::from_secs(120),
-    );
-    let log = replay.log();
-    println!("{log}");
-    assert!(replay.status.success(), "{log}");
-    assert!(log.contains("every torque bit-identical"), "{log}");
+    replay_bit_identical(&file, dir.path());
 }
 
 #[test]
@@ -190,23 +204,11 @@ fn hcc_record_across_a_simulator_restart() {
     }
     assert_clean(&ns, &prefix);
 
-    let plot = run_with_timeout(
-        Command::new(bin("hcc"))
-            .arg("plot")
-            .arg(&file)
-            .arg("--out")
-            .arg(dir.path().join("plot")),
-        dir.path(),
-        "plot",
-        Duration::from_secs(120),
-    );
-    assert!(plot.status.success(), "hcc plot failed:\n{}", plot.log());
-    let metrics = read_json(&dir.path().join("plot/metrics.json"));
+    let (metrics, rows) = plot(&file, dir.path());
     let ipc = &metrics["run"]["settings"]["ipc"];
     println!("{ipc:#}");
     assert_eq!(ipc["driver_restarts"], 1, "{ipc:#}");
     assert_eq!(ipc["telemetry_without_state"], 0, "{ipc:#}");
-    let (_, rows) = read_csv(&dir.path().join("plot/trajectory.csv"));
     assert!(rows.len() > 550, "rows: {}", rows.len());
     // t goes on across the restart (the new simulator numbers its states
     // from the start again).
@@ -219,15 +221,6 @@ fn hcc_record_across_a_simulator_restart() {
         );
     }
 
-    let replay = run_with_timeout(
-        Command::new(bin("hcc")).arg("replay").arg(&file),
-        dir.path(),
-        "replay",
-        Duration::from_secs(120),
-    );
-    let log = replay.log();
-    println!("{log}");
-    assert!(replay.status.success(), "{log}");
+    let log = replay_bit_identical(&file, dir.path());
     assert!(log.contains("1 driver restarts"), "{log}");
-    assert!(log.contains("every torque bit-identical"), "{log}");
 }

@@ -561,6 +561,14 @@ mod tests {
         run
     }
 
+    /// Reads cycle `i` of `run` as the recorder drains it: state, command,
+    /// telemetry.
+    fn feed(replay: &mut Replay, run: &Run, i: usize) {
+        replay.on_state(run.states[i]);
+        replay.on_command(run.commands[i]);
+        replay.on_telemetry(run.telemetry[i].clone());
+    }
+
     fn paper_sim1() -> Scenario {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/paper-sim1.toml");
         Scenario::load(path).unwrap()
@@ -698,9 +706,7 @@ mod tests {
             if let Some((_, sp)) = sent.iter().find(|(at, _)| *at == i as u64 + 1) {
                 replay.on_setpoint(*sp);
             }
-            replay.on_state(run.states[i]);
-            replay.on_command(run.commands[i]);
-            replay.on_telemetry(run.telemetry[i].clone());
+            feed(&mut replay, &run, i);
             assert!(replay.advance(false, &mut each).unwrap());
             // Each cycle is handed on once its state and command are read.
             assert!(replay.pending.is_empty(), "cycle {}", i + 1);
@@ -734,9 +740,7 @@ mod tests {
             Ok(true)
         };
         for i in 0..k as usize {
-            replay.on_state(run.states[i]);
-            replay.on_command(run.commands[i]);
-            replay.on_telemetry(run.telemetry[i].clone());
+            feed(&mut replay, &run, i);
             assert!(replay.advance(false, &mut each).unwrap());
             largest = largest.max(replay.pending.len());
         }
@@ -778,9 +782,7 @@ mod tests {
             Ok(true)
         };
         for i in 0..run.states.len() {
-            replay.on_state(run.states[i]);
-            replay.on_command(run.commands[i]);
-            replay.on_telemetry(run.telemetry[i].clone());
+            feed(&mut replay, &run, i);
             assert!(replay.advance(false, &mut each).unwrap());
         }
         assert!(replay.advance(true, &mut each).unwrap());
@@ -820,9 +822,7 @@ mod tests {
         let runs = [&first, &second];
         for run in runs {
             for i in 0..run.states.len() {
-                replay.on_state(run.states[i]);
-                replay.on_command(run.commands[i]);
-                replay.on_telemetry(run.telemetry[i].clone());
+                feed(&mut replay, run, i);
                 assert!(replay.advance(false, &mut each).unwrap());
                 assert!(replay.states.len() <= 1 && replay.commands.len() <= 1);
             }
