@@ -9,9 +9,11 @@
 //!   sign the controller keeps), nothing of the daemon's history matters and
 //!   every torque is bit-identical;
 //! * a recording across a simulator killed and started again (as a user
-//!   swaps the simulator for a driver): the recorder counts the state
-//!   stream's restart, `hcc plot` derives every cycle, `hcc replay` follows
-//!   the new driver's states (numbered from the start again) bit for bit;
+//!   swaps the simulator for a driver), and across a controller killed and
+//!   started again: the recorder counts the restarted streams, `hcc plot`
+//!   derives every cycle, `hcc replay` follows the new daemon (numbering
+//!   from the start again; a fresh control cycle for a new controller) bit
+//!   for bit;
 //! * the controller's log accounts for the recorder's connections: made
 //!   while it waits (its connection upkeep), or — when the recorder attached
 //!   while the loop was busy or blocked on a late state — by the next send,
@@ -140,10 +142,24 @@ fn hcc_record_attached_to_daemons_started_by_hand() {
     replay_bit_identical(&file, dir.path());
 }
 
-#[test]
-fn hcc_record_across_a_simulator_restart() {
-    let dir = TempDir::new("record_restart");
-    let ns = unique_namespace("record_restart");
+/// Which daemon a recording sees restarted.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Restarted {
+    Simulator,
+    Controller,
+}
+
+/// `hcc record` across a crash of `which` and a new one started on the same
+/// namespace: the recorder counts the restart of that daemon's streams (not
+/// samples out of sequence), `hcc plot` derives every cycle with t going on,
+/// `hcc replay` follows the restart bit for bit.
+fn record_across_a_restart(which: Restarted) {
+    let tag = match which {
+        Restarted::Simulator => "restart_sim",
+        Restarted::Controller => "restart_ctl",
+    };
+    let dir = TempDir::new(tag);
+    let ns = unique_namespace(tag);
     let prefix = unique_file_prefix();
     let config = repo_root().join("config/paper-sim1.toml");
     let file = dir.path().join("restart.mcap");
@@ -155,20 +171,30 @@ fn hcc_record_across_a_simulator_restart() {
         mon.wait_until("1500 cycles: the arm at rest", LONG, |m| {
             m.telemetry.len() >= 1500
         });
+        // A long idle timeout: the recorder must not take the controller's
+        // absence for the end of the run.
         let mut rec = ChildGuard::spawn(
             Command::new(bin("hcc"))
                 .env(FILE_PREFIX_ENV, &prefix)
-                .args(["record", "--namespace", &ns, "--quiet", "--config"])
+                .args([
+                    "record",
+                    "--namespace",
+                    &ns,
+                    "--quiet",
+                    "--idle-timeout",
+                    "60",
+                ])
+                .arg("--config")
                 .arg(&config)
                 .arg("--out")
                 .arg(&file)
                 .stdout(std::fs::File::create(&out).unwrap())
                 .stderr(Stdio::inherit()),
         );
-        // The recorder is in once its file grows (its first chunk flushes
-        // within a second); then 300 more cycles before the crash.
+        // The file exists once the recorder runs; its subscribers connect
+        // within milliseconds, well inside the 300 cycles before the crash.
         let attached = std::time::Instant::now();
-        while std::fs::metadata(&file).map_or(0, |m| m.len()) == 0 {
+        while !file.exists() {
             assert!(attached.elapsed() < LONG, "hcc record wrote nothing");
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -176,14 +202,26 @@ fn hcc_record_across_a_simulator_restart() {
         mon.wait_until("300 recorded cycles", LONG, |m| {
             m.telemetry.len() >= n + 300
         });
-        sim.crash();
+        match which {
+            Restarted::Simulator => {
+                sim.crash();
+                let n = mon.telemetry.len();
+                mon.wait_until("the peer lost", LONG, |m| {
+                    m.telemetry[n..].iter().any(|t| t.peer_lost)
+                });
+                sim = Daemon::sim(&ns, &prefix, dir.path(), "sim2");
+            }
+            Restarted::Controller => {
+                ctl.crash();
+                let n = mon.states.len();
+                mon.wait_until("200 states without a controller", LONG, |m| {
+                    m.states.len() >= n + 200
+                });
+                ctl = Daemon::controller(&ns, &prefix, dir.path(), "controller2");
+            }
+        }
         let n = mon.telemetry.len();
-        mon.wait_until("the peer lost", LONG, |m| {
-            m.telemetry[n..].iter().any(|t| t.peer_lost)
-        });
-        let mut sim2 = Daemon::sim(&ns, &prefix, dir.path(), "sim2");
-        let n = mon.telemetry.len();
-        mon.wait_until("300 cycles with the second simulator", LONG, |m| {
+        mon.wait_until("300 cycles after the restart", LONG, |m| {
             m.telemetry[n..].iter().filter(|t| !t.peer_lost).count() >= 300
         });
         // SAFETY: a signal to our own child, by pid.
@@ -194,12 +232,18 @@ fn hcc_record_across_a_simulator_restart() {
         let log = std::fs::read_to_string(&out).unwrap_or_default();
         println!("{log}");
         assert!(status.success(), "hcc record: {status}\n{log}");
-        assert!(
-            log.contains("joint_state") && log.contains("(1 restart)"),
-            "{log}"
-        );
+        let restarted: &[&str] = match which {
+            Restarted::Simulator => &["joint_state"],
+            Restarted::Controller => &["torque_command", "telemetry"],
+        };
+        for stream in restarted {
+            let counted = log
+                .split(", ")
+                .any(|part| part.contains(stream) && part.contains("(1 restart)"));
+            assert!(counted, "{stream} not counted as restarted once: {log}");
+        }
         assert!(!log.contains("out of sequence"), "{log}");
-        sim2.stop();
+        sim.stop();
         ctl.stop();
     }
     assert_clean(&ns, &prefix);
@@ -207,11 +251,16 @@ fn hcc_record_across_a_simulator_restart() {
     let (metrics, rows) = plot(&file, dir.path());
     let ipc = &metrics["run"]["settings"]["ipc"];
     println!("{ipc:#}");
-    assert_eq!(ipc["driver_restarts"], 1, "{ipc:#}");
+    let (drivers, controllers) = match which {
+        Restarted::Simulator => (1, 0),
+        Restarted::Controller => (0, 1),
+    };
+    assert_eq!(ipc["driver_restarts"], drivers, "{ipc:#}");
+    assert_eq!(ipc["controller_restarts"], controllers, "{ipc:#}");
     assert_eq!(ipc["telemetry_without_state"], 0, "{ipc:#}");
     assert!(rows.len() > 550, "rows: {}", rows.len());
-    // t goes on across the restart (the new simulator numbers its states
-    // from the start again).
+    // t goes on across the restart (a new simulator numbers its states from
+    // the start again).
     for w in rows.windows(2) {
         assert!(
             w[1][0] > w[0][0],
@@ -222,5 +271,16 @@ fn hcc_record_across_a_simulator_restart() {
     }
 
     let log = replay_bit_identical(&file, dir.path());
-    assert!(log.contains("1 driver restarts"), "{log}");
+    let expected = format!("{drivers} driver restarts, {controllers} controller restarts");
+    assert!(log.contains(&expected), "{log}");
+}
+
+#[test]
+fn hcc_record_across_a_simulator_restart() {
+    record_across_a_restart(Restarted::Simulator);
+}
+
+#[test]
+fn hcc_record_across_a_controller_restart() {
+    record_across_a_restart(Restarted::Controller);
 }

@@ -183,9 +183,16 @@ struct Stream {
 }
 
 impl Stream {
+    /// Checks `seq`; one below the last starts the stream again (a
+    /// restarted publisher: one publisher's samples arrive in order).
     fn observe(&mut self, seq: u64) -> SeqEvent {
         self.received += 1;
-        self.checker.observe(seq)
+        let e = self.checker.observe(seq);
+        if let SeqEvent::Backwards { .. } = e {
+            self.checker.reset();
+            return self.checker.observe(seq);
+        }
+        e
     }
 }
 
@@ -227,13 +234,8 @@ impl Recording {
     /// restarted driver, numbering from below the last seq); a duplicate is
     /// not replayed.
     fn on_state(&mut self, s: &JointState) -> bool {
-        match self.states.observe(s.header.seq) {
-            SeqEvent::Duplicate => return false,
-            SeqEvent::Backwards { .. } => {
-                self.states.checker.reset();
-                self.states.checker.observe(s.header.seq);
-            }
-            _ => {}
+        if !self.states.observe(s.header.seq).is_accepted() {
+            return false;
         }
         self.last_state = Some(*s);
         true
@@ -255,9 +257,10 @@ impl Recording {
         self.modes[k] += 1;
     }
 
-    /// How the sample relates to its stream.
-    fn on_telemetry(&mut self, t: &Telemetry) -> SeqEvent {
-        self.telemetry.observe(t.header.seq)
+    /// Whether the sample continues its stream or starts it again (a
+    /// restarted controller); a duplicate is not replayed.
+    fn on_telemetry(&mut self, t: &Telemetry) -> bool {
+        self.telemetry.observe(t.header.seq).is_accepted()
     }
 }
 
@@ -364,8 +367,7 @@ pub fn derive<'a>(
             }
             Entry::Telemetry(t) => {
                 let t = t.to_msg().map_err(bad)?;
-                // A restarted controller's samples too: the replay ends there.
-                if rec.on_telemetry(&t) != SeqEvent::Duplicate {
+                if rec.on_telemetry(&t) {
                     replay.on_telemetry(t);
                 }
             }
@@ -453,7 +455,8 @@ impl Derived<'_> {
             "telemetry_without_state": self.replayed.states_missing,
             "telemetry_before_the_recording": self.replayed.cycles_before_recording,
             "driver_restarts": self.replayed.driver_restarts,
-            "controller_restarted_after_cycle": self.replayed.controller_restarted_after,
+            "controller_restarts": self.replayed.controller_restarts,
+            "setpoints_dropped_at_controller_restarts": self.replayed.setpoints_dropped_at_restart,
             "stale_telemetry": self.replayed.stale,
             "states_not_answered_by_the_controller": self.replayed.states_skipped,
             "states_dropped_unconsumed": self.replayed.states_dropped,
@@ -502,21 +505,23 @@ impl Derived<'_> {
             self.latencies_ns.len()
         );
         println!(
-            "  recorder: gaps {} (states {}, commands {}, telemetry {}), cycles before the recording {}, telemetry without state {}, states not answered {}",
+            "  recorder: gaps {} (states {}, commands {}, telemetry {}), cycles before the recording {}, telemetry without state {}, states not answered {}, driver restarts {}",
             rec.gaps(),
             rec.states.checker.missed(),
             rec.commands.checker.missed(),
             rec.telemetry.checker.missed(),
             self.replayed.cycles_before_recording,
             self.replayed.states_missing,
-            self.replayed.states_skipped
+            self.replayed.states_skipped,
+            self.replayed.driver_restarts
         );
         if rec.setpoints > 0 {
             println!("  setpoints recorded: {}", rec.setpoints);
         }
-        if let Some(after) = self.replayed.controller_restarted_after {
+        if self.replayed.controller_restarts > 0 {
             println!(
-                "  note: the controller restarted after cycle {after} (its telemetry numbered again): a new controller is another run; the results end there"
+                "  note: the controller restarted {} time(s) (its commands and telemetry numbered again); a fresh control cycle of the scenario replays each new one",
+                self.replayed.controller_restarts
             );
         }
         if self.rows.rows_without_law > 0 {

@@ -29,10 +29,13 @@
 //!
 //! A restarted driver (its states numbered from the start again) is
 //! followed: the states are matched by seq and stamp. A restarted
-//! controller (its telemetry numbered from the start again) is another run
-//! — a new controller, perhaps another scenario: the replay ends at the
-//! last cycle of the first one ([`ReplayCounts::controller_restarted_after`])
-//! and reads nothing after.
+//! controller (its commands and telemetry numbered from the start again)
+//! is followed too: once the first controller's cycles are replayed, a
+//! fresh control cycle of the same scenario takes over, as the new
+//! controller did ([`ReplayCounts::controller_restarts`]). The setpoints
+//! still queued then were sent to the old controller (the new one never
+//! receives what was published before it subscribed): they are dropped and
+//! counted. A new controller of another scenario shows as a difference.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -73,9 +76,15 @@ pub struct ReplayCounts {
     /// Times the state stream started again below its last sequence number
     /// (a restarted or replaced driver).
     pub driver_restarts: u64,
-    /// The controller's last cycle before its telemetry was numbered again
-    /// from below (a restarted controller): the replay ended there.
-    pub controller_restarted_after: Option<u64>,
+    /// Times the controller's commands and telemetry were numbered again
+    /// from below (a restarted controller; a fresh control cycle took over).
+    pub controller_restarts: u64,
+    /// Setpoints still queued at a controller restart (sent to the old
+    /// controller; not taken again).
+    pub setpoints_dropped_at_restart: u64,
+    /// Commands and telemetry of a further controller restart that came
+    /// before the replay reached the previous one (not replayed).
+    pub samples_dropped_at_restart: u64,
     /// Recorded states dropped unconsumed to bound the memory (more than
     /// [`MAX_PENDING`] · 2 waiting: no cycle will consume them).
     pub states_dropped: u64,
@@ -116,64 +125,96 @@ struct Answered {
     seq: u64,
 }
 
+/// One controller's commands and telemetry, as read (each numbered +1 per
+/// message from its start).
+#[derive(Default)]
+struct ControllerStreams {
+    /// Recorded commands by their seq, not yet handed on.
+    commands: BTreeMap<u64, TorqueCommand>,
+    /// The first and the largest command seq read.
+    first_command_seq: Option<u64>,
+    last_command_seq: Option<u64>,
+    /// Telemetry waiting for its inputs to be read.
+    pending: VecDeque<Box<Telemetry>>,
+    /// The last telemetry seq read.
+    last_telemetry_seq: Option<u64>,
+}
+
+impl ControllerStreams {
+    /// Whether `seq` continues the command stream (else it is a restarted
+    /// controller's).
+    fn continues_commands(&self, seq: u64) -> bool {
+        self.last_command_seq.is_none_or(|l| seq > l)
+    }
+
+    /// Whether `seq` continues the telemetry stream.
+    fn continues_telemetry(&self, seq: u64) -> bool {
+        self.last_telemetry_seq.is_none_or(|l| seq > l)
+    }
+
+    fn command(&mut self, c: TorqueCommand) {
+        let seq = c.header.seq;
+        self.first_command_seq.get_or_insert(seq);
+        self.last_command_seq = Some(seq);
+        self.commands.insert(seq, c);
+    }
+
+    fn telemetry(&mut self, t: Box<Telemetry>) {
+        self.last_telemetry_seq = Some(t.header.seq);
+        self.pending.push_back(t);
+    }
+}
+
 /// The replay state (module docs).
 pub struct Replay {
+    /// The scenario, for a fresh control cycle after a controller restart.
+    scenario: Scenario,
     cycle: ControlCycle,
     /// Recorded states not yet consumed, in the order read (the driver's
     /// order: seq ascending, starting again after a driver restart).
     states: VecDeque<JointState>,
-    /// Recorded commands by their seq, not yet handed on.
-    commands: BTreeMap<u64, TorqueCommand>,
-    /// The largest command seq read.
-    last_command_seq: Option<u64>,
+    /// The controller's commands and telemetry being replayed.
+    ctl: ControllerStreams,
+    /// A restarted controller's, read before the replay reached them.
+    next: Option<ControllerStreams>,
     /// Recorded setpoints per client, not yet taken.
     setpoints: BTreeMap<u64, VecDeque<Setpoint>>,
     /// Per client, the setpoints answered so far, as the telemetry counts
     /// them, and the seq of the last one answered.
     answered: BTreeMap<u64, Answered>,
-    /// Telemetry waiting for its inputs to be read.
-    pending: VecDeque<Box<Telemetry>>,
     /// The last recorded state's (seq, stamp), and the largest stamp read.
     last_state: Option<(u64, u64)>,
     latest_stamp: u64,
-    /// The first recorded state's (seq, stamp) and command's seq.
+    /// The first recorded state's (seq, stamp).
     first_state: Option<(u64, u64)>,
-    first_command_seq: Option<u64>,
     /// Whether a cycle was handed on (the first one decides what was before).
     started: bool,
-    /// The last telemetry seq read.
-    last_telemetry_seq: Option<u64>,
-    /// States and commands read since a controller restart was seen.
-    since_restart: usize,
-    /// Everything of the first controller replayed after its restart: the
-    /// rest of the file is not read.
-    closed: bool,
     counts: ReplayCounts,
+}
+
+/// A control cycle of `scenario`, as a controller starts.
+fn fresh_cycle(scenario: &Scenario) -> anyhow::Result<ControlCycle> {
+    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
+        .map_err(|e| anyhow!("{}: controller: {e}", scenario.path.display()))?;
+    ControlCycle::new(controller, &CycleSettings::from_scenario(scenario))
+        .map_err(|e| anyhow!("the controller of {}: {e}", scenario.path.display()))
 }
 
 impl Replay {
     /// The replay of recordings of `scenario`'s controller.
     pub fn new(scenario: &Scenario) -> anyhow::Result<Replay> {
-        let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
-            .map_err(|e| anyhow!("{}: controller: {e}", scenario.path.display()))?;
-        let cycle = ControlCycle::new(controller, &CycleSettings::from_scenario(scenario))
-            .map_err(|e| anyhow!("the controller of {}: {e}", scenario.path.display()))?;
         Ok(Replay {
-            cycle,
+            scenario: scenario.clone(),
+            cycle: fresh_cycle(scenario)?,
             states: VecDeque::new(),
-            commands: BTreeMap::new(),
-            last_command_seq: None,
+            ctl: ControllerStreams::default(),
+            next: None,
             setpoints: BTreeMap::new(),
             answered: BTreeMap::new(),
-            pending: VecDeque::new(),
             last_state: None,
             latest_stamp: 0,
             first_state: None,
-            first_command_seq: None,
             started: false,
-            last_telemetry_seq: None,
-            since_restart: 0,
-            closed: false,
             counts: ReplayCounts::default(),
         })
     }
@@ -188,10 +229,9 @@ impl Replay {
     /// one is a restarted driver's, kept).
     pub fn on_state(&mut self, s: JointState) {
         let key = (s.header.seq, s.header.stamp_ns);
-        if self.closed || self.last_state == Some(key) {
+        if self.last_state == Some(key) {
             return;
         }
-        self.count_since_restart();
         if self.states.len() >= 2 * MAX_PENDING {
             self.states.pop_front();
             self.counts.states_dropped += 1;
@@ -205,25 +245,32 @@ impl Replay {
         self.states.push_back(s);
     }
 
-    /// A recorded torque command.
+    /// A recorded torque command (one numbered at or below the last is a
+    /// restarted controller's).
     pub fn on_command(&mut self, c: TorqueCommand) {
-        if self.closed {
+        let seq = c.header.seq;
+        // The new controller's once its commands have begun; before, the old
+        // one's while they continue its numbering.
+        let to_next = match &self.next {
+            Some(n) if n.last_command_seq.is_some() => true,
+            _ => !self.ctl.continues_commands(seq),
+        };
+        if !to_next {
+            self.ctl.command(c);
             return;
         }
-        self.count_since_restart();
-        let seq = c.header.seq;
-        self.first_command_seq = Some(self.first_command_seq.map_or(seq, |f| f.min(seq)));
-        self.last_command_seq = Some(self.last_command_seq.map_or(seq, |l| l.max(seq)));
-        self.commands.insert(seq, c);
+        let next = self.next.get_or_insert_with(ControllerStreams::default);
+        if next.continues_commands(seq) {
+            next.command(c);
+        } else {
+            self.counts.samples_dropped_at_restart += 1;
+        }
     }
 
     /// A recorded setpoint (one the replay has already accounted for as
     /// answered before its first cycle — read after it, its stream drained
     /// later — is history and dropped).
     pub fn on_setpoint(&mut self, s: Setpoint) {
-        if self.closed {
-            return;
-        }
         if self
             .answered
             .get(&s.client_id)
@@ -235,35 +282,47 @@ impl Replay {
         self.setpoints.entry(s.client_id).or_default().push_back(s);
     }
 
-    /// A recorded telemetry sample (a cycle, or a stale event). One numbered
-    /// at or below the last is a restarted controller's: it and every later
-    /// sample are not replayed (module docs).
+    /// A recorded telemetry sample (a cycle, or a stale event); one
+    /// numbered at or below the last is a restarted controller's.
     pub fn on_telemetry(&mut self, t: Box<Telemetry>) {
-        if self.closed || self.counts.controller_restarted_after.is_some() {
-            return;
-        }
         let seq = t.header.seq;
-        if let Some(last) = self.last_telemetry_seq
-            && seq <= last
-        {
-            self.counts.controller_restarted_after = Some(last);
+        let to_next = match &self.next {
+            Some(n) if n.last_telemetry_seq.is_some() => true,
+            _ => !self.ctl.continues_telemetry(seq),
+        };
+        if !to_next {
+            self.ctl.telemetry(t);
             return;
         }
-        self.last_telemetry_seq = Some(seq);
-        self.pending.push_back(t);
-    }
-
-    fn count_since_restart(&mut self) {
-        if self.counts.controller_restarted_after.is_some() {
-            self.since_restart += 1;
+        let next = self.next.get_or_insert_with(ControllerStreams::default);
+        if next.continues_telemetry(seq) {
+            next.telemetry(t);
+        } else {
+            self.counts.samples_dropped_at_restart += 1;
         }
     }
 
     /// Whether a cycle still waiting for its inputs must be handed on now:
-    /// [`MAX_PENDING`] samples read after it (telemetry, or states and
-    /// commands once no telemetry comes any more).
+    /// [`MAX_PENDING`] telemetry samples read after it.
     fn waited_enough(&self) -> bool {
-        self.pending.len() > MAX_PENDING || self.since_restart > MAX_PENDING
+        let next = self.next.as_ref().map_or(0, |n| n.pending.len());
+        self.ctl.pending.len() + next > MAX_PENDING
+    }
+
+    /// The restarted controller's streams become the replayed ones, with a
+    /// fresh control cycle (module docs).
+    fn restart_controller(&mut self) -> anyhow::Result<()> {
+        let Some(next) = self.next.take() else {
+            return Ok(());
+        };
+        self.ctl = next;
+        self.cycle = fresh_cycle(&self.scenario)?;
+        self.answered.clear();
+        let queued: usize = self.setpoints.values().map(VecDeque::len).sum();
+        self.counts.setpoints_dropped_at_restart += queued as u64;
+        self.setpoints.clear();
+        self.counts.controller_restarts += 1;
+        Ok(())
     }
 
     /// Replays the pending cycles whose inputs have been read (with `end`:
@@ -274,36 +333,39 @@ impl Replay {
         end: bool,
         each: &mut dyn FnMut(&Replayed<'_>) -> anyhow::Result<bool>,
     ) -> anyhow::Result<bool> {
-        while let Some(tel) = self.pending.front() {
-            if tel.flags & TELEMETRY_FLAG_PEER_LOST != 0 {
-                let stamp = tel.header.stamp_ns;
-                self.pending.pop_front();
-                let _ = self.cycle.stale(stamp);
-                self.counts.stale += 1;
-                continue;
+        loop {
+            while let Some(tel) = self.ctl.pending.front() {
+                if tel.flags & TELEMETRY_FLAG_PEER_LOST != 0 {
+                    let stamp = tel.header.stamp_ns;
+                    self.ctl.pending.pop_front();
+                    let _ = self.cycle.stale(stamp);
+                    self.counts.stale += 1;
+                    continue;
+                }
+                let complete = self.inputs_read(tel);
+                if !complete && !end && !self.waited_enough() {
+                    // The cycle's state, command or setpoints come later in the file.
+                    return Ok(true);
+                }
+                let Some(tel) = self.ctl.pending.pop_front() else {
+                    break;
+                };
+                if !self.replay(&tel, end && !complete, each)? {
+                    return Ok(false);
+                }
             }
-            let complete = self.inputs_read(tel);
-            if !complete && !end && !self.waited_enough() {
-                // The cycle's state, command or setpoints come later in the file.
-                return Ok(true);
-            }
-            let Some(tel) = self.pending.pop_front() else {
+            // The old controller's cycles are over once the new one's
+            // telemetry is read (its commands may come first).
+            let restarted = self
+                .next
+                .as_ref()
+                .is_some_and(|n| end || !n.pending.is_empty());
+            if !restarted {
                 break;
-            };
-            if !self.replay(&tel, end && !complete, each)? {
-                return Ok(false);
             }
+            self.restart_controller()?;
         }
-        if self.counts.controller_restarted_after.is_some() && self.pending.is_empty() {
-            // The first controller's cycles are all replayed.
-            self.closed = true;
-        }
-        if self.closed {
-            // The second controller's inputs: not part of this replay.
-            self.states.clear();
-            self.commands.clear();
-            self.setpoints.clear();
-        } else if end {
+        if end {
             self.counts.states_skipped += self.states.len() as u64;
             self.states.clear();
         }
@@ -314,6 +376,7 @@ impl Replay {
     /// the recording holds the cycle's command (which echoes both).
     fn wanted(&self, tel: &Telemetry) -> (u64, Option<u64>) {
         let stamp = self
+            .ctl
             .commands
             .get(&tel.command_seq)
             .filter(|c| c.state_seq == tel.state_seq)
@@ -326,7 +389,11 @@ impl Replay {
     /// without the command, by seq: a later state); and the setpoints it
     /// answered.
     fn inputs_read(&self, tel: &Telemetry) -> bool {
-        if self.last_command_seq.is_none_or(|c| c < tel.command_seq) {
+        if self
+            .ctl
+            .last_command_seq
+            .is_none_or(|c| c < tel.command_seq)
+        {
             return false;
         }
         let state_read = match self.wanted(tel) {
@@ -374,7 +441,11 @@ impl Replay {
             (seq, None) => seq < first_seq,
         };
         !self.started
-            && (state_before || self.first_command_seq.is_some_and(|f| tel.command_seq < f))
+            && (state_before
+                || self
+                    .ctl
+                    .first_command_seq
+                    .is_some_and(|f| tel.command_seq < f))
     }
 
     /// Hands on a cycle before the recording (not replayed): the setpoints
@@ -403,7 +474,7 @@ impl Replay {
         each(&Replayed {
             telemetry: tel,
             state: None,
-            recorded: self.commands.get(&tel.command_seq),
+            recorded: self.ctl.commands.get(&tel.command_seq),
             answer: None,
             cycle: &self.cycle,
             setpoints_missing: 0,
@@ -464,9 +535,9 @@ impl Replay {
         if state.is_none() {
             self.counts.states_missing += 1;
         }
-        let recorded = self.commands.remove(&tel.command_seq);
+        let recorded = self.ctl.commands.remove(&tel.command_seq);
         // Commands of earlier cycles are not needed any more.
-        self.commands = self.commands.split_off(&tel.command_seq);
+        self.ctl.commands = self.ctl.commands.split_off(&tel.command_seq);
         each(&Replayed {
             telemetry: tel,
             state: state.as_ref(),
@@ -709,7 +780,7 @@ mod tests {
             feed(&mut replay, &run, i);
             assert!(replay.advance(false, &mut each).unwrap());
             // Each cycle is handed on once its state and command are read.
-            assert!(replay.pending.is_empty(), "cycle {}", i + 1);
+            assert!(replay.ctl.pending.is_empty(), "cycle {}", i + 1);
         }
         assert!(replay.advance(true, &mut each).unwrap());
         assert_eq!(handed, (20..=60).collect::<Vec<_>>());
@@ -742,7 +813,7 @@ mod tests {
         for i in 0..k as usize {
             feed(&mut replay, &run, i);
             assert!(replay.advance(false, &mut each).unwrap());
-            largest = largest.max(replay.pending.len());
+            largest = largest.max(replay.ctl.pending.len());
         }
         assert!(replay.advance(true, &mut each).unwrap());
         assert_eq!(handed, k);
@@ -798,41 +869,72 @@ mod tests {
     }
 
     /// A controller restarted mid-recording (its telemetry and commands
-    /// numbered from 1 again, the driver's states going on): the replay
-    /// hands on the first controller's 30 cycles, bit-identical, says where
-    /// the restart was, and reads nothing of the second run — however long
-    /// it is, nothing of it is kept.
+    /// numbered from 1 again, the driver's states going on, a gap of 50
+    /// states between the two controllers): the replay hands on the first
+    /// controller's 30 cycles and then, with a fresh control cycle, the
+    /// second one's 40 — every torque bit-identical, the restart counted,
+    /// the unanswered states skipped. The streams interleave as the
+    /// recorder drains them: the new controller's first commands are read
+    /// before the old one's last telemetry.
     #[test]
-    fn a_controller_restart_ends_the_replay() {
+    fn a_restarted_controller_is_followed_with_a_fresh_cycle() {
         let scenario = paper_sim1();
         let ms = 1_000_000;
         let first = daemon_run(&scenario, 30, &[]);
-        let k = 2 * MAX_PENDING as u64 + 100;
-        let second = daemon_run_on(&scenario, (31..=30 + k).map(|seq| (seq, seq * ms)), &[]);
+        let second = daemon_run_on(&scenario, (81..=120).map(|seq| (seq, seq * ms)), &[]);
         let mut replay = Replay::new(&scenario).unwrap();
         let mut handed = vec![];
         let mut each = |r: &Replayed<'_>| {
             let (Some(recorded), Some(Answer::Command(_))) = (r.recorded, r.answer) else {
-                panic!("cycle {} not replayed", r.telemetry.header.seq);
+                panic!(
+                    "cycle {} not replayed: state {:?}, recorded {:?}, answer {:?}",
+                    r.telemetry.header.seq,
+                    r.state.map(|s| s.header.seq),
+                    r.recorded.map(|c| c.header.seq),
+                    r.answer
+                );
             };
-            assert_eq!(recorded.tau(), r.cycle.command().tau());
+            let bits = |t: &[f64]| t.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(recorded.tau()), bits(r.cycle.command().tau()));
             handed.push(r.telemetry.header.seq);
             Ok(true)
         };
-        let runs = [&first, &second];
-        for run in runs {
-            for i in 0..run.states.len() {
-                feed(&mut replay, run, i);
-                assert!(replay.advance(false, &mut each).unwrap());
-                assert!(replay.states.len() <= 1 && replay.commands.len() <= 1);
-            }
+        for i in 0..28 {
+            feed(&mut replay, &first, i);
+            assert!(replay.advance(false, &mut each).unwrap());
+        }
+        // The old controller's last two cycles: their states and commands,
+        // then the new one's first command, then the old telemetry.
+        for i in 28..30 {
+            replay.on_state(first.states[i]);
+            replay.on_command(first.commands[i]);
+        }
+        let mut idle = JointState::zeroed();
+        idle.set_n_joints(4).unwrap();
+        for seq in 31..=80 {
+            idle.header.seq = seq;
+            idle.header.stamp_ns = seq * ms;
+            replay.on_state(idle);
+        }
+        replay.on_state(second.states[0]);
+        replay.on_command(second.commands[0]);
+        for i in 28..30 {
+            replay.on_telemetry(first.telemetry[i].clone());
+        }
+        replay.on_telemetry(second.telemetry[0].clone());
+        assert!(replay.advance(false, &mut each).unwrap());
+        for i in 1..40 {
+            feed(&mut replay, &second, i);
+            assert!(replay.advance(false, &mut each).unwrap());
         }
         assert!(replay.advance(true, &mut each).unwrap());
-        assert_eq!(handed, (1..=30).collect::<Vec<_>>());
+        let expected: Vec<u64> = (1..=30).chain(1..=40).collect();
+        assert_eq!(handed, expected);
         let counts = replay.counts();
-        assert_eq!(counts.controller_restarted_after, Some(30));
-        assert_eq!(counts.cycles, 30);
-        assert!(replay.closed);
+        assert_eq!(counts.controller_restarts, 1);
+        assert_eq!(counts.cycles, 70);
+        assert_eq!(counts.states_skipped, 50);
+        assert_eq!(counts.samples_dropped_at_restart, 0);
     }
 
     /// States that no telemetry consumes (the controller gone, the driver

@@ -177,9 +177,10 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             cmp.first_cycle.map_or("-".to_string(), |c| c.to_string())
         );
     }
-    if let Some(after) = counts.controller_restarted_after {
+    if counts.setpoints_dropped_at_restart + counts.samples_dropped_at_restart > 0 {
         println!(
-            "note: the controller restarted after cycle {after} (its telemetry numbered again): a new controller is another run; replayed up to the restart"
+            "note: at the controller restarts: setpoints sent to the old controller and not taken again {}, samples of a restart too close to the previous one not replayed {}",
+            counts.setpoints_dropped_at_restart, counts.samples_dropped_at_restart
         );
     }
     if cmp.compared == 0 {
@@ -189,12 +190,13 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "replayed {} cycles of {} ({} setpoints, {} stale events, {} driver restarts): every torque bit-identical to the recording",
+        "replayed {} cycles of {} ({} setpoints, {} stale events, {} driver restarts, {} controller restarts): every torque bit-identical to the recording",
         cmp.compared,
         args.recording.display(),
         counts.setpoints_taken,
         counts.stale,
-        counts.driver_restarts
+        counts.driver_restarts,
+        counts.controller_restarts
     );
     Ok(())
 }
