@@ -58,10 +58,9 @@ impl Stream {
 
     /// Counts gaps; whether the sample passes the decimation.
     fn admit(&mut self, seq: u64, counters: &Counters) -> bool {
-        match self.checker.observe(seq) {
-            SeqEvent::Gap { missed } => add(&counters.ipc_lost, missed),
-            SeqEvent::Backwards { .. } => self.checker = SequenceChecker::default(),
-            _ => {}
+        // A restarted source starts the stream again.
+        if let SeqEvent::Gap { missed } = self.checker.observe_restarting(seq) {
+            add(&counters.ipc_lost, missed);
         }
         let pass = self.decimator.pass(seq);
         if !pass {

@@ -297,21 +297,15 @@ struct Stream {
 impl Stream {
     fn observe(&mut self, seq: u64) -> SeqEvent {
         self.stats.received += 1;
-        let mut e = self.checker.observe(seq);
-        if let SeqEvent::Backwards { .. } = e {
-            // One publisher's samples arrive in order: a smaller number is a
-            // new publisher's (a restarted daemon), whose numbering starts
-            // again.
-            self.stats.restarts += 1;
-            self.checker.reset();
-            e = self.checker.observe(seq);
-        }
+        // A smaller number is a new publisher's (a restarted daemon).
+        let e = self.checker.observe_restarting(seq);
         if let SeqEvent::Gap { .. } = e {
             self.stats.gap_events += 1;
         }
         self.stats.gaps = self.checker.missed();
         self.stats.duplicates = self.checker.duplicates();
-        self.stats.backwards = self.checker.backwards() - self.stats.restarts;
+        self.stats.backwards = self.checker.backwards();
+        self.stats.restarts = self.checker.restarts();
         e
     }
 }

@@ -187,12 +187,7 @@ impl Stream {
     /// restarted publisher: one publisher's samples arrive in order).
     fn observe(&mut self, seq: u64) -> SeqEvent {
         self.received += 1;
-        let e = self.checker.observe(seq);
-        if let SeqEvent::Backwards { .. } = e {
-            self.checker.reset();
-            return self.checker.observe(seq);
-        }
-        e
+        self.checker.observe_restarting(seq)
     }
 }
 

@@ -51,6 +51,7 @@ pub struct SequenceChecker {
     missed: u64,
     duplicates: u64,
     backwards: u64,
+    restarts: u64,
 }
 
 impl SequenceChecker {
@@ -62,6 +63,7 @@ impl SequenceChecker {
             missed: 0,
             duplicates: 0,
             backwards: 0,
+            restarts: 0,
         }
     }
 
@@ -93,6 +95,23 @@ impl SequenceChecker {
         event
     }
 
+    /// [`SequenceChecker::observe`] for a stream whose publisher may be
+    /// replaced by a new one (a restarted daemon) while one publisher's
+    /// numbers only grow: a number below the last starts the stream again
+    /// from it — counted in [`SequenceChecker::restarts`], not in
+    /// `backwards`, and returned as `First`.
+    pub fn observe_restarting(&mut self, seq: u64) -> SeqEvent {
+        match self.observe(seq) {
+            SeqEvent::Backwards { .. } => {
+                self.backwards -= 1;
+                self.restarts += 1;
+                self.last = None;
+                self.observe(seq)
+            }
+            e => e,
+        }
+    }
+
     /// Forgets the last number (keeps the totals): the next one is `First`.
     pub fn reset(&mut self) {
         self.last = None;
@@ -121,6 +140,11 @@ impl SequenceChecker {
     /// Backwards steps seen.
     pub const fn backwards(&self) -> u64 {
         self.backwards
+    }
+
+    /// Restarts seen by [`SequenceChecker::observe_restarting`].
+    pub const fn restarts(&self) -> u64 {
+        self.restarts
     }
 }
 
@@ -154,6 +178,22 @@ pub const fn command_freshness(command_state_seq: u64, latest_state_seq: u64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_restarted_publisher_starts_the_stream_again() {
+        let mut c = SequenceChecker::new();
+        for seq in [5, 6, 8] {
+            assert!(c.observe_restarting(seq).is_accepted());
+        }
+        assert_eq!(c.observe_restarting(8), SeqEvent::Duplicate);
+        // A new publisher numbering from 1: First, then followed from there.
+        assert_eq!(c.observe_restarting(1), SeqEvent::First);
+        assert_eq!(c.observe_restarting(2), SeqEvent::Next);
+        assert_eq!(c.observe_restarting(4), SeqEvent::Gap { missed: 1 });
+        assert_eq!((c.restarts(), c.backwards()), (1, 0));
+        assert_eq!((c.missed(), c.duplicates(), c.accepted()), (2, 1, 6));
+        assert_eq!(c.last(), Some(4));
+    }
 
     #[test]
     fn next_gap_duplicate_backwards() {

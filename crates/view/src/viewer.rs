@@ -75,15 +75,13 @@ impl Seq {
     /// from there.
     fn observe(&mut self, seq: u64, counts: &mut StreamCounts) -> bool {
         counts.received += 1;
-        match self.checker.observe(seq) {
+        let restarts = self.checker.restarts();
+        let event = self.checker.observe_restarting(seq);
+        counts.restarts += self.checker.restarts() - restarts;
+        match event {
             SeqEvent::Gap { missed } => counts.gaps += missed,
             SeqEvent::Duplicate => return false,
-            SeqEvent::Backwards { .. } => {
-                counts.restarts += 1;
-                self.checker.reset();
-                self.checker.observe(seq);
-            }
-            SeqEvent::First | SeqEvent::Next => {}
+            _ => {}
         }
         true
     }
