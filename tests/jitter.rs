@@ -162,7 +162,21 @@ fn jitter_reports_every_figure_and_consistent_counts() {
             for s in STATS {
                 assert!(f["floor"][s].is_number(), "{name}.floor.{s} missing: {f}");
             }
-            assert!(f["ratio"]["p99.9"].is_number() || f["ratio"]["p99.9"].is_null());
+            // The pair's p99.9 over the floor's on the same core; null only
+            // where the floor's is 0 ns (no ratio to take).
+            let floor_p999 = f["floor"]["p999_ns"].as_u64().expect("floor.p999_ns");
+            let pair_p999 = f["pair"]["p999_ns"].as_u64().expect("pair.p999_ns");
+            let ratio = f["ratio"].get("p99.9").expect("ratio.p99.9 missing");
+            if floor_p999 > 0 {
+                let want = pair_p999 as f64 / floor_p999 as f64;
+                let got = ratio.as_f64().expect("ratio.p99.9 a number");
+                assert!((got - want).abs() <= 1e-12 * want, "{name}: {got} ≠ {want}");
+            } else {
+                assert!(
+                    ratio.is_null(),
+                    "{name}: a ratio over a 0 ns floor: {ratio}"
+                );
+            }
         }
     }
     // The counts add up: every period after the first command was answered or missed.
