@@ -11,7 +11,9 @@
 //!   leading-block variants, transposes and copies;
 //! * [`eigen`]: the symmetric eigenproblem by cyclic Jacobi;
 //! * [`basis`]: null-space bases (Householder QR) and their alignment to the
-//!   previous cycle's (orthogonal Procrustes, polar factor).
+//!   previous cycle's (orthogonal Procrustes, polar factor);
+//! * [`blocks`]: block copies and column views;
+//! * [`symmetric`]: a matrix plus a transpose (Ṁ = C + Cᵀ), exactly symmetric.
 //!
 //! The hand-written products are kept where the benchmark `cargo bench -p
 //! hcc-linalg --bench kernels` shows them faster than nalgebra's own in-place
@@ -21,10 +23,12 @@
 //! at construction.
 
 pub mod basis;
+pub mod blocks;
 pub mod cholesky;
 pub mod eigen;
 pub mod products;
 pub mod spd;
+pub mod symmetric;
 
 pub use cholesky::{
     LinalgError, cholesky_factor, cholesky_in_place, cholesky_in_place_slice,

@@ -1,0 +1,83 @@
+//! What a cycle hands back: [`StepOutput`] (τ of eq. 19 and its parts τ_i of
+//! eqs. 20, 21 and τ_μ of eq. 22, v_i of eq. 3, the storages S_i of eqs. 26, 28,
+//! the singularity flags and fades, the safety layer's report) and a level's
+//! current spring–damper target, [`LevelTarget`].
+
+use nalgebra::{DMatrix, DVector};
+
+/// What one control cycle produced (all preallocated; valid after [`Controller::step`](super::Controller::step)).
+#[derive(Clone, Debug)]
+pub struct StepOutput {
+    /// τ = Σ τ_i + τ_μ + g (eq. 19); g only with gravity compensation.
+    pub tau: DVector<f64>,
+    /// τ_i of each level (eqs. 20, 21).
+    pub tau_level: Vec<DVector<f64>>,
+    /// τ_μ (eq. 22); zero when the cancellation is off.
+    pub tau_mu: DVector<f64>,
+    /// g(q) (also when it is not added to τ).
+    pub gravity: DVector<f64>,
+    /// x_i − x_{i,d} per level (orientation: 2·R_d·ε ≈ the rotation vector, world axes).
+    pub task_error: Vec<DVector<f64>>,
+    /// v_i = J̄_i q̇ (eq. 3); the lowest level has n − Σ_{j<r} m_j entries.
+    pub v: Vec<DVector<f64>>,
+    /// V_i(x̃_i), the potential of each level.
+    pub potential: Vec<f64>,
+    /// S_i = ½ v_iᵀ Λ_i v_i + V_i (eqs. 26, 28).
+    pub storage: Vec<f64>,
+    /// P_μ = τ_μᵀ q̇ (zero in theory).
+    pub p_mu: f64,
+    /// Per level: an inversion of this level was damped (kinematic or algorithmic singularity).
+    pub singular: Vec<bool>,
+    /// Any level singular.
+    pub any_singular: bool,
+    /// Per level: the smallest eigenvalue ratio of the Gram matrices inverted for it.
+    pub conditioning: Vec<f64>,
+    /// Per level: the factor its torque was scaled by as the Gram matrix of the levels
+    /// above it becomes singular (always 1 for level 1, and away from singularities;
+    /// see the crate docs, "Singularities").
+    pub fade: Vec<f64>,
+    /// The factor τ_μ was scaled by (it fades with the conditioning of every level).
+    pub fade_mu: f64,
+    /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`](crate::Form::KinematicProjector) only (zero otherwise).
+    pub coriolis: DVector<f64>,
+    /// Safety layer (crate::safety): its torque (added to τ only when it acts), what
+    /// acted, counters, the fade's energy tank and the total energy E.
+    pub safety: crate::safety::SafetyOutput,
+}
+
+impl StepOutput {
+    pub(super) fn new(n: usize, dims: &[usize], v_dims: &[usize]) -> StepOutput {
+        let r = dims.len();
+        StepOutput {
+            tau: DVector::zeros(n),
+            tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
+            tau_mu: DVector::zeros(n),
+            gravity: DVector::zeros(n),
+            task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
+            v: v_dims.iter().map(|&d| DVector::zeros(d)).collect(),
+            potential: vec![0.0; r],
+            storage: vec![0.0; r],
+            p_mu: 0.0,
+            singular: vec![false; r],
+            any_singular: false,
+            conditioning: vec![1.0; r],
+            fade: vec![1.0; r],
+            fade_mu: 1.0,
+            coriolis: DVector::zeros(n),
+            safety: crate::safety::SafetyOutput::new(n, r),
+        }
+    }
+}
+
+/// A level's current spring–damper target ([`Controller::level_target`](super::Controller::level_target)).
+#[derive(Clone, Copy, Debug)]
+pub struct LevelTarget<'a> {
+    /// x_{i,d} (roll, pitch, yaw for an orientation task).
+    pub goal: &'a [f64],
+    /// ẋ_{i,d} (zero for a fixed goal).
+    pub goal_velocity: &'a [f64],
+    /// K_i.
+    pub stiffness: &'a DMatrix<f64>,
+    /// D_i.
+    pub damping: &'a DMatrix<f64>,
+}

@@ -1,0 +1,165 @@
+//! What a running controller takes between cycles, allocation-free: goals
+//! x_{i,d}, their velocities ẋ_{i,d}, gains K_i, D_i (eqs. 20, 21) and their
+//! check against the control rate, the stiffness scale κ, the applied torque,
+//! the form of the law and the τ_μ ablation.
+
+use super::{Controller, LevelTarget};
+use crate::ControlError;
+use crate::rate::GainRate;
+use crate::spec::Form;
+use nalgebra::DMatrix;
+
+impl Controller {
+    /// Switches τ_μ (eq. 22) on or off (the ablation).
+    pub fn set_coriolis_cancellation(&mut self, on: bool) {
+        self.spec.coriolis_cancellation = on;
+    }
+
+    /// Chooses eq. (21) or the classical projector form (eqs. 8, 9).
+    pub fn set_form(&mut self, form: Form) {
+        self.spec.form = form;
+    }
+
+    /// The torque the robot applies until the next command (the previous
+    /// command as sent, gravity included when the controller adds it), or
+    /// `None` before the first. With a torque rate limit downstream the applied
+    /// torque lags the law's, and the velocity barrier (crate::safety) brakes for
+    /// the faster of the two accelerations. Entries beyond n are ignored; a
+    /// shorter slice or a non-finite entry is ignored. Allocation-free.
+    pub fn set_applied_torque(&mut self, tau: Option<&[f64]>) {
+        let n = self.applied_tau.len();
+        self.have_applied = match tau {
+            Some(t) if t.len() >= n && t[..n].iter().all(|x| x.is_finite()) => {
+                self.applied_tau.as_mut_slice().copy_from_slice(&t[..n]);
+                true
+            }
+            _ => false,
+        };
+    }
+
+    /// Whether the control rate carries the gains of level `i` (crate::rate):
+    /// the stiffness `k` and damping `d` given, the level's own where `None`, at
+    /// the configuration of the last cycle (the initial one before the first).
+    /// For a gains setpoint before it is taken. Allocation-free.
+    pub fn check_gain_rate(
+        &mut self,
+        i: usize,
+        k: Option<&DMatrix<f64>>,
+        d: Option<&DMatrix<f64>>,
+    ) -> Result<(), GainRate> {
+        let period = self.spec.safety.control_period_s;
+        let Some(l) = self.levels.get_mut(i) else {
+            return Ok(());
+        };
+        if !l.rate.set_mobility(&self.chol, &l.j) {
+            return Ok(());
+        }
+        let k = k.unwrap_or(&l.stiffness);
+        let d = d.unwrap_or(&l.damping);
+        crate::rate::check_level(&mut l.rate, i, k, d, period)
+    }
+
+    /// Scales every level's spring by κ in (0, 1]: V_i becomes κ V_i and its
+    /// gradient κ ∂V_i/∂x_i (after the spring saturation), as if every K_i
+    /// were κ K_i; the damping D_i is unchanged. With κ = 1 the law is the
+    /// paper's, bit for bit. A contact reaction's softening (hcc-cycle) ramps κ
+    /// smoothly; a time-varying κ adds the power κ̇ Σ V_i to the storage
+    /// Σ S_i (Sec. IV), which is ≤ 0 while κ falls and at most (1 − κ_min)
+    /// Σ V_i over a whole rise. A value outside (0, 1] or not finite is
+    /// ignored (κ kept). Allocation-free.
+    pub fn set_stiffness_scale(&mut self, kappa: f64) {
+        if kappa > 0.0 && kappa <= 1.0 {
+            self.stiffness_scale = kappa;
+        }
+    }
+
+    /// κ ([`Controller::set_stiffness_scale`]).
+    pub fn stiffness_scale(&self) -> f64 {
+        self.stiffness_scale
+    }
+
+    /// Sets the virtual equilibrium x_{i,d} of level `i` without allocating.
+    pub fn set_goal(&mut self, i: usize, goal: &[f64]) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        if goal.len() != l.goal.len() || goal.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::BadInput(
+                "goal has the wrong length or a non-finite value",
+            ));
+        }
+        if l.goal.as_slice() != goal {
+            l.goal.as_mut_slice().copy_from_slice(goal);
+            l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
+            self.safety.release_conflict(i);
+            self.safety.refill_passivity_budget();
+        }
+        Ok(())
+    }
+
+    /// Sets the stiffness K_i and/or the damping D_i of level `i` (m_i × m_i)
+    /// of the spring–damper F_i (eqs. 20, 21) without allocating; `None`
+    /// keeps one. They must be symmetric positive definite for the stability
+    /// of Sec. IV: a wrong size, a non-finite or asymmetric matrix, or a
+    /// diagonal entry ≤ 0 is an error and changes nothing; full positive
+    /// definiteness is the caller's check (`hcc_msgs::Setpoint::validate`).
+    pub fn set_gains(
+        &mut self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        for g in [stiffness, damping].into_iter().flatten() {
+            let bad = g.shape() != (l.m, l.m)
+                || g.iter().any(|x| !x.is_finite())
+                || (0..l.m).any(|a| g[(a, a)] <= 0.0)
+                || (0..l.m).any(|a| (0..a).any(|b| g[(a, b)] != g[(b, a)]));
+            if bad {
+                return Err(ControlError::BadInput(
+                    "gain has the wrong size, a non-finite value, is asymmetric or not positive",
+                ));
+            }
+        }
+        if let Some(k) = stiffness {
+            l.stiffness.copy_from(k);
+        }
+        if let Some(d) = damping {
+            l.damping.copy_from(d);
+        }
+        self.safety.set_spring_radius(i, &l.stiffness, &l.damping);
+        self.safety.refill_passivity_budget();
+        Ok(())
+    }
+
+    /// Sets the velocity ẋ_{i,d} of level `i`'s equilibrium (m_i values, the
+    /// task's velocity: m/s, world-frame angular velocity in rad/s, joint
+    /// rad/s) without allocating. The damping then acts on ẋ_i − ẋ_{i,d}, so
+    /// a moving goal is tracked without lag; all zeros restore the paper's
+    /// D_i ẋ_i exactly.
+    pub fn set_goal_velocity(&mut self, i: usize, velocity: &[f64]) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        if velocity.len() != l.m || velocity.iter().any(|x| !x.is_finite()) {
+            return Err(ControlError::BadInput(
+                "goal velocity has the wrong length or a non-finite value",
+            ));
+        }
+        l.goal_velocity.as_mut_slice().copy_from_slice(velocity);
+        l.goal_moving = velocity.iter().any(|&x| x != 0.0);
+        Ok(())
+    }
+
+    /// Level `i`'s current goal x_{i,d}, velocity ẋ_{i,d}, K_i and D_i.
+    pub fn level_target(&self, i: usize) -> Option<LevelTarget<'_>> {
+        self.levels.get(i).map(|l| LevelTarget {
+            goal: l.goal.as_slice(),
+            goal_velocity: l.goal_velocity.as_slice(),
+            stiffness: &l.stiffness,
+            damping: &l.damping,
+        })
+    }
+}
