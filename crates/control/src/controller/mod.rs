@@ -252,13 +252,7 @@ impl Controller {
     fn compute(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
         let r = self.levels.len();
         let eps = self.spec.singular_ratio;
-        hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
-        // M = L Lᵀ (M⁻¹ is only ever applied, by solves) and Ṁ = C + Cᵀ (Sec. II).
-        copy(&mut self.chol, &self.data.m);
-        hcc_model::linalg::cholesky_factor(&mut self.chol)
-            .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
-        sym_sum_transpose(&mut self.mdot, &self.data.c);
-        copy(&mut self.out.gravity, &self.data.g);
+        self.dynamics(q, qd)?;
 
         // Safety layer: the speed each joint reaches before the rate-limited
         // applied torque can stop it (crate::safety; |q̇| without a rate limit).
@@ -278,16 +272,8 @@ impl Controller {
             self.evaluate_task(i, q, qd, governor, speed);
         }
 
-        // The levels above the lowest, stacked: Y = J M⁻¹ (by solves, M⁻¹ is never
-        // formed), W = J M⁻¹ Jᵀ, whose diagonal blocks are J_i M⁻¹ J_iᵀ and whose
-        // leading blocks are J_aug M⁻¹ J_augᵀ (eq. 8), and their derivatives with
-        // d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹.
-        self.stack_top()?;
-        self.first_level();
-        for i in 1..r {
-            self.null_space_level(i)?;
-        }
-        self.out.any_singular = self.out.singular.iter().any(|&s| s);
+        // Z_i, J̄_i, Λ_i of every level (eqs. 3–13, 15–18).
+        self.decompose()?;
         // Safety layer: a fade-in is paid from the energy tank (crate::safety).
         self.passive_fade();
         // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
@@ -305,7 +291,25 @@ impl Controller {
         // damping, joint position and velocity limits (crate::safety); zero and
         // not added where nothing acts.
         self.safety_torque(q, qd);
-        // τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts).
+        self.assemble_torque(qd)
+    }
+
+    /// The model's terms at (q, q̇): M = L Lᵀ (M⁻¹ is only ever applied, by
+    /// solves), C, Ṁ = C + Cᵀ (Sec. II) and g.
+    fn dynamics(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
+        hcc_model::compute_all_terms(&self.model, &mut self.data, q, qd);
+        copy(&mut self.chol, &self.data.m);
+        hcc_model::linalg::cholesky_factor(&mut self.chol)
+            .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
+        sym_sum_transpose(&mut self.mdot, &self.data.c);
+        copy(&mut self.out.gravity, &self.data.g);
+        Ok(())
+    }
+
+    /// τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts, the comparison
+    /// law's C q̇, the velocity barrier on the acceleration this τ gives);
+    /// an error for a non-finite torque.
+    fn assemble_torque(&mut self, qd: &DVector<f64>) -> Result<(), ControlError> {
         copy(&mut self.out.tau, &self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;

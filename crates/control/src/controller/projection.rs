@@ -15,7 +15,22 @@ use hcc_linalg::spd::damped_spd_inverse;
 use hcc_linalg::symmetric::add_own_transpose;
 
 impl Controller {
-    /// The levels above the lowest, stacked (see the comment in [`Controller::compute`]).
+    /// The decomposition of one cycle: the levels above the lowest stacked —
+    /// Y = J M⁻¹ (by solves, M⁻¹ is never formed), W = J M⁻¹ Jᵀ, whose diagonal
+    /// blocks are J_i M⁻¹ J_iᵀ and whose leading blocks are J_aug M⁻¹ J_augᵀ
+    /// (eq. 8), and their derivatives with d/dt M⁻¹ = −M⁻¹ Ṁ M⁻¹ — then level 1
+    /// and every null-space level.
+    pub(super) fn decompose(&mut self) -> Result<(), ControlError> {
+        self.stack_top()?;
+        self.first_level();
+        for i in 1..self.levels.len() {
+            self.null_space_level(i)?;
+        }
+        self.out.any_singular = self.out.singular.iter().any(|&s| s);
+        Ok(())
+    }
+
+    /// The levels above the lowest, stacked ([`Controller::decompose`]).
     pub(super) fn stack_top(&mut self) -> Result<(), ControlError> {
         let n = self.n;
         let mut row = 0;
