@@ -74,8 +74,40 @@ fn diag(n: usize, v: f64) -> DMatrix<f64> {
 }
 
 /// The hierarchy of the table in the module docs, goals a few cm / a few 0.1 rad away
-/// from the start.
+/// from the start, each level's gains scaled down to what the 1 kHz loop carries
+/// at `q0` ([`carried_by_the_rate`]: the light distal links of the longer chains
+/// take less than the nominal gains).
 pub fn chain_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
+    carried_by_the_rate(model, nominal_spec(model, q0), q0)
+}
+
+/// `spec` with each level's stiffness and damping scaled down (by 0.9 of the
+/// factor the rate check names, until it passes) to what the control rate
+/// carries at `q0` (`hcc_control::rate`); unchanged where they are carried.
+fn carried_by_the_rate(model: &Model, spec: ControllerSpec, q0: &[f64]) -> ControllerSpec {
+    let q0 = DVector::from_column_slice(q0);
+    // A controller with gains far below the bounds, only to check the real ones.
+    let mut soft = spec.clone();
+    for l in &mut soft.levels {
+        l.stiffness *= 1e-6;
+        l.damping *= 1e-6;
+    }
+    let mut c = hcc_control::Controller::new(model, soft, &q0).expect("the chain's hierarchy");
+    let mut spec = spec;
+    for (i, l) in spec.levels.iter_mut().enumerate() {
+        while let Err(e) = c.check_gain_rate(i, Some(&l.stiffness), Some(&l.damping)) {
+            let gain = if e.damping {
+                &mut l.damping
+            } else {
+                &mut l.stiffness
+            };
+            *gain *= 0.9 * e.scale();
+        }
+    }
+    spec
+}
+
+fn nominal_spec(model: &Model, q0: &[f64]) -> ControllerSpec {
     let n = model.nq();
     let tcp = model.frame_id("tcp").expect("tcp frame");
     let mut data = hcc_model::Data::new(model);
