@@ -1,7 +1,8 @@
 //! The controller: its workspace, construction and the one call per cycle,
 //! [`Controller::step`], from the measured state to the torque command. The
 //! cycle runs its stages in this order ([`Controller::step`]):
-//! 1. M, its Cholesky factor, Ṁ = C + Cᵀ and g (Sec. II);
+//! 1. M, its Cholesky factor, Ṁ = C + Cᵀ and g (Sec. II), and the speed each
+//!    joint reaches (the safety layer's input, [`crate::safety::reach`]);
 //! 2. the task terms of each level, F_i of eqs. (20), (21) (`task_force.rs`);
 //! 3. the decomposition: Z_i, J̄_i, Λ_i, Λ̇_i (eqs. 3–13, 15–18;
 //!    `projection.rs`, `null_space.rs`);
