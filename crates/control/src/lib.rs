@@ -77,6 +77,7 @@ pub mod saturation;
 pub mod spec;
 pub mod task;
 pub mod transition;
+pub mod velocity_limit;
 
 pub use contact::{ContactChange, ContactDetector, MomentumObserver, ObserverInput, observe};
 pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
@@ -85,6 +86,7 @@ pub use rate::GainRate;
 pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
 pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
+pub use velocity_limit::{VelocityLimitOutcome, VelocityLimitWork, limit_velocity};
 
 /// Errors of construction and of a cycle.
 #[derive(Debug, thiserror::Error)]

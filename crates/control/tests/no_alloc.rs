@@ -115,3 +115,41 @@ fn transitions_allocate_nothing() {
     assert_eq!(hcc_rtalloc::thread_stats().allocs - before, 0);
     assert!(t.goal().iter().all(|x| x.is_finite()));
 }
+
+/// The discrete-time velocity limit, acting on every call (the Panda's wrist
+/// driven past its limit with the other joints coupled in), allocates nothing.
+#[test]
+fn the_velocity_limit_acting_allocates_nothing() {
+    use hcc_control::velocity_limit::PeriodModel;
+    use hcc_control::{VelocityLimitWork, limit_velocity};
+    let model = panda();
+    let q0 = vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8];
+    let mut c = Controller::new(&model, panda_spec(&model), &DVector::from_vec(q0.clone()))
+        .expect("controller");
+    let qd = vec![0.4, -0.2, 0.3, 0.1, -0.5, 0.2, 2.3];
+    c.step(&q0, &qd).expect("step");
+    let terms = c.model_terms();
+    let h = &terms.c * DVector::from_vec(qd.clone()) + &terms.g;
+    let v_max: Vec<f64> = model.joints.iter().map(|j| j.velocity_limit).collect();
+    let p = PeriodModel {
+        m: &terms.m,
+        chol: c.mass_factor(),
+        h: &h,
+        qd: &qd,
+        v_max: &v_max,
+        period_s: 1e-3,
+    };
+    let mut w = VelocityLimitWork::new(7);
+    let before = hcc_rtalloc::thread_stats().allocs;
+    let mut acted = 0;
+    for k in 0..1000 {
+        let mut tau = [30.0, -20.0, 10.0, 5.0, -4.0, 3.0, 5.0 + k as f64 * 1e-3];
+        for (t, g) in tau.iter_mut().zip(terms.g.iter()) {
+            *t += g;
+        }
+        acted += usize::from(limit_velocity(&p, &mut tau, &mut w).acted);
+    }
+    let after = hcc_rtalloc::thread_stats().allocs;
+    assert_eq!(acted, 1000, "the limit did not act");
+    assert_eq!(after - before, 0, "the velocity limit allocated");
+}

@@ -61,6 +61,7 @@ use crate::settings::{CycleError, CycleSettings};
 use crate::stream::{StreamCheck, Verdict};
 use crate::telemetry;
 use crate::torque_filter::TorqueFilter;
+use crate::velocity_limit::VelocityLimit;
 use crate::wrench::WrenchEstimate;
 
 /// What [`ControlCycle::decide`] made of a state.
@@ -86,6 +87,11 @@ pub struct ControlCycle {
     stream: StreamCheck,
     setpoints: SetpointHandler,
     filter: TorqueFilter,
+    /// The discrete-time velocity limit on the torque sent (module
+    /// `velocity_limit`; where no rate limit follows).
+    velocity_limit: VelocityLimit,
+    /// The largest correction it made so far (N·m).
+    velocity_limit_largest: f64,
     /// The external-torque observer and the contact detection (module
     /// `contact`).
     contact: ContactWatch,
@@ -150,6 +156,11 @@ impl ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
             setpoints,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
+            velocity_limit: VelocityLimit::new(
+                &controller,
+                settings.torque_filter.torque_rate_limit.is_some(),
+            ),
+            velocity_limit_largest: 0.0,
             contact: ContactWatch::new(&settings.contact),
             reaction: ContactReaction::new(&settings.contact),
             wrench,
@@ -372,6 +383,9 @@ impl ControlCycle {
             Some(_) => self.filter_torque(&mut tau),
             None => self.filter.bypass(&tau[..n]),
         }
+        if law_mode.is_some() {
+            self.limit_velocity(state, gravity_in_tau, &mut tau);
+        }
         let mode = law_mode.unwrap_or(CommandMode::SafeHold);
         self.fill_command(state, mode, gravity_conflict, &tau);
         self.pending_telemetry = Some((state.header.seq, mode, law_mode.is_some()));
@@ -487,6 +501,35 @@ impl ControlCycle {
         let c = &mut self.counters.telemetry;
         c.rate_limited += u64::from(stages.rate_limited);
         c.low_passed += u64::from(stages.low_passed);
+    }
+
+    /// The discrete-time velocity limit on the law's torque about to be sent
+    /// (module `velocity_limit`), counted.
+    fn limit_velocity(
+        &mut self,
+        state: &JointState,
+        gravity_in_tau: bool,
+        tau: &mut [f64; MAX_JOINTS],
+    ) {
+        let n = self.n;
+        let out = self.velocity_limit.apply(
+            &self.controller,
+            &state.qd()[..n],
+            gravity_in_tau,
+            &self.limits[..n],
+            self.period_s,
+            &mut tau[..n],
+        );
+        if let Some(out) = out.filter(|o| o.acted) {
+            self.counters.core.velocity_limited += 1;
+            self.velocity_limit_largest = self.velocity_limit_largest.max(out.largest_correction);
+        }
+    }
+
+    /// The largest correction the discrete-time velocity limit made so far
+    /// (N·m; 0 while it has not acted).
+    pub fn velocity_limit_largest_correction(&self) -> f64 {
+        self.velocity_limit_largest
     }
 
     /// The control law, paper Eq. (19), into `tau`; remembers g(q) as

@@ -19,6 +19,10 @@ hcc_msgs::define_counters! {
         contact_events: "contacts detected",
         /// Cycles with the contact flag set.
         contact_cycles: "cycles in contact",
+        /// Cycles whose torque the discrete-time velocity limit corrected
+        /// (a joint would have passed 0.95 of its velocity limit in the next
+        /// period; module `velocity_limit`).
+        velocity_limited: "cycles corrected by the discrete-time velocity limit",
     }
 }
 

@@ -48,6 +48,7 @@ pub mod settings;
 pub mod stream;
 mod telemetry;
 pub mod torque_filter;
+mod velocity_limit;
 mod wrench;
 
 pub use control_cycle::{Answer, ControlCycle};

@@ -11,12 +11,12 @@
 //! and time, the share of goals above 0.95, and the largest torque step;
 //! `FAST_DETAIL` prints every goal above 0.95.
 //!
-//! The target (the issue "Never past a velocity limit") is ≤ 0.95 in every
-//! case. Until the limit that holds in discrete time is in, the figures of
-//! today are held so that a regression shows. Today, over the default 100
-//! goals: without a filter 1.166 × (joint 7, 2 ms after the step; 5 goals
-//! above 0.95), with the shipped filter 1.836 × (joint 7, at 0.097 s; 24 goals
-//! above 0.95) — docs/limits-and-singularities.md.
+//! Without a torque filter the discrete-time velocity limit of the cycle
+//! (`hcc_control::velocity_limit`) holds every joint at ≤ 0.95 × its limit:
+//! asserted (0.9401 over the default 100 goals; 1.166 × before it). With the
+//! shipped filter the target is the same, but the limit does not yet plan
+//! through the rate limit: today's 1.836 × (joint 7 at 0.097 s; 24 goals above
+//! 0.95) is held so that a regression shows — docs/limits-and-singularities.md.
 
 use std::path::PathBuf;
 
@@ -178,7 +178,7 @@ fn sweep(base: &Scenario, goals: &[Goal], filter: bool, seconds: f64) -> (Peak, 
     let above = peaks.iter().filter(|p| p.ratio > 0.95).count();
     let step = peaks.iter().map(|p| p.tau_step).fold(0.0, f64::max);
     println!(
-        "fast goals, {name}: {} goals of {seconds} s; largest |q̇_k|/q̇_max,k {:.3} (goal {g}, joint {}, t {:.3} s); above 0.95: {above} ({:.1} %); largest torque step {step:.3} N·m",
+        "fast goals, {name}: {} goals of {seconds} s; largest |q̇_k|/q̇_max,k {:.4} (goal {g}, joint {}, t {:.3} s); above 0.95: {above} ({:.1} %); largest torque step {step:.3} N·m",
         goals.len(),
         worst.ratio,
         worst.joint + 1,
@@ -208,7 +208,7 @@ fn fast_goals_against_the_velocity_limits() {
     let (filtered, step) = sweep(&base, &goals, true, seconds);
     // What the robot sees through the filter: 1 N·m per cycle at most.
     assert!(step <= 1.0 + 1e-9, "a torque step of {step} N·m");
-    // Held at today's figures (the target is 0.95: see the module docs).
-    assert!(bare.ratio <= 1.20, "without the filter: {bare:?}");
+    assert!(bare.ratio <= 0.95, "without the filter: {bare:?}");
+    // Held at today's figure (the target is 0.95: see the module docs).
     assert!(filtered.ratio <= 1.90, "with the filter: {filtered:?}");
 }

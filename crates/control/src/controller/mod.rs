@@ -212,6 +212,13 @@ impl Controller {
         &self.data
     }
 
+    /// The Cholesky factor L of M(q) at the state of the last cycle (lower
+    /// triangle; M = L Lᵀ), for solves with M⁻¹ outside the law
+    /// ([`crate::velocity_limit`]). Valid after a successful [`Controller::step`].
+    pub fn mass_factor(&self) -> &DMatrix<f64> {
+        &self.chol
+    }
+
     /// Result of the last cycle.
     pub fn output(&self) -> &StepOutput {
         &self.out
