@@ -18,39 +18,19 @@
 //! through the rate limit: today's 1.836 × (joint 7 at 0.097 s; 24 goals above
 //! 0.95) is held so that a regression shows — docs/limits-and-singularities.md.
 
+mod seeded;
+use seeded::Rng;
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
 use hcc_simulation::run_observed;
-use nalgebra::{DVector, UnitQuaternion, Vector3};
+use nalgebra::{DVector, UnitQuaternion};
 
 fn load(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../config")
         .join(name);
     Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// A small deterministic generator (xorshift64*), uniform in [0, 1).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-    /// A unit vector, uniform on the sphere.
-    fn direction(&mut self) -> Vector3<f64> {
-        let z = self.range(-1.0, 1.0);
-        let phi = self.range(-std::f64::consts::PI, std::f64::consts::PI);
-        let r = (1.0 - z * z).sqrt();
-        Vector3::new(r * phi.cos(), r * phi.sin(), z)
-    }
 }
 
 /// One goal: TCP position, TCP roll-pitch-yaw, posture.

@@ -4,6 +4,8 @@
 //! out of reach and a posture beyond its limits, and a seeded sweep of Panda goals.
 //! The figures are printed (`--nocapture`) and quoted in docs/limits-and-singularities.md.
 
+mod seeded;
+use seeded::Rng;
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -462,21 +464,6 @@ fn a_level_in_conflict_fades_out_and_the_arm_comes_to_rest() {
     assert!(beyond <= 0.0);
     assert!(max_speed(&log, 3.9) < 0.01, "not at rest");
     assert!(onset[0] < 0.1 * rate, "a torque jump at the onset");
-}
-
-/// A small deterministic generator (xorshift64*), uniform in [0, 1).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
 }
 
 /// Why a sweep goal is not settled (at rest or converged) at the end of its run.
