@@ -68,6 +68,7 @@
 //! `hcc_model::Data` included); [`Controller::step`] allocates nothing. M⁻¹ is never
 //! formed: it is applied by Cholesky solves.
 
+pub mod brake_certificate;
 pub mod contact;
 pub mod controller;
 mod fade;
@@ -79,6 +80,7 @@ pub mod task;
 pub mod transition;
 pub mod velocity_limit;
 
+pub use brake_certificate::{BrakeModel, BrakeWork, limit_velocity_rate_limited};
 pub use contact::{ContactChange, ContactDetector, MomentumObserver, ObserverInput, observe};
 pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
 pub use fade::FADE_RANGE;

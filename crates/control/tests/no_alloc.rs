@@ -153,3 +153,47 @@ fn the_velocity_limit_acting_allocates_nothing() {
     assert_eq!(acted, 1000, "the limit did not act");
     assert_eq!(after - before, 0, "the velocity limit allocated");
 }
+
+/// The velocity limit behind a rate limit (the brake certificate), acting on
+/// every call — the Panda's wrist past the bound, so every rule is simulated,
+/// bisected and the fall-back chosen — allocates nothing.
+#[test]
+fn the_brake_certificate_acting_allocates_nothing() {
+    use hcc_control::{BrakeModel, BrakeWork, limit_velocity_rate_limited};
+    let model = panda();
+    let q0 = vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8];
+    let mut c = Controller::new(&model, panda_spec(&model), &DVector::from_vec(q0.clone()))
+        .expect("controller");
+    let qd = vec![0.4, -0.2, 0.3, 0.1, -0.5, 0.2, 2.5];
+    c.step(&q0, &qd).expect("step");
+    let terms = c.model_terms();
+    let v_max: Vec<f64> = model.joints.iter().map(|j| j.velocity_limit).collect();
+    let effort: Vec<f64> = model.joints.iter().map(|j| j.effort_limit).collect();
+    let previous: Vec<f64> = terms.g.iter().map(|g| g + 2.0).collect();
+    let p = BrakeModel {
+        m: &terms.m,
+        chol: c.mass_factor(),
+        c: &terms.c,
+        g: &terms.g,
+        qd: &qd,
+        v_max: &v_max,
+        period_s: 1e-3,
+        previous: &previous,
+        max_step: 1.0,
+        effort: &effort,
+    };
+    let mut w = BrakeWork::new(7);
+    let mut acted = 0;
+    for k in 0..200 {
+        let mut tau = previous.clone();
+        tau[6] += 1.0 - k as f64 * 1e-4;
+        let start = hcc_rtalloc::thread_stats().allocs;
+        acted += usize::from(limit_velocity_rate_limited(&p, &mut tau, &mut w).acted);
+        assert_eq!(
+            hcc_rtalloc::thread_stats().allocs,
+            start,
+            "call {k} allocated"
+        );
+    }
+    assert_eq!(acted, 200, "the certificate did not act");
+}

@@ -61,7 +61,7 @@ use crate::settings::{CycleError, CycleSettings};
 use crate::stream::{StreamCheck, Verdict};
 use crate::telemetry;
 use crate::torque_filter::TorqueFilter;
-use crate::velocity_limit::VelocityLimit;
+use crate::velocity_limit::{RateLimit, VelocityLimit};
 use crate::wrench::WrenchEstimate;
 
 /// What [`ControlCycle::decide`] made of a state.
@@ -88,7 +88,7 @@ pub struct ControlCycle {
     setpoints: SetpointHandler,
     filter: TorqueFilter,
     /// The discrete-time velocity limit on the torque sent (module
-    /// `velocity_limit`; where no rate limit follows).
+    /// `velocity_limit`; behind a rate limit, the brake certificate).
     velocity_limit: VelocityLimit,
     /// The largest correction it made so far (N·m).
     velocity_limit_largest: f64,
@@ -156,10 +156,7 @@ impl ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
             setpoints,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
-            velocity_limit: VelocityLimit::new(
-                &controller,
-                settings.torque_filter.torque_rate_limit.is_some(),
-            ),
+            velocity_limit: VelocityLimit::new(&controller, &limits, settings.period_s()),
             velocity_limit_largest: 0.0,
             contact: ContactWatch::new(&settings.contact),
             reaction: ContactReaction::new(&settings.contact),
@@ -512,17 +509,25 @@ impl ControlCycle {
         tau: &mut [f64; MAX_JOINTS],
     ) {
         let n = self.n;
+        let origin = self.filter.origin();
+        let rate = self.filter.max_step().map(|max_step| RateLimit {
+            previous: &origin[..n],
+            max_step,
+        });
         let out = self.velocity_limit.apply(
             &self.controller,
             &state.qd()[..n],
             gravity_in_tau,
-            &self.limits[..n],
-            self.period_s,
+            rate,
             &mut tau[..n],
         );
         if let Some(out) = out.filter(|o| o.acted) {
             self.counters.core.velocity_limited += 1;
             self.velocity_limit_largest = self.velocity_limit_largest.max(out.largest_correction);
+            // The filter's next step starts from what is sent.
+            if self.filter.is_active() {
+                self.filter.bypass(&tau[..n]);
+            }
         }
     }
 

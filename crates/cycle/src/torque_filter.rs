@@ -51,6 +51,8 @@ pub struct TorqueFilter {
     /// The previous command's τ (the filter's state), valid if `have_prev`.
     prev: [f64; MAX_JOINTS],
     have_prev: bool,
+    /// The command the last [`TorqueFilter::apply`] stepped from.
+    origin: [f64; MAX_JOINTS],
 }
 
 impl TorqueFilter {
@@ -64,6 +66,7 @@ impl TorqueFilter {
                 .map(|f| 1.0 - (-std::f64::consts::TAU * f * period_s).exp()),
             prev: [0.0; MAX_JOINTS],
             have_prev: false,
+            origin: [0.0; MAX_JOINTS],
         }
     }
 
@@ -85,6 +88,7 @@ impl TorqueFilter {
             self.prev[..n].copy_from_slice(&hold[..n]);
             self.have_prev = true;
         }
+        self.origin[..n].copy_from_slice(&self.prev[..n]);
         if let Some(max_step) = self.max_step {
             stages.rate_limited = limit_rate(&mut tau[..n], &self.prev[..n], max_step, self.mode);
         }
@@ -105,8 +109,20 @@ impl TorqueFilter {
         (self.have_prev && self.max_step.is_some()).then_some(&self.prev)
     }
 
+    /// The rate limit's largest step per period (r·Δt), if it is on.
+    pub fn max_step(&self) -> Option<f64> {
+        self.max_step
+    }
+
+    /// The command the last [`TorqueFilter::apply`] stepped from (first n
+    /// entries): what a later stage must stay within one rate step of.
+    pub fn origin(&self) -> &[f64; MAX_JOINTS] {
+        &self.origin
+    }
+
     /// A command that did not come through [`TorqueFilter::apply`] was sent
-    /// (the safe command, never delayed): the next law torque starts from it.
+    /// (the safe command, never delayed), or a later stage changed the one
+    /// that did (the velocity limit): the next law torque starts from it.
     pub fn bypass(&mut self, sent: &[f64]) {
         let n = sent.len().min(MAX_JOINTS);
         self.prev[..n].copy_from_slice(&sent[..n]);
