@@ -26,7 +26,7 @@ from typing import Any, Sequence
 DRIVER_SCHEMA_VERSION: int = 3
 #: Version of the client-facing part (setpoints, telemetry, rejection codes);
 #: part of their type names (``@client<N>``).
-CLIENT_SCHEMA_VERSION: int = 4
+CLIENT_SCHEMA_VERSION: int = 5
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -307,6 +307,9 @@ class TelemetryCounters(ctypes.Structure):
         ("send_failures", ctypes.c_uint64),
         ("rate_limited", ctypes.c_uint64),
         ("low_passed", ctypes.c_uint64),
+        ("velocity_limited", ctypes.c_uint64),
+        ("velocity_limit_fallbacks", ctypes.c_uint64),
+        ("velocity_limit_max_correction_mnm", ctypes.c_uint64),
     ]
     cycles: int
     invalid_states: int
@@ -321,6 +324,12 @@ class TelemetryCounters(ctypes.Structure):
     rate_limited: int
     #: Cycles whose torque went through the output low-pass filter.
     low_passed: int
+    #: Cycles whose torque the discrete-time velocity limit corrected.
+    velocity_limited: int
+    #: Of those, cycles without a certified brake (the fall-back was sent).
+    velocity_limit_fallbacks: int
+    #: The largest correction of the velocity limit so far, mN·m (a maximum).
+    velocity_limit_max_correction_mnm: int
 
     @staticmethod
     def type_name() -> str:

@@ -202,6 +202,28 @@ def test_fr3_reaches_two_goals_without_a_reflex(tmp_path: pathlib.Path) -> None:
         remove_ipc_files(run.prefix)
 
 
+def test_fr3_without_the_torque_filter_reaches_two_goals_without_a_reflex(
+    tmp_path: pathlib.Path,
+) -> None:
+    """The FR3 scenario with its `[torque_filter]` removed: the cycle's
+    one-period velocity limit is then the one that acts, and what is sent
+    reaches the server without a reflex or a torque step the robot refuses."""
+    section = "[torque_filter]\ntorque_rate_limit = 500.0  # N·m/s\n"
+    text = FR3.read_text()
+    assert section in text
+    text = text.replace(section, "")
+    text = text.replace('urdf = "robots/', f'urdf = "{ROOT}/config/robots/')
+    scenario = tmp_path / "fr3-no-filter.toml"
+    scenario.write_text(text)
+    port = free_port()
+    run = Run(tmp_path, scenario, port)
+    try:
+        with franka_sim(tmp_path, port) as sim_log:
+            reach_two_goals(run, sim_log)
+    finally:
+        remove_ipc_files(run.prefix)
+
+
 def reach_two_goals(run: Run, sim_log: pathlib.Path) -> None:
     """Controller and driver on the server: two goals by `hcc goal`, then a
     clean stop; nothing the robot would refuse."""

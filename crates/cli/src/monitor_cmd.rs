@@ -169,10 +169,12 @@ fn table(t: &Telemetry, names: &[String]) -> String {
     );
     let c: &TelemetryCounters = &t.counters;
     s += &format!(
-        "cycles {}  saturated {}  rate-limited {}  singular {}  invalid {}  missed {}\n",
+        "cycles {}  saturated {}  rate-limited {}  velocity-limited {} (largest {:.3} N·m)  singular {}  invalid {}  missed {}\n",
         c.cycles,
         c.saturations,
         c.rate_limited,
+        c.velocity_limited,
+        c.velocity_limit_max_correction_mnm as f64 * 1e-3,
         c.singular_cycles,
         c.invalid_states,
         c.missed_states

@@ -74,6 +74,9 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     if let Some(n) = counted("rate_limited_cycles") {
         println!("  torque rate-limited in {n} cycles");
     }
+    if let Some(n) = counted("velocity_corrected_cycles") {
+        println!("  torque corrected by the discrete-time velocity limit in {n} cycles");
+    }
     if let Some(n) = counted("numerical_failures") {
         println!(
             "  warning: the law failed numerically in {n} cycles (answered with the safe command)"

@@ -522,8 +522,12 @@ impl ControlCycle {
             &mut tau[..n],
         );
         if let Some(out) = out.filter(|o| o.acted) {
-            self.counters.core.velocity_limited += 1;
+            let c = &mut self.counters.telemetry;
+            c.velocity_limited += 1;
+            c.velocity_limit_fallbacks += u64::from(out.fallback);
             self.velocity_limit_largest = self.velocity_limit_largest.max(out.largest_correction);
+            // mN·m, rounded up: a correction is never shown as 0.
+            c.velocity_limit_max_correction_mnm = (self.velocity_limit_largest * 1e3).ceil() as u64;
             // The filter's next step starts from what is sent.
             if self.filter.is_active() {
                 self.filter.bypass(&tau[..n]);

@@ -19,10 +19,6 @@ hcc_msgs::define_counters! {
         contact_events: "contacts detected",
         /// Cycles with the contact flag set.
         contact_cycles: "cycles in contact",
-        /// Cycles whose torque the discrete-time velocity limit corrected
-        /// (a joint would have passed 0.95 of its velocity limit in the next
-        /// period; module `velocity_limit`).
-        velocity_limited: "cycles corrected by the discrete-time velocity limit",
     }
 }
 
@@ -101,13 +97,15 @@ mod tests {
         assert_eq!(c.telemetry.send_failures, 18);
         assert_eq!(c.telemetry.rate_limited, 19);
         assert_eq!(c.telemetry.low_passed, 20);
-        assert_eq!(c.core.numerical_failures, 21);
-        assert_eq!(c.core.peer_restarts, 22);
+        assert_eq!(c.telemetry.velocity_limited, 21);
+        assert_eq!(c.telemetry.velocity_limit_max_correction_mnm, 23);
+        assert_eq!(c.core.numerical_failures, 24);
+        assert_eq!(c.core.peer_restarts, 25);
         assert_eq!(c.values(), values);
         let entries = c.entries();
         assert_eq!(entries[0], ("cycles", "cycles", 10));
-        assert_eq!(entries[12].0, "peer_restarts");
-        assert!(entries[12].1.contains("new peer detected"));
+        assert_eq!(entries[15].0, "peer_restarts");
+        assert!(entries[15].1.contains("new peer detected"));
         let names: Vec<_> = entries.iter().map(|e| e.0).collect();
         let mut unique = names.clone();
         unique.sort_unstable();

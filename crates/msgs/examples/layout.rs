@@ -72,7 +72,8 @@ fn main() {
             "TelemetryCounters",
             fields!(TelemetryCounters: cycles, invalid_states, saturations, singular_cycles,
                 stale_events, peer_lost_events, missed_states, sequence_errors, send_failures,
-                rate_limited, low_passed),
+                rate_limited, low_passed, velocity_limited, velocity_limit_fallbacks,
+                velocity_limit_max_correction_mnm),
         ),
         (
             "TelemetryTimings",

@@ -117,7 +117,7 @@
 //! layout bumps both. The version sits in every header
 //! (`header.schema_version`, checked by [`check_schema`]) and, as
 //! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
-//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client4`), so
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client5`), so
 //! iceoryx2 itself refuses to connect peers of different versions of one
 //! part when a service is opened (`IncompatibleTypes`; size and alignment
 //! are compared too). Both parts started at 3, the single schema they were
@@ -198,8 +198,12 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// [`Setpoint::apply_at_state_seq`], [`SetpointAnswer::rejected`] and
 /// [`SetpointAnswer::late`]; client schema 4: [`Telemetry::tau_ext`] (the
 /// estimate of the external joint torque, appended after every older field,
-/// whose offsets are unchanged) and [`TELEMETRY_FLAG_CONTACT`].
-pub const CLIENT_SCHEMA_VERSION: u32 = 4;
+/// whose offsets are unchanged) and [`TELEMETRY_FLAG_CONTACT`]; client
+/// schema 5: the velocity limit's counters in [`TelemetryCounters`]
+/// (`velocity_limited`, `velocity_limit_fallbacks`,
+/// `velocity_limit_max_correction_mnm`, appended: every later field of
+/// [`Telemetry`] moves by 24 bytes).
+pub const CLIENT_SCHEMA_VERSION: u32 = 5;
 
 /// The two parts of the contract, each with its own version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

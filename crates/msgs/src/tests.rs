@@ -48,7 +48,7 @@ fn layout_has_no_hidden_padding() {
         offset_of!(Telemetry, tau_ext),
         telemetry_fields - 8 * MAX_JOINTS
     );
-    assert_eq!(size_of::<TelemetryCounters>(), 11 * 8);
+    assert_eq!(size_of::<TelemetryCounters>(), 14 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
     assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 2 * 4);
     for a in [
@@ -427,7 +427,7 @@ fn monotonic_clock_advances() {
 
 #[test]
 fn telemetry_counters_are_listed_once_in_field_order() {
-    assert_eq!(TelemetryCounters::COUNT, 11);
+    assert_eq!(TelemetryCounters::COUNT, 14);
     assert_eq!(
         TelemetryCounters::NAMES,
         [
@@ -442,6 +442,9 @@ fn telemetry_counters_are_listed_once_in_field_order() {
             "send_failures",
             "rate_limited",
             "low_passed",
+            "velocity_limited",
+            "velocity_limit_fallbacks",
+            "velocity_limit_max_correction_mnm",
         ]
     );
     // The wire layout: one u64 each, in the order of NAMES.
@@ -457,8 +460,14 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         offset_of!(TelemetryCounters, send_failures),
         offset_of!(TelemetryCounters, rate_limited),
         offset_of!(TelemetryCounters, low_passed),
+        offset_of!(TelemetryCounters, velocity_limited),
+        offset_of!(TelemetryCounters, velocity_limit_fallbacks),
+        offset_of!(TelemetryCounters, velocity_limit_max_correction_mnm),
     ];
-    assert_eq!(offsets, [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 80]);
+    assert_eq!(
+        offsets,
+        [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 80, 88, 96, 104]
+    );
     let c = TelemetryCounters {
         cycles: 1,
         invalid_states: 2,
@@ -471,8 +480,11 @@ fn telemetry_counters_are_listed_once_in_field_order() {
         send_failures: 9,
         rate_limited: 10,
         low_passed: 11,
+        velocity_limited: 12,
+        velocity_limit_fallbacks: 13,
+        velocity_limit_max_correction_mnm: 14,
     };
-    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]);
+    assert_eq!(c.values(), [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14]);
     assert_eq!(TelemetryCounters::from_values(c.values()), c);
     assert_eq!(c.entries()[5], ("peer_lost_events", 6));
     assert_eq!(TelemetryCounters::ZERO, TelemetryCounters::default());

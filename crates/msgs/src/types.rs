@@ -65,7 +65,7 @@ pub const TELEMETRY_FLAG_CONTACT_HOLD: u32 = 1 << 18;
 /// Header shared by all messages. It belongs to both parts of the contract:
 /// a change of its layout bumps both versions (its type name carries both).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@driver3@client4")]
+#[type_name("hcc_msgs::Header@driver3@client5")]
 #[repr(C)]
 pub struct Header {
     /// The writer's version of the message's part of the contract
@@ -612,7 +612,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@client4")]
+    #[type_name("hcc_msgs::TelemetryCounters@client5")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -637,12 +637,22 @@ define_counters! {
         rate_limited: "rate-limited cycles",
         /// Cycles whose torque went through the output low-pass filter.
         low_passed: "low-pass filtered cycles",
+        /// Cycles whose torque the discrete-time velocity limit corrected
+        /// (hcc-cycle's `velocity_limit`: the one-period limit, or the brake
+        /// certificate behind a torque-rate limit). Client schema 5.
+        velocity_limited: "cycles corrected by the velocity limit",
+        /// Of those, the cycles in which no brake was certified and the
+        /// brake that goes least far past the bound was sent. Client schema 5.
+        velocity_limit_fallbacks: "velocity-limit fall-backs",
+        /// The largest correction the velocity limit made so far (the largest
+        /// |Δτ_k|), mN·m; a maximum, not a total. Client schema 5.
+        velocity_limit_max_correction_mnm: "largest velocity-limit correction (mN·m)",
     }
 }
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@client4")]
+#[type_name("hcc_msgs::TelemetryTimings@client5")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -662,7 +672,7 @@ pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
 /// The controller's answer to the last setpoint of one client.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@client4")]
+#[type_name("hcc_msgs::SetpointAnswer@client5")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -691,7 +701,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@client4")]
+#[type_name("hcc_msgs::Telemetry@client5")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.

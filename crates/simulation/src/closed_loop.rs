@@ -164,6 +164,7 @@ impl InProcess {
         let stops = self.driver.plant().end_stops();
         for (key, value) in [
             ("rate_limited_cycles", c.telemetry.rate_limited),
+            ("velocity_corrected_cycles", c.telemetry.velocity_limited),
             ("numerical_failures", c.core.numerical_failures),
             ("joint_limit_guard_cycles", safety.joint_limit_cycles),
             ("velocity_limit_cycles", safety.velocity_limit_cycles),

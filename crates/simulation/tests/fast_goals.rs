@@ -78,6 +78,9 @@ struct Peak {
     t: f64,
     tau_step: f64,
     finite: bool,
+    /// Telemetry's velocity-limit counters at the end: cycles corrected,
+    /// fall-backs, the largest correction (mN·m).
+    corrected: [u64; 3],
 }
 
 fn run(base: &Scenario, goal: &Goal, filter: bool, seconds: f64) -> Peak {
@@ -98,6 +101,7 @@ fn run(base: &Scenario, goal: &Goal, filter: bool, seconds: f64) -> Peak {
         t: 0.0,
         tau_step: 0.0,
         finite: true,
+        corrected: [0; 3],
     };
     let mut prev: Option<Vec<f64>> = None;
     run_observed(&s, &mut |v| {
@@ -117,6 +121,12 @@ fn run(base: &Scenario, goal: &Goal, filter: bool, seconds: f64) -> Peak {
             peak.tau_step = peak.tau_step.max(step);
         }
         prev = Some(tau.to_vec());
+        let c = v.cycle.telemetry().counters;
+        peak.corrected = [
+            c.velocity_limited,
+            c.velocity_limit_fallbacks,
+            c.velocity_limit_max_correction_mnm,
+        ];
         Ok(())
     })
     .unwrap_or_else(|e| panic!("closed loop: {e}"));
@@ -157,14 +167,20 @@ fn sweep(base: &Scenario, goals: &[Goal], filter: bool, seconds: f64) -> (Peak, 
         .expect("goals");
     let above = peaks.iter().filter(|p| p.ratio > 0.95).count();
     let step = peaks.iter().map(|p| p.tau_step).fold(0.0, f64::max);
+    let corrected: u64 = peaks.iter().map(|p| p.corrected[0]).sum();
+    let fallbacks: u64 = peaks.iter().map(|p| p.corrected[1]).sum();
+    let largest = peaks.iter().map(|p| p.corrected[2]).max().unwrap_or(0);
     println!(
-        "fast goals, {name}: {} goals of {seconds} s; largest |q̇_k|/q̇_max,k {:.4} (goal {g}, joint {}, t {:.3} s); above 0.95: {above} ({:.1} %); largest torque step {step:.3} N·m",
+        "fast goals, {name}: {} goals of {seconds} s; largest |q̇_k|/q̇_max,k {:.4} (goal {g}, joint {}, t {:.3} s); above 0.95: {above} ({:.1} %); largest torque step {step:.3} N·m; velocity limit (telemetry): {corrected} cycles corrected, {fallbacks} fall-backs, largest correction {:.3} N·m",
         goals.len(),
         worst.ratio,
         worst.joint + 1,
         worst.t,
-        100.0 * above as f64 / goals.len() as f64
+        100.0 * above as f64 / goals.len() as f64,
+        largest as f64 * 1e-3
     );
+    // Telemetry counts what the limit did.
+    assert!(corrected > 0 && largest > 0, "{name}: the limit never acted");
     (worst, step)
 }
 
