@@ -640,7 +640,7 @@ struct GoalRun {
 /// `[contact]` defaults). The goals' transitions (at the levels' shipped
 /// speed limits) last up to 14 s, so the settling is also counted from the
 /// end of each goal's transitions. Asserted with the defaults (30 s per
-/// goal): every goal settled, ≥ 87.5 % by 12 s (the 500-goal run: 95.2 %),
+/// goal): every goal settled, ≥ 87.5 % by 12 s (the 500-goal run: 95.0 %),
 /// none faster than 0.05 rad/s at 12 s; from the end of the transitions:
 /// ≥ 95 % within 12 s, every goal within 30 s, none faster than 0.05 rad/s
 /// 12 s after it. `SWEEP_SHARD=i/n` runs every
@@ -799,7 +799,7 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         let n = runs.len() as f64;
         let by = |t: f64| runs.iter().filter(|r| r.settle <= t).count() as f64 / n;
         assert_eq!(by(30.0), 1.0, "every goal settles within 30 s");
-        // The target is 95 % by 12 s, which the 500-goal run meets (95.2 %,
+        // The target is 95 % by 12 s, which the 500-goal run meets (95.0 %,
         // docs/limits-and-singularities.md); of these 40, 36 settle by 12 s —
         // goals 5 and 31 follow transitions that end at 10.6 s and 12.7 s, 36
         // and 39 creep along the reach boundary (singular level 1) until 19–27
