@@ -180,7 +180,10 @@ fn sweep(base: &Scenario, goals: &[Goal], filter: bool, seconds: f64) -> (Peak, 
         largest as f64 * 1e-3
     );
     // Telemetry counts what the limit did.
-    assert!(corrected > 0 && largest > 0, "{name}: the limit never acted");
+    assert!(
+        corrected > 0 && largest > 0,
+        "{name}: the limit never acted"
+    );
     (worst, step)
 }
 
