@@ -340,6 +340,31 @@ mod tests {
     const T: f64 = 1e-3;
     const MAX_STEP: f64 = 1.0;
 
+    /// The certificate's model at velocity `qd` after the command `previous`.
+    fn at<'a>(
+        (m, chol, c, g): (
+            &'a DMatrix<f64>,
+            &'a DMatrix<f64>,
+            &'a DMatrix<f64>,
+            &'a DVector<f64>,
+        ),
+        qd: &'a [f64],
+        previous: &'a [f64],
+    ) -> BrakeModel<'a> {
+        BrakeModel {
+            m,
+            chol,
+            c,
+            g,
+            qd,
+            v_max: &V_MAX,
+            period_s: T,
+            previous,
+            max_step: MAX_STEP,
+            effort: &EFFORT,
+        }
+    }
+
     /// The shipped filter's rate limit, as a whole.
     fn rate_limit(tau: &mut [f64], prev: &[f64]) {
         let largest = tau
@@ -369,18 +394,7 @@ mod tests {
             rate_limit(&mut tau, &prev);
             if certify {
                 let qd = v.as_slice().to_vec();
-                let p = BrakeModel {
-                    m: &m,
-                    chol: &chol,
-                    c: &c,
-                    g: &g,
-                    qd: &qd,
-                    v_max: &V_MAX,
-                    period_s: T,
-                    previous: &prev,
-                    max_step: MAX_STEP,
-                    effort: &EFFORT,
-                };
+                let p = at((&m, &chol, &c, &g), &qd, &prev);
                 acted += usize::from(limit_velocity_rate_limited(&p, &mut tau, &mut w).acted);
             }
             for (k, t) in tau.iter().enumerate() {
@@ -424,18 +438,7 @@ mod tests {
         let previous: Vec<f64> = g.iter().map(|x| x + 0.5).collect();
         let tau0: Vec<f64> = g.iter().map(|x| x + 1.2).collect();
         let mut tau = tau0.clone();
-        let p = BrakeModel {
-            m: &m,
-            chol: &chol,
-            c: &c,
-            g: &g,
-            qd: &qd,
-            v_max: &V_MAX,
-            period_s: T,
-            previous: &previous,
-            max_step: MAX_STEP,
-            effort: &EFFORT,
-        };
+        let p = at((&m, &chol, &c, &g), &qd, &previous);
         let out = limit_velocity_rate_limited(&p, &mut tau, &mut w);
         assert!(!out.acted, "{out:?}");
         let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -458,18 +461,7 @@ mod tests {
             let mut tau = g.as_slice().to_vec();
             rate_limit(&mut tau, &prev);
             let qd = v.as_slice().to_vec();
-            let p = BrakeModel {
-                m: &m,
-                chol: &chol,
-                c: &c,
-                g: &g,
-                qd: &qd,
-                v_max: &V_MAX,
-                period_s: T,
-                previous: &prev,
-                max_step: MAX_STEP,
-                effort: &EFFORT,
-            };
+            let p = at((&m, &chol, &c, &g), &qd, &prev);
             let out = limit_velocity_rate_limited(&p, &mut tau, &mut w);
             let e = energy(&v);
             let qdd = m
