@@ -166,7 +166,10 @@ pub fn limit_velocity_rate_limited(
         brake_from_previous(p, rule, w, &mut brake[..n]);
         if certified(p, &brake[..n], rule, w).is_err() {
             // How far past v̄ its own brake goes, for the fall-back.
-            let peak = simulate(p, &brake[..n], rule, false, w).unwrap_err();
+            // (The same brake run to the end: it fails again; no panic if not.)
+            let peak = simulate(p, &brake[..n], rule, false, w)
+                .err()
+                .unwrap_or(1.0);
             if peak < lowest.0 {
                 lowest = (peak, rule);
             }

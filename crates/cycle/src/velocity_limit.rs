@@ -8,7 +8,7 @@
 //!   the effort limits again;
 //! * a torque-rate limit: a correction cannot arrive within the period, so
 //!   [`hcc_control::brake_certificate`] sends the law's torque only when a
-//!   brake the rate limit allows still holds every joint below 0.94 of its
+//!   brake the rate limit allows still holds every joint below 0.92 of its
 //!   limit, else the law's torque blended towards that brake — within one
 //!   rate step of the previous command and within the effort limits, so the
 //!   filter's promise (no step larger than r·Δt) holds for what is sent.
