@@ -26,7 +26,7 @@ from typing import Any, Sequence
 DRIVER_SCHEMA_VERSION: int = 3
 #: Version of the client-facing part (setpoints, telemetry, rejection codes);
 #: part of their type names (``@client<N>``).
-CLIENT_SCHEMA_VERSION: int = 5
+CLIENT_SCHEMA_VERSION: int = 6
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -416,7 +416,11 @@ class Telemetry(ctypes.Structure):
     (Eqs. (20), (21)), each level's transition progress, and the answer to
     the last setpoint of each recent client. Since client schema 4 also
     ``tau_ext``, the estimate of the external joint torque (appended last),
-    and the contact flag :data:`TELEMETRY_FLAG_CONTACT`.
+    and the contact flag :data:`TELEMETRY_FLAG_CONTACT`. Since client schema
+    6 also ``h``, the storage H of the arm and the controller together (J:
+    kinetic energy, the levels' potentials as faded, the joint-limit guard's
+    potential, the controller's energy tanks), and ``potential``, each
+    level's potential as H counts it (appended last).
     """
 
     _fields_ = [
@@ -444,6 +448,8 @@ class Telemetry(ctypes.Structure):
         ("transition_progress", ctypes.c_double * MAX_LEVELS),
         ("setpoint_answers", SetpointAnswer * MAX_SETPOINT_CLIENTS),
         ("tau_ext", _Joints),
+        ("h", ctypes.c_double),
+        ("potential", ctypes.c_double * MAX_LEVELS),
     ]
     header: Header
     state_seq: int
@@ -453,6 +459,7 @@ class Telemetry(ctypes.Structure):
     singular_levels: int
     flags: int
     p_mu: float
+    h: float
     counters: TelemetryCounters
     timings: TelemetryTimings
 
@@ -524,6 +531,11 @@ class Telemetry(ctypes.Structure):
         """r, the controller's estimate of the external joint torque τ_ext
         (N·m; generalized-momentum observer, client schema 4), length n."""
         return list(self.tau_ext[: self.n()])
+
+    def potential_list(self) -> list[float]:
+        """Each level's potential as H counts it (J; V_1, then β_i V_i with
+        the level's fade β_i; client schema 6), length r."""
+        return list(self.potential[: self.levels()])
 
     def contact(self) -> bool:
         """Whether this sample flags a contact."""

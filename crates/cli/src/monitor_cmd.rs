@@ -93,6 +93,7 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
                 "stiffness": &t.stiffness_diag[i][..m],
                 "damping": &t.damping_diag[i][..m],
                 "storage": t.storage[i],
+                "potential": t.potential[i],
                 "singular": t.is_singular(i),
                 "transition_progress": t.transition_progress[i],
             })
@@ -110,6 +111,7 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "mode": mode_name(t.mode),
         "levels": levels,
         "tau": t.tau(),
+        "H": t.h,
         "contact": t.contact(),
         "contact_hold": t.contact_hold(),
         "tau_ext": t.tau_ext(),
@@ -135,7 +137,7 @@ fn table(t: &Telemetry, names: &[String]) -> String {
         .unwrap_or(6)
         .max(6);
     s += &format!(
-        "{:<width$} |error|      storage      progress  singular  goal\n",
+        "{:<width$} |error|      storage      V in H       progress  singular  goal\n",
         "level"
     );
     for i in 0..t.levels() {
@@ -146,15 +148,17 @@ fn table(t: &Telemetry, names: &[String]) -> String {
             (i + 1).to_string()
         };
         s += &format!(
-            "{:<width$} {:<12.3e} {:<12.3e} {:<9.2} {:<9} {:?}\n",
+            "{:<width$} {:<12.3e} {:<12.3e} {:<12.3e} {:<9.2} {:<9} {:?}\n",
             label,
             e.iter().map(|x| x * x).sum::<f64>().sqrt(),
             t.storage[i],
+            t.potential[i],
             t.transition_progress[i],
             t.is_singular(i),
             t.goal(i)
         );
     }
+    s += &format!("storage H {:.4} J (arm and controller)\n", t.h);
     let (r_max, joint) = largest_external_torque(t);
     s += &format!(
         "contact {}  max |tau_ext| {:.3} N·m (joint {}){}\n",

@@ -6,7 +6,8 @@ use hcc_msgs::{MAX_LEVELS, MAX_TASK_DIM, Telemetry};
 /// Writes what the law computed in its last step (`out`) into `t`: per level
 /// τ_i (Eqs. (20), (21)), the task error x̃_i, the storage S_i (Eqs. (26),
 /// (28)), the conditioning and the singular flag; τ_μ (Eq. (22)) and its
-/// power P_μ = τ_μᵀ q̇ (Sec. IV-C); g(q) when the controller adds it.
+/// power P_μ = τ_μᵀ q̇ (Sec. IV-C); g(q) when the controller adds it; the
+/// storage H and each level's potential in it.
 /// Allocation-free.
 pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compensation: bool) {
     let n = out.tau.len();
@@ -22,7 +23,9 @@ pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compe
         // σ_min/σ_max of the level's Gram factor (square root of the
         // smallest eigenvalue ratio of the inverted Gram matrices).
         t.min_singular_value[i] = out.conditioning[i].max(0.0).sqrt();
+        t.potential[i] = out.safety.level_potential[i];
     }
+    t.h = out.safety.h;
     t.singular_levels = singular;
     t.tau_mu[..n].copy_from_slice(out.tau_mu.as_slice());
     if gravity_compensation {

@@ -117,7 +117,7 @@
 //! layout bumps both. The version sits in every header
 //! (`header.schema_version`, checked by [`check_schema`]) and, as
 //! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
-//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client5`), so
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client6`), so
 //! iceoryx2 itself refuses to connect peers of different versions of one
 //! part when a service is opened (`IncompatibleTypes`; size and alignment
 //! are compared too). Both parts started at 3, the single schema they were
@@ -202,8 +202,10 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// schema 5: the velocity limit's counters in [`TelemetryCounters`]
 /// (`velocity_limited`, `velocity_limit_fallbacks`,
 /// `velocity_limit_max_correction_mnm`, appended: every later field of
-/// [`Telemetry`] moves by 24 bytes).
-pub const CLIENT_SCHEMA_VERSION: u32 = 5;
+/// [`Telemetry`] moves by 24 bytes); client schema 6: [`Telemetry::h`] and
+/// [`Telemetry::potential`] (the storage H and each level's potential in it,
+/// appended after every older field).
+pub const CLIENT_SCHEMA_VERSION: u32 = 6;
 
 /// The two parts of the contract, each with its own version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -266,7 +266,7 @@ pub const fn answer_code(result: Result<(), Rejection>) -> u32 {
 /// `fields`, `dim` and `gain_layout` select are ignored (writers keep them
 /// zero).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Setpoint@client5")]
+#[type_name("hcc_msgs::Setpoint@client6")]
 #[repr(C)]
 pub struct Setpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.

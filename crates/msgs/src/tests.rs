@@ -41,13 +41,18 @@ fn layout_has_no_hidden_padding() {
         + 3 * 8 * MAX_TASK_DIM * MAX_LEVELS
         + 8 * MAX_LEVELS
         + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS
-        + 8 * MAX_JOINTS;
+        + 8 * MAX_JOINTS
+        + 8
+        + 8 * MAX_LEVELS;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
-    // Client schema 4 appended tau_ext: every older field kept its offset.
+    // Client schemas 4 and 6 appended tau_ext, then h and potential: every
+    // older field kept its offset.
+    let appended_6 = 8 + 8 * MAX_LEVELS;
     assert_eq!(
         offset_of!(Telemetry, tau_ext),
-        telemetry_fields - 8 * MAX_JOINTS
+        telemetry_fields - appended_6 - 8 * MAX_JOINTS
     );
+    assert_eq!(offset_of!(Telemetry, h), telemetry_fields - appended_6);
     assert_eq!(size_of::<TelemetryCounters>(), 14 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
     assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 2 * 4);

@@ -65,7 +65,7 @@ pub const TELEMETRY_FLAG_CONTACT_HOLD: u32 = 1 << 18;
 /// Header shared by all messages. It belongs to both parts of the contract:
 /// a change of its layout bumps both versions (its type name carries both).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@driver3@client5")]
+#[type_name("hcc_msgs::Header@driver3@client6")]
 #[repr(C)]
 pub struct Header {
     /// The writer's version of the message's part of the contract
@@ -612,7 +612,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@client5")]
+    #[type_name("hcc_msgs::TelemetryCounters@client6")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -652,7 +652,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@client5")]
+#[type_name("hcc_msgs::TelemetryTimings@client6")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -672,7 +672,7 @@ pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
 /// The controller's answer to the last setpoint of one client.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@client5")]
+#[type_name("hcc_msgs::SetpointAnswer@client6")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -701,7 +701,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@client5")]
+#[type_name("hcc_msgs::Telemetry@client6")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -757,6 +757,14 @@ pub struct Telemetry {
     /// ICRA 2005), at this state. Client schema 4; appended last, so every
     /// older field keeps its offset.
     pub tau_ext: [f64; MAX_JOINTS],
+    /// H = ½ q̇ᵀ M q̇ + V_1 + Σ_{i≥2} β_i V_i + the joint-limit guard's
+    /// potential + the controller's energy tanks (J): the storage of the arm
+    /// and the controller together at this state. Without external input it
+    /// rises only by what the controller injects. Client schema 6; appended.
+    pub h: f64,
+    /// Per level, its potential as H counts it (J): V_1, β_i V_i for i ≥ 2
+    /// (β_i the level's fade). Client schema 6; appended.
+    pub potential: [f64; MAX_LEVELS],
 }
 
 impl Telemetry {
@@ -801,6 +809,8 @@ impl Telemetry {
                 late: 0,
             }; MAX_SETPOINT_CLIENTS],
             tau_ext: [0.0; MAX_JOINTS],
+            h: 0.0,
+            potential: [0.0; MAX_LEVELS],
         }
     }
 

@@ -30,6 +30,12 @@ impl CycleOutput for Telemetry {
     fn p_mu(&self) -> f64 {
         self.p_mu
     }
+    fn h(&self) -> Option<f64> {
+        Some(self.h)
+    }
+    fn potential_in_h(&self, i: usize) -> Option<f64> {
+        Some(self.potential[i])
+    }
     fn external_torque(&self) -> Option<&[f64]> {
         Some(Telemetry::tau_ext(self))
     }
@@ -64,6 +70,12 @@ impl CycleOutput for WithWrench<'_> {
     }
     fn p_mu(&self) -> f64 {
         self.output.p_mu()
+    }
+    fn h(&self) -> Option<f64> {
+        self.output.h()
+    }
+    fn potential_in_h(&self, i: usize) -> Option<f64> {
+        self.output.potential_in_h(i)
     }
     fn external_torque(&self) -> Option<&[f64]> {
         self.output.external_torque()

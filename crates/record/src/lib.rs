@@ -23,6 +23,9 @@
 //! - `S<i>_kin` = S_i − V_i (the kinetic part ½ v_iᵀ Λ_i v_i) and `S<i>_pot` =
 //!   V_i(x̃_i) (the potential of eq. 28),
 //! - `E_kin`, `E_pot`: the mechanical energy of the plant ([`EnergyModel`]),
+//! - `H`, `V_<i>`: the storage of the arm and the controller as the
+//!   controller counts it, and each level's potential in it (from the
+//!   telemetry, [`CycleOutput::h`]; NaN where the output has none),
 //! - `tau_ext_<k>`, `contact`: the estimate of the external joint torque and
 //!   the contact flag, from the telemetry (NaN where the output has none);
 //! - `f_ext_<k>`: the estimate of the external wrench at the first position or

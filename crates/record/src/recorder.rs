@@ -23,6 +23,16 @@ pub trait CycleOutput {
     fn level_energy(&self, i: usize) -> f64;
     /// Power of τ_μ, P_μ = τ_μᵀ q̇.
     fn p_mu(&self) -> f64;
+    /// H, the storage of the arm and the controller (`hcc_msgs::Telemetry::h`;
+    /// `None`: not known, the `H` column is NaN).
+    fn h(&self) -> Option<f64> {
+        None
+    }
+    /// Level `i`'s potential as H counts it (`None`: not known, the `V_<i>`
+    /// column is NaN).
+    fn potential_in_h(&self, _i: usize) -> Option<f64> {
+        None
+    }
     /// The estimate r of the external joint torque (`None`: not known, the
     /// `tau_ext_<k>` columns are NaN).
     fn external_torque(&self) -> Option<&[f64]> {
@@ -228,6 +238,11 @@ impl Recorder {
         let (kinetic, potential) = self.energy.energy_at(t, &self.q, &self.qd)?;
         self.row.push(kinetic);
         self.row.push(potential);
+        let out = cycle.output;
+        self.row.push(out.h().unwrap_or(f64::NAN));
+        for i in 0..self.dims.len() {
+            self.row.push(out.potential_in_h(i).unwrap_or(f64::NAN));
+        }
         self.push_contact_columns(cycle.output);
         sink.push_row(&self.row)
     }

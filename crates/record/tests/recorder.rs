@@ -58,6 +58,12 @@ impl CycleOutput for Output {
     fn contact(&self) -> Option<bool> {
         Some(true)
     }
+    fn h(&self) -> Option<f64> {
+        Some(11.5)
+    }
+    fn potential_in_h(&self, i: usize) -> Option<f64> {
+        Some([1.0, 1.5][i])
+    }
 }
 
 /// Joint-space terms: J_1 selects joint 1, J_2 = I; J̄ = J stacked (not a
@@ -163,6 +169,10 @@ fn one_row_per_cycle_in_the_layout_of_column_names() {
     assert_eq!(get("E_pot"), 0.4);
     assert_eq!(get("tau_ext_3"), 2.0);
     assert_eq!(get("contact"), 1.0);
+    // H and each level's potential in it, from the output.
+    assert_eq!(get("H"), 11.5);
+    assert_eq!(get("V_1"), 1.0);
+    assert_eq!(get("V_2"), 1.5);
     // Joint levels only: no frame for a wrench estimate, no `f_ext_<k>`.
     assert_eq!(hcc_record::wrench_rows(&s), 0);
     assert!(table.column("f_ext_1").is_none());

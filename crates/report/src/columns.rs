@@ -16,6 +16,11 @@
 //!   the paper, ‖J̄_i M⁻¹ τ_j‖ (zero for j ≠ i by the block-diagonal Λ, eq. 16),
 //! - `S<i>_kin`, `S<i>_pot`: kinetic ½v_iᵀΛ_i v_i and potential V_i parts of S_i,
 //! - `E_kin`, `E_pot`: mechanical energy of the plant,
+//! - `H`: the storage of the arm and the controller together as the controller
+//!   counts it, ½q̇ᵀMq̇ + V_1 + Σ_{i≥2} β_i V_i + the joint-limit guard's
+//!   potential + its energy tanks (β_i a level's fade); without external input
+//!   it rises only by what the controller injects,
+//! - `V_<i>`: the potential of level i as H counts it (V_1, β_i V_i),
 //! - `tau_ext_<k>`: the controller's estimate r of the external joint torque
 //!   at joint k (generalized-momentum observer, hcc-control's `contact`),
 //! - `contact`: 1 while the contact detection flags a contact, else 0,
@@ -32,6 +37,8 @@ pub const P_MU: &str = "P_mu";
 pub const E_KIN: &str = "E_kin";
 /// Potential (gravity) energy of the plant.
 pub const E_POT: &str = "E_pot";
+/// The storage H of the arm and the controller.
+pub const H: &str = "H";
 
 /// The contact flag (1 in contact, 0 not).
 pub const CONTACT: &str = "contact";
@@ -63,6 +70,10 @@ pub fn energy_kinetic(i: usize) -> String {
 /// Potential part of S_i.
 pub fn energy_potential(i: usize) -> String {
     format!("S{i}_pot")
+}
+/// The potential of level `i` as H counts it: `V_<i>`.
+pub fn potential_in_h(i: usize) -> String {
+    format!("V_{i}")
 }
 /// Torque of level `i` at joint `k`: `tau_L<i>_<k>`.
 pub fn level_torque(i: usize, k: usize) -> String {

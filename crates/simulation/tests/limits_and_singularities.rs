@@ -5,7 +5,7 @@
 //! The figures are printed (`--nocapture`) and quoted in docs/limits-and-singularities.md.
 
 mod seeded;
-use seeded::Rng;
+use seeded::{Rng, quantile};
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -966,11 +966,6 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         r_peak.join(", "),
         runs.iter().filter(|r| r.contact_cycles > 0).count()
     );
-}
-
-/// The p-quantile (nearest rank) of `sorted` (ascending, not empty).
-fn quantile(sorted: &[f64], p: f64) -> f64 {
-    sorted[((p * (sorted.len() as f64 - 1.0)).round() as usize).min(sorted.len() - 1)]
 }
 
 /// `SWEEP_SAFETY=field=value,…`: the `[safety]` fields of a comparison run (numeric

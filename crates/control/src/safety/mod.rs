@@ -257,9 +257,10 @@ impl Safety {
         self.xdot_fresh = false;
         gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
         let kinetic = 0.5 * c.qd.dot(&self.mqd);
-        let mut potential = c.potential.first().copied().unwrap_or(0.0);
-        for i in 1..c.potential.len() {
-            potential += c.fade[i] * c.potential[i];
+        let mut potential = 0.0;
+        for (i, (v, stored)) in c.potential.iter().zip(&mut out.level_potential).enumerate() {
+            *stored = if i == 0 { *v } else { c.fade[i] * v };
+            potential += *stored;
         }
         out.hierarchy_power = c.hierarchy_power;
         out.passivity_active = false;
@@ -284,6 +285,7 @@ impl Safety {
         out.joint_limit_cycles += u64::from(out.joint_limit_active);
         out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
         out.energy = kinetic + potential + out.guard_potential;
+        out.h = out.energy + self.tank;
     }
 
     /// The joint-space parts, joint by joint (one m_k each): the joint-limit

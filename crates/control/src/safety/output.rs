@@ -59,6 +59,12 @@ pub struct SafetyOutput {
     pub guard_potential: f64,
     /// E = ½ q̇ᵀ M q̇ + V_1 + Σ β_i V_i + guard potential (J; [`super::passive_fade`]).
     pub energy: f64,
+    /// Per level, its potential as E counts it: V_1, β_i V_i for i ≥ 2 (J).
+    pub level_potential: Vec<f64>,
+    /// H = E + T: the storage of the arm and the controller together, the fade's
+    /// tank included (J). Without external input it can rise only by what the
+    /// controller injects: the measure of passivity.
+    pub h: f64,
     /// q̇ᵀ τ_safety (W): ≤ 0 but for the guard spring's exchange with its potential.
     pub power: f64,
 }
@@ -90,6 +96,8 @@ impl SafetyOutput {
             passivity_cycles: 0,
             guard_potential: 0.0,
             energy: 0.0,
+            level_potential: vec![0.0; levels],
+            h: 0.0,
             power: 0.0,
         }
     }

@@ -6,7 +6,9 @@
 //!
 //! Field names follow the paper: per level `error` (x̃_i), `S` (storage
 //! S_i, eqs. 26/28), `tau` (τ_i, eqs. 20/21); at the top `tau` (τ, eq. 19),
-//! `tau_mu` (τ_μ, eq. 22), `tau_gravity` (g(q)) and `P_mu` (τ_μᵀ q̇).
+//! `tau_mu` (τ_μ, eq. 22), `tau_gravity` (g(q)), `P_mu` (τ_μᵀ q̇) and `H`
+//! (the storage of the arm and the controller; per level `V`, its potential
+//! as H counts it).
 
 use hcc_msgs::{
     CommandMode, DriverStatus, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS,
@@ -15,6 +17,11 @@ use hcc_msgs::{
 };
 use serde::{Deserialize, Deserializer, Serialize};
 use std::collections::BTreeMap;
+
+/// NaN: a field that a recording made before it was added lacks.
+fn nan() -> f64 {
+    f64::NAN
+}
 
 /// Reads a number or `null` (NaN).
 fn num<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
@@ -190,6 +197,10 @@ pub struct LevelMsg {
     /// Storage function S_i, eqs. (26)/(28).
     #[serde(rename = "S", deserialize_with = "num")]
     pub storage: f64,
+    /// The level's potential as H counts it (V_1, β_i V_i; client schema 6,
+    /// NaN in recordings made before it).
+    #[serde(rename = "V", default = "nan", deserialize_with = "num")]
+    pub potential: f64,
     /// Torque τ_i of the level, eqs. (20)/(21) (n entries).
     #[serde(deserialize_with = "nums")]
     pub tau: Vec<f64>,
@@ -237,6 +248,10 @@ pub struct TelemetryMsg {
     /// P_μ = τ_μᵀ q̇.
     #[serde(rename = "P_mu", deserialize_with = "num")]
     pub p_mu: f64,
+    /// H, the storage of the arm and the controller (client schema 6; NaN
+    /// in recordings made before it).
+    #[serde(rename = "H", default = "nan", deserialize_with = "num")]
+    pub h: f64,
     pub levels: Vec<LevelMsg>,
     pub counters: BTreeMap<String, u64>,
     pub timings: TimingsMsg,
@@ -285,6 +300,7 @@ impl From<&Telemetry> for TelemetryMsg {
                     error: t.task_error(i).to_vec(),
                     error_norm: norm(t.task_error(i)),
                     storage: t.storage[i],
+                    potential: t.potential[i],
                     tau: t.tau_level(i).to_vec(),
                     sigma_min: t.min_singular_value[i],
                     singular: t.is_singular(i),
@@ -309,6 +325,7 @@ impl From<&Telemetry> for TelemetryMsg {
             tau_gravity: t.tau_gravity[..n].to_vec(),
             tau_ext: t.tau_ext().to_vec(),
             p_mu: t.p_mu,
+            h: t.h,
             levels,
             counters: t
                 .counters
@@ -365,6 +382,7 @@ impl TelemetryMsg {
             fill(&mut t.tau_ext, &self.tau_ext, "tau_ext")?;
         }
         t.p_mu = self.p_mu;
+        t.h = self.h;
         if self.levels.len() > MAX_LEVELS {
             return Err(format!("{} levels", self.levels.len()));
         }
@@ -375,6 +393,7 @@ impl TelemetryMsg {
             fill(&mut t.stiffness_diag[i], &l.stiffness, "levels.stiffness")?;
             fill(&mut t.damping_diag[i], &l.damping, "levels.damping")?;
             t.storage[i] = l.storage;
+            t.potential[i] = l.potential;
             t.min_singular_value[i] = l.sigma_min;
             t.transition_progress[i] = l.transition_progress;
         }

@@ -26,3 +26,9 @@ impl Rng {
         Vector3::new(r * phi.cos(), r * phi.sin(), z)
     }
 }
+
+/// The p-quantile (nearest rank) of `sorted` (ascending, not empty).
+#[allow(dead_code)] // used by some of the sweeps only
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    sorted[((p * (sorted.len() as f64 - 1.0)).round() as usize).min(sorted.len() - 1)]
+}
