@@ -419,8 +419,10 @@ class Telemetry(ctypes.Structure):
     and the contact flag :data:`TELEMETRY_FLAG_CONTACT`. Since client schema
     6 also ``h``, the storage H of the arm and the controller together (J:
     kinetic energy, the levels' potentials as faded, the joint-limit guard's
-    potential, the controller's energy tanks), and ``potential``, each
-    level's potential as H counts it (appended last).
+    potential, the controller's energy tanks), ``potential``, each level's
+    potential as H counts it, ``tank``, the energy in each level's energy tank
+    (J), and ``tank_valve``, its valve in [0, 1] (1: the paper's law) —
+    appended last.
     """
 
     _fields_ = [
@@ -450,6 +452,8 @@ class Telemetry(ctypes.Structure):
         ("tau_ext", _Joints),
         ("h", ctypes.c_double),
         ("potential", ctypes.c_double * MAX_LEVELS),
+        ("tank", ctypes.c_double * MAX_LEVELS),
+        ("tank_valve", ctypes.c_double * MAX_LEVELS),
     ]
     header: Header
     state_seq: int
@@ -531,6 +535,17 @@ class Telemetry(ctypes.Structure):
         """r, the controller's estimate of the external joint torque τ_ext
         (N·m; generalized-momentum observer, client schema 4), length n."""
         return list(self.tau_ext[: self.n()])
+
+    def tank_list(self) -> list[float]:
+        """The energy in each level's energy tank (J; 0 for level 1, which has
+        none; client schema 6), length r."""
+        return list(self.tank[: self.levels()])
+
+    def tank_valve_list(self) -> list[float]:
+        """Each level's tank valve in [0, 1] (1: the paper's law; 0: the
+        level's spring point follows what the levels above do to it; client
+        schema 6), length r."""
+        return list(self.tank_valve[: self.levels()])
 
     def potential_list(self) -> list[float]:
         """Each level's potential as H counts it (J; V_1, then β_i V_i with

@@ -94,6 +94,8 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
                 "damping": &t.damping_diag[i][..m],
                 "storage": t.storage[i],
                 "potential": t.potential[i],
+                "tank": t.tank[i],
+                "tank_valve": t.tank_valve[i],
                 "singular": t.is_singular(i),
                 "transition_progress": t.transition_progress[i],
             })
@@ -137,7 +139,7 @@ fn table(t: &Telemetry, names: &[String]) -> String {
         .unwrap_or(6)
         .max(6);
     s += &format!(
-        "{:<width$} |error|      storage      V in H       progress  singular  goal\n",
+        "{:<width$} |error|      storage      V in H       tank (J)     valve  progress  singular  goal\n",
         "level"
     );
     for i in 0..t.levels() {
@@ -148,11 +150,13 @@ fn table(t: &Telemetry, names: &[String]) -> String {
             (i + 1).to_string()
         };
         s += &format!(
-            "{:<width$} {:<12.3e} {:<12.3e} {:<12.3e} {:<9.2} {:<9} {:?}\n",
+            "{:<width$} {:<12.3e} {:<12.3e} {:<12.3e} {:<12.3e} {:<6.3} {:<9.2} {:<9} {:?}\n",
             label,
             e.iter().map(|x| x * x).sum::<f64>().sqrt(),
             t.storage[i],
             t.potential[i],
+            t.tank[i],
+            t.tank_valve[i],
             t.transition_progress[i],
             t.is_singular(i),
             t.goal(i)

@@ -37,6 +37,10 @@ pub(crate) fn safety_spec(
         passivity_damping: s.passivity_damping.unwrap_or(d.passivity_damping),
         passivity_budget: s.passivity_budget.unwrap_or(d.passivity_budget),
         passivity_damping_rate: s.passivity_damping_rate.unwrap_or(d.passivity_damping_rate),
+        energy_tanks: s.energy_tanks.unwrap_or(d.energy_tanks),
+        tank_initial: s.tank_initial.unwrap_or(d.tank_initial),
+        tank_max: s.tank_max.unwrap_or(d.tank_max),
+        tank_return_rate: s.tank_return_rate.unwrap_or(d.tank_return_rate),
         control_period_s: 1.0 / control_rate_hz,
         torque_rate_limit,
     };

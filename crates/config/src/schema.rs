@@ -414,4 +414,13 @@ pub struct SafetySection {
     pub passivity_budget: Option<f64>,
     /// The passivity damping's largest rate, 1/s (default 50).
     pub passivity_damping_rate: Option<f64>,
+    /// The energy tanks of the levels below the first (default true).
+    pub energy_tanks: Option<bool>,
+    /// A tank's energy at the start and after a goal or gains change, J, plus half the
+    /// storage then (default 2).
+    pub tank_initial: Option<f64>,
+    /// A tank's capacity, J (default 4).
+    pub tank_max: Option<f64>,
+    /// K_P, the return rate of a level's shifted spring point, 1/s (default 2).
+    pub tank_return_rate: Option<f64>,
 }

@@ -71,6 +71,7 @@
 pub mod brake_certificate;
 pub mod contact;
 pub mod controller;
+pub mod energy_tank;
 mod fade;
 pub mod rate;
 pub mod safety;

@@ -149,6 +149,12 @@ pub(crate) struct PotentialWork {
     /// The stacked coordinate error e (quaternion rows: 2ε, goal axes) and K e.
     e: DVector<f64>,
     ke: DVector<f64>,
+    /// With a shifted spring point ([`potential`]'s `shift`): the error at it,
+    /// x̂ − x_d = x̃ − δ (quaternion rows: 2 R̂_d ε̂), the frames' rotations R and
+    /// the shifted goal rotations R̂_d = exp(\[δ\]×) R_d.
+    shifted_err: DVector<f64>,
+    rotation: Vec<Rotation3<f64>>,
+    shifted_rotation: Vec<Rotation3<f64>>,
 }
 
 impl PotentialWork {
@@ -159,6 +165,9 @@ impl PotentialWork {
             quat: vec![(1.0, Vector3::zeros()); tasks.len()],
             e: DVector::zeros(m),
             ke: DVector::zeros(m),
+            shifted_err: DVector::zeros(m),
+            rotation: vec![Rotation3::identity(); tasks.len()],
+            shifted_rotation: vec![Rotation3::identity(); tasks.len()],
         };
         w.set_goal(tasks, goal.as_slice(), n);
         w
@@ -182,6 +191,12 @@ impl PotentialWork {
 /// quaternion rows R_d (ηI + \[ε\]×) (K e)_rows, world axes) of one level at the
 /// state in `data` (frame placements through `frames`, shared with the Jacobians). V_i = ½ eᵀ K e over the stacked errors e (e = 2ε for quaternion
 /// rows): for a single orientation task V = 2 εᵀ K ε (the spec's potential).
+///
+/// `shift`: the spring point x̂ = x − δ of an energy tank ([`crate::energy_tank`];
+/// δ in the coordinates of ẋ_i, world angular velocity on quaternion rows): V_i
+/// and its gradient are then those at x̂ — the goal shifted by δ, R̂_d =
+/// exp(\[δ\]×) R_d on quaternion rows — while `err` stays x̃_i = x − x_d. `None`
+/// is the unshifted potential, bit for bit.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn potential(
     model: &Model,
@@ -191,6 +206,7 @@ pub(crate) fn potential(
     q: &DVector<f64>,
     stiffness: &DMatrix<f64>,
     goal: &DVector<f64>,
+    shift: Option<&DVector<f64>>,
     w: &mut PotentialWork,
     err: &mut DVector<f64>,
     grad: &mut DVector<f64>,
@@ -209,16 +225,60 @@ pub(crate) fn potential(
         if let Some(qr) = task.quaternion_rows() {
             let rot = placement.expect("frame task").rotation.to_rotation_matrix();
             w.quat[t] = quaternion_error(&w.goal_rotation[t], &rot, &mut err[qr..qr + 3]);
+            w.rotation[t] = rot;
         }
         o += m;
     }
+    let Some(delta) = shift else {
+        return spring(tasks, n, stiffness, w, err, grad, false);
+    };
+    // The spring point x̂ = x − δ: the error at it, x̃ − δ (an angle wrapped),
+    // and on quaternion rows the error against R̂_d = exp([δ]×) R_d.
+    w.shifted_err.copy_from(err);
+    w.shifted_err -= delta;
+    let mut o = 0;
+    for (t, task) in tasks.iter().enumerate() {
+        if let TaskSpec::PlanarOrientation { .. } = task {
+            w.shifted_err[o] = wrap_angle(w.shifted_err[o]);
+        }
+        if let Some(qr) = task.quaternion_rows() {
+            let d = Vector3::new(delta[o + qr], delta[o + qr + 1], delta[o + qr + 2]);
+            w.shifted_rotation[t] = Rotation3::new(d) * w.goal_rotation[t];
+            let rows = &mut w.shifted_err.as_mut_slice()[o + qr..o + qr + 3];
+            w.quat[t] = quaternion_error(&w.shifted_rotation[t], &w.rotation[t], rows);
+        }
+        o += task.dim(n);
+    }
+    let shifted = std::mem::replace(&mut w.shifted_err, DVector::zeros(0));
+    let v = spring(tasks, n, stiffness, w, &shifted, grad, true);
+    w.shifted_err = shifted;
+    v
+}
+
+/// V = ½ eᵀ K e and its gradient conjugate to ẋ_i at the error `err` (and the
+/// (η, ε) of the quaternion tasks in `w`), against the goal rotations R_d, or
+/// R̂_d where `shifted`.
+fn spring(
+    tasks: &[TaskSpec],
+    n: usize,
+    stiffness: &DMatrix<f64>,
+    w: &mut PotentialWork,
+    err: &DVector<f64>,
+    grad: &mut DVector<f64>,
+    shifted: bool,
+) -> f64 {
     if let [TaskSpec::Orientation { .. }] = tasks {
         // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
         let (eta, eps) = w.quat[0];
         let k = Matrix3::from_fn(|a, b| stiffness[(a, b)]);
         let keps = k * eps;
         let f_goal = 2.0 * (eta * keps + eps.cross(&keps));
-        let g = w.goal_rotation[0] * f_goal;
+        let rd = if shifted {
+            &w.shifted_rotation[0]
+        } else {
+            &w.goal_rotation[0]
+        };
+        let g = rd * f_goal;
         for a in 0..3 {
             grad[a] = g[a];
         }
@@ -229,7 +289,7 @@ pub(crate) fn potential(
         gemv(grad, 1.0, stiffness, err, 0.0);
         return 0.5 * err.dot(grad);
     }
-    stacked_quaternion_potential(tasks, n, stiffness, w, err, grad)
+    stacked_quaternion_potential(tasks, n, stiffness, w, err, grad, shifted)
 }
 
 /// The error rows x̃ = x − x_d of one task (`goal`, `err`: its rows) at the
@@ -318,6 +378,7 @@ fn stacked_quaternion_potential(
     w: &mut PotentialWork,
     err: &DVector<f64>,
     grad: &mut DVector<f64>,
+    shifted: bool,
 ) -> f64 {
     w.e.copy_from(err);
     let mut o = 0;
@@ -337,7 +398,12 @@ fn stacked_quaternion_potential(
         if let Some(qr) = task.quaternion_rows() {
             let (eta, eps) = w.quat[t];
             let ke = Vector3::new(w.ke[o + qr], w.ke[o + qr + 1], w.ke[o + qr + 2]);
-            let g = w.goal_rotation[t] * (eta * ke + eps.cross(&ke));
+            let rd = if shifted {
+                &w.shifted_rotation[t]
+            } else {
+                &w.goal_rotation[t]
+            };
+            let g = rd * (eta * ke + eps.cross(&ke));
             for a in 0..3 {
                 grad[o + qr + a] = g[a];
             }

@@ -132,7 +132,8 @@ impl ContactReaction {
 
     /// Before the law of a state: the target from the contact flag (`began`:
     /// a contact began at the previous state) and the setpoints accepted so
-    /// far (`accepted`), h advanced by `dt`, and for `soften` the law's κ.
+    /// far (`accepted`), h advanced by `dt`, and for `soften` the law's κ,
+    /// for `hold` the law's share 1 − h of the torque.
     /// Allocation-free.
     pub(crate) fn before_law(
         &mut self,
@@ -163,6 +164,10 @@ impl ContactReaction {
         if self.kind == Reaction::Soften {
             let kappa = 1.0 - (1.0 - self.soften_fraction) * self.h;
             controller.set_stiffness_scale(kappa);
+        } else {
+            // The law's share of the blended torque (`blend`), for the energy
+            // tanks' booking.
+            controller.set_law_share(1.0 - self.h);
         }
     }
 

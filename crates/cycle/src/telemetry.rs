@@ -7,7 +7,7 @@ use hcc_msgs::{MAX_LEVELS, MAX_TASK_DIM, Telemetry};
 /// τ_i (Eqs. (20), (21)), the task error x̃_i, the storage S_i (Eqs. (26),
 /// (28)), the conditioning and the singular flag; τ_μ (Eq. (22)) and its
 /// power P_μ = τ_μᵀ q̇ (Sec. IV-C); g(q) when the controller adds it; the
-/// storage H and each level's potential in it.
+/// storage H, each level's potential in it, its energy tank and valve.
 /// Allocation-free.
 pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compensation: bool) {
     let n = out.tau.len();
@@ -24,6 +24,8 @@ pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compe
         // smallest eigenvalue ratio of the inverted Gram matrices).
         t.min_singular_value[i] = out.conditioning[i].max(0.0).sqrt();
         t.potential[i] = out.safety.level_potential[i];
+        t.tank[i] = out.tank[i];
+        t.tank_valve[i] = out.tank_valve[i];
     }
     t.h = out.safety.h;
     t.singular_levels = singular;

@@ -88,7 +88,8 @@ fn main() {
             fields!(Telemetry: header, state_seq, command_seq, mode, n_levels, task_dims,
                 singular_levels, flags, tau, tau_level, tau_mu, tau_gravity, task_error,
                 storage, min_singular_value, p_mu, counters, timings, goal, stiffness_diag,
-                damping_diag, transition_progress, setpoint_answers, tau_ext, h, potential),
+                damping_diag, transition_progress, setpoint_answers, tau_ext, h, potential, tank,
+                tank_valve),
         ),
         (
             "Setpoint",

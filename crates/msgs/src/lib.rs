@@ -202,9 +202,10 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// schema 5: the velocity limit's counters in [`TelemetryCounters`]
 /// (`velocity_limited`, `velocity_limit_fallbacks`,
 /// `velocity_limit_max_correction_mnm`, appended: every later field of
-/// [`Telemetry`] moves by 24 bytes); client schema 6: [`Telemetry::h`] and
-/// [`Telemetry::potential`] (the storage H and each level's potential in it,
-/// appended after every older field).
+/// [`Telemetry`] moves by 24 bytes); client schema 6: [`Telemetry::h`],
+/// [`Telemetry::potential`], [`Telemetry::tank`] and [`Telemetry::tank_valve`]
+/// (the storage H, each level's potential in it, its energy tank and the
+/// tank's valve; appended after every older field).
 pub const CLIENT_SCHEMA_VERSION: u32 = 6;
 
 /// The two parts of the contract, each with its own version.

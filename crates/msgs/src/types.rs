@@ -765,6 +765,13 @@ pub struct Telemetry {
     /// Per level, its potential as H counts it (J): V_1, β_i V_i for i ≥ 2
     /// (β_i the level's fade). Client schema 6; appended.
     pub potential: [f64; MAX_LEVELS],
+    /// Per level, the energy E_i in its energy tank (J; 0 for level 1, which
+    /// has none, and with the tanks off). Client schema 6; appended.
+    pub tank: [f64; MAX_LEVELS],
+    /// Per level, its tank's valve β_i ∈ [0, 1] (1: the paper's law; 0: the
+    /// spring point follows what the levels above do to it). Client schema 6;
+    /// appended.
+    pub tank_valve: [f64; MAX_LEVELS],
 }
 
 impl Telemetry {
@@ -811,6 +818,8 @@ impl Telemetry {
             tau_ext: [0.0; MAX_JOINTS],
             h: 0.0,
             potential: [0.0; MAX_LEVELS],
+            tank: [0.0; MAX_LEVELS],
+            tank_valve: [0.0; MAX_LEVELS],
         }
     }
 

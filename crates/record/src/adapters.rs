@@ -36,6 +36,9 @@ impl CycleOutput for Telemetry {
     fn potential_in_h(&self, i: usize) -> Option<f64> {
         Some(self.potential[i])
     }
+    fn tank(&self, i: usize) -> Option<(f64, f64)> {
+        Some((self.tank[i], self.tank_valve[i]))
+    }
     fn external_torque(&self) -> Option<&[f64]> {
         Some(Telemetry::tau_ext(self))
     }
@@ -76,6 +79,9 @@ impl CycleOutput for WithWrench<'_> {
     }
     fn potential_in_h(&self, i: usize) -> Option<f64> {
         self.output.potential_in_h(i)
+    }
+    fn tank(&self, i: usize) -> Option<(f64, f64)> {
+        self.output.tank(i)
     }
     fn external_torque(&self) -> Option<&[f64]> {
         self.output.external_torque()

@@ -115,6 +115,8 @@ pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     c.push(columns::E_POT.to_string());
     c.push(columns::H.to_string());
     c.extend((1..=r).map(columns::potential_in_h));
+    c.extend((1..=r).map(columns::tank));
+    c.extend((1..=r).map(columns::tank_valve));
     c.extend((1..=n).map(columns::external_torque));
     c.push(columns::CONTACT.to_string());
     c.extend((1..=wrench_rows(scenario)).map(columns::external_wrench));

@@ -26,6 +26,9 @@
 //! - `H`, `V_<i>`: the storage of the arm and the controller as the
 //!   controller counts it, and each level's potential in it (from the
 //!   telemetry, [`CycleOutput::h`]; NaN where the output has none),
+//! - `tank_<i>`, `valve_<i>`: the energy in level i's energy tank and its
+//!   valve (from the telemetry, [`CycleOutput::tank`]; NaN where the output
+//!   has none),
 //! - `tau_ext_<k>`, `contact`: the estimate of the external joint torque and
 //!   the contact flag, from the telemetry (NaN where the output has none);
 //! - `f_ext_<k>`: the estimate of the external wrench at the first position or

@@ -33,6 +33,11 @@ pub trait CycleOutput {
     fn potential_in_h(&self, _i: usize) -> Option<f64> {
         None
     }
+    /// The energy in level `i`'s energy tank and its valve (`None`: not
+    /// known, the `tank_<i>` and `valve_<i>` columns are NaN).
+    fn tank(&self, _i: usize) -> Option<(f64, f64)> {
+        None
+    }
     /// The estimate r of the external joint torque (`None`: not known, the
     /// `tau_ext_<k>` columns are NaN).
     fn external_torque(&self) -> Option<&[f64]> {
@@ -242,6 +247,12 @@ impl Recorder {
         self.row.push(out.h().unwrap_or(f64::NAN));
         for i in 0..self.dims.len() {
             self.row.push(out.potential_in_h(i).unwrap_or(f64::NAN));
+        }
+        for part in [0, 1] {
+            for i in 0..self.dims.len() {
+                let tank = out.tank(i).map(|t| if part == 0 { t.0 } else { t.1 });
+                self.row.push(tank.unwrap_or(f64::NAN));
+            }
         }
         self.push_contact_columns(cycle.output);
         sink.push_row(&self.row)

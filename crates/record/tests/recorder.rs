@@ -64,6 +64,9 @@ impl CycleOutput for Output {
     fn potential_in_h(&self, i: usize) -> Option<f64> {
         Some([1.0, 1.5][i])
     }
+    fn tank(&self, i: usize) -> Option<(f64, f64)> {
+        Some([(0.0, 1.0), (2.5, 0.75)][i])
+    }
 }
 
 /// Joint-space terms: J_1 selects joint 1, J_2 = I; J̄ = J stacked (not a
@@ -173,6 +176,8 @@ fn one_row_per_cycle_in_the_layout_of_column_names() {
     assert_eq!(get("H"), 11.5);
     assert_eq!(get("V_1"), 1.0);
     assert_eq!(get("V_2"), 1.5);
+    assert_eq!(get("tank_2"), 2.5);
+    assert_eq!(get("valve_2"), 0.75);
     // Joint levels only: no frame for a wrench estimate, no `f_ext_<k>`.
     assert_eq!(hcc_record::wrench_rows(&s), 0);
     assert!(table.column("f_ext_1").is_none());

@@ -21,6 +21,9 @@
 //!   potential + its energy tanks (β_i a level's fade); without external input
 //!   it rises only by what the controller injects,
 //! - `V_<i>`: the potential of level i as H counts it (V_1, β_i V_i),
+//! - `tank_<i>`, `valve_<i>`: the energy in level i's energy tank (J; 0 for
+//!   level 1) and the tank's valve in [0, 1] (1: the paper's law; 0: the
+//!   level's spring point follows what the levels above do to it),
 //! - `tau_ext_<k>`: the controller's estimate r of the external joint torque
 //!   at joint k (generalized-momentum observer, hcc-control's `contact`),
 //! - `contact`: 1 while the contact detection flags a contact, else 0,
@@ -74,6 +77,14 @@ pub fn energy_potential(i: usize) -> String {
 /// The potential of level `i` as H counts it: `V_<i>`.
 pub fn potential_in_h(i: usize) -> String {
     format!("V_{i}")
+}
+/// The energy in level `i`'s energy tank: `tank_<i>`.
+pub fn tank(i: usize) -> String {
+    format!("tank_{i}")
+}
+/// The valve of level `i`'s energy tank: `valve_<i>`.
+pub fn tank_valve(i: usize) -> String {
+    format!("valve_{i}")
 }
 /// Torque of level `i` at joint `k`: `tau_L<i>_<k>`.
 pub fn level_torque(i: usize, k: usize) -> String {

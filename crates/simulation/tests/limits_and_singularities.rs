@@ -27,6 +27,8 @@ struct Sample {
     q: Vec<f64>,
     qd: Vec<f64>,
     energy: f64,
+    /// H = E + the fade's tank + the levels' energy tanks (`SafetyOutput::h`).
+    h: f64,
     errors: Vec<f64>,
     finite: bool,
     guard: bool,
@@ -141,6 +143,7 @@ impl Logged {
             q: q.to_vec(),
             qd: qd.to_vec(),
             energy: out.safety.energy,
+            h: out.safety.h,
             errors: out.task_error.iter().map(|e| e.norm()).collect(),
             finite: out.tau.iter().all(|x| x.is_finite()),
             guard: out.safety.joint_limit_active,
@@ -220,13 +223,14 @@ fn max_speed(log: &[Sample], from: f64) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Largest rise of E over any window after `from` (0 if E never grows).
+/// Largest rise of the storage H over any window after `from` (0 if H never
+/// grows).
 fn energy_rise(log: &[Sample], from: f64) -> f64 {
     let mut low = f64::INFINITY;
     let mut rise: f64 = 0.0;
     for s in log.iter().filter(|s| s.t >= from) {
-        low = low.min(s.energy);
-        rise = rise.max(s.energy - low);
+        low = low.min(s.h);
+        rise = rise.max(s.h - low);
     }
     rise
 }
@@ -244,18 +248,18 @@ fn report_singular(name: &str, log: &[Sample], reach_gap: f64) {
         .collect();
     let last = log.last().unwrap();
     println!(
-        "{name}: max |q̇| at 1/2/4/6/8 s: {}; max |q̇| from 4 s {:.2e} rad/s; E at 1/8 s {:.4}/{:.4} J, largest rise of E after 2 s {:.2e} J (after 1 s {:.2e} J); level-1 error at 8 s {:.5} m (closest reachable {reach_gap:.5} m)",
+        "{name}: max |q̇| at 1/2/4/6/8 s: {}; max |q̇| from 4 s {:.2e} rad/s; H at 1/8 s {:.4}/{:.4} J, largest rise of H after 2 s {:.2e} J (after 1 s {:.2e} J); level-1 error at 8 s {:.5} m (closest reachable {reach_gap:.5} m)",
         speeds.join(" / "),
         max_speed(log, 4.0),
-        log.iter().find(|s| s.t >= 1.0).unwrap().energy,
-        last.energy,
+        log.iter().find(|s| s.t >= 1.0).unwrap().h,
+        last.h,
         energy_rise(log, 2.0),
         energy_rise(log, 1.0),
         last.errors[0],
     );
 }
 
-/// With `HCC_ENERGY_PLOTS=<dir>` set: the total energy E of a run (and the same
+/// With `HCC_ENERGY_PLOTS=<dir>` set: the storage H of a run (and the same
 /// from 2 s on, and the largest joint speed) as `<dir>/energy-<name>.png` (the
 /// figures of docs/limits-and-singularities.md).
 fn energy_plot(name: &str, title: &str, log: &[Sample]) {
@@ -265,13 +269,13 @@ fn energy_plot(name: &str, title: &str, log: &[Sample]) {
     let dir = PathBuf::from(dir);
     std::fs::create_dir_all(&dir).unwrap();
     let t: Vec<f64> = log.iter().map(|s| s.t).collect();
-    let e: Vec<f64> = log.iter().map(|s| s.energy).collect();
-    let end = log.last().map_or(0.0, |s| s.energy);
+    let e: Vec<f64> = log.iter().map(|s| s.h).collect();
+    let end = log.last().map_or(0.0, |s| s.h);
     let late: Vec<f64> = log
         .iter()
         .map(|s| {
             if s.t >= 2.0 {
-                1e3 * (s.energy - end)
+                1e3 * (s.h - end)
             } else {
                 f64::NAN
             }
@@ -293,15 +297,15 @@ fn energy_plot(name: &str, title: &str, log: &[Sample]) {
         &t,
         &[
             panel(
-                "Total energy E = kinetic + V_1 + sum beta_i V_i (+ guard potential)",
-                "E [J]",
-                "E",
+                "Storage H = kinetic + V_1 + sum beta_i V_i (+ guard potential) + tanks",
+                "H [J]",
+                "H",
                 e,
             ),
             panel(
-                &format!("E from t = 2 s, relative to its final value {end:.4} J"),
-                "E - E(end) [mJ]",
-                "E - E(end)",
+                &format!("H from t = 2 s, relative to its final value {end:.4} J"),
+                "H - H(end) [mJ]",
+                "H - H(end)",
                 late,
             ),
             panel(
@@ -449,7 +453,7 @@ fn a_level_in_conflict_fades_out_and_the_arm_comes_to_rest() {
         without.last().unwrap().errors[1]
     );
     println!(
-        "conflict: the conflict fade from t = {first:.3} s, in {conflict} cycles; |dτ/dt| in its first 5 cycles {onset:.3?} N·m/s, largest {rate:.0} N·m/s, largest torque change {tau:.2} N·m; max |q̇| over the last 0.1 s {:.2e} rad/s (from 3 s {:.2e}); largest rise of E after 2 s {:.2e} J; errors at the end {:.4?}; conditioning {:?}; largest |q̇|/limit {speed:.2}",
+        "conflict: the conflict fade from t = {first:.3} s, in {conflict} cycles; |dτ/dt| in its first 5 cycles {onset:.3?} N·m/s, largest {rate:.0} N·m/s, largest torque change {tau:.2} N·m; max |q̇| over the last 0.1 s {:.2e} rad/s (from 3 s {:.2e}); largest rise of H after 2 s {:.2e} J; errors at the end {:.4?}; conditioning {:?}; largest |q̇|/limit {speed:.2}",
         max_speed(&log, 3.9),
         max_speed(&log, 3.0),
         energy_rise(&log, 2.0),

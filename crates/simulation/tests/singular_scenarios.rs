@@ -180,7 +180,11 @@ fn kinematic_singularity_arm_stretched_out_then_back() {
 fn algorithmic_singularity_conflicting_levels_then_compatible_goal() {
     let scenario = load("planar-algorithmic-singularity.toml");
     let switch_s = 1.5;
-    let log = run(scenario, 1, &[0.6], switch_s, 1.5);
+    // Level 2 starts towards its compatible goal 0.3–0.4 s after it is set
+    // (0.1 s later with the energy tanks: 1.6 mm left after 1.5 s, 0.8 mm
+    // without them; why it starts later was not looked into) and converges
+    // with a time constant of about 0.2 s: 2 s to be within 1 mm.
+    let log = run(scenario, 1, &[0.6], switch_s, 2.0);
     // The rank loss of levels 1 and 2 together is flagged on level 3 (the
     // inversion of J_aug J_augᵀ for its null-space basis).
     summary("algorithmic", &log, 2, switch_s);

@@ -29,8 +29,18 @@
 //! is the full sweep of docs/limits-and-singularities.md.
 //! `UNREACHABLE_SHARD=i/n` runs the goals g with g mod n = i (one process per
 //! core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
-//! and prints its course every 0.25 s; `UNREACHABLE_FILTER=0` runs without
-//! the torque filter.
+//! and prints its course every 0.25 s (`UNREACHABLE_PLOT=<dir>`: and draws
+//! it, H, the potentials, the tanks and their valves, as
+//! `<dir>/unreachable-goal-<g>.png`); `UNREACHABLE_FILTER=0` runs without the
+//! torque filter.
+//!
+//! Asserted on every goal (30 s each), with the energy tanks
+//! (`hcc_control::energy_tank`): no NaN, inside the position limits, at most
+//! 0.95 of a velocity limit, at rest by 30 s, never moving again after rest,
+//! and H rising by at most 0.01 J within 10 ms and 0.2 J over a run without
+//! the torque filter — with it, the filter's lag still feeds energy in (up to
+//! 2 J and 30 J) — but the known exceptions of the 200 goals (`Known`; the
+//! figures in docs/limits-and-singularities.md).
 
 mod seeded;
 use seeded::{Rng, quantile};
@@ -166,6 +176,87 @@ struct GoalRun {
     finite: bool,
 }
 
+/// A goal's course every cycle, for its figure (`UNREACHABLE_PLOT`).
+#[derive(Default)]
+struct Course {
+    t: Vec<f64>,
+    h: Vec<f64>,
+    /// Per level: V_i as H counts it, the tank E_i, the valve β_i.
+    potential: Vec<Vec<f64>>,
+    tank: Vec<Vec<f64>>,
+    valve: Vec<Vec<f64>>,
+    speed: Vec<f64>,
+}
+
+impl Course {
+    fn push(&mut self, t: f64, out: &hcc_control::StepOutput, speed: f64) {
+        let r = out.tank.len();
+        if self.potential.is_empty() {
+            self.potential = vec![Vec::new(); r];
+            self.tank = vec![Vec::new(); r];
+            self.valve = vec![Vec::new(); r];
+        }
+        self.t.push(t);
+        self.h.push(out.safety.h);
+        for i in 0..r {
+            self.potential[i].push(out.safety.level_potential[i]);
+            self.tank[i].push(out.tank[i]);
+            self.valve[i].push(out.tank_valve[i]);
+        }
+        self.speed.push(speed);
+    }
+
+    /// H, the levels' potentials, the tanks and the valves, and the largest
+    /// joint speed, as `<dir>/unreachable-goal-<g>.png`.
+    fn plot(&self, dir: &std::path::Path, g: usize, goal: &Goal, filtered: bool) {
+        use hcc_report::TimePanel;
+        std::fs::create_dir_all(dir).unwrap();
+        let per_level = |name: &str, v: &[Vec<f64>], from: usize| -> Vec<(String, Vec<f64>)> {
+            v.iter()
+                .enumerate()
+                .skip(from)
+                .map(|(i, x)| (format!("{name}_{}", i + 1), x.clone()))
+                .collect()
+        };
+        let panels = [
+            TimePanel {
+                title: "Storage H = kinetic + sum V_i + guard potential + tanks".into(),
+                y_label: "H [J]".into(),
+                series: vec![("H".into(), self.h.clone())],
+            },
+            TimePanel {
+                title: "Each level's potential in H".into(),
+                y_label: "V [J]".into(),
+                series: per_level("V", &self.potential, 0),
+            },
+            TimePanel {
+                title: "Energy tanks of levels 2 and 3".into(),
+                y_label: "E [J]".into(),
+                series: per_level("tank", &self.tank, 1),
+            },
+            TimePanel {
+                title: "Tank valves (1: the paper's law)".into(),
+                y_label: "valve".into(),
+                series: per_level("valve", &self.valve, 1),
+            },
+            TimePanel {
+                title: "Largest joint speed".into(),
+                y_label: "max |qd| [rad/s]".into(),
+                series: vec![("max |qd|".into(), self.speed.clone())],
+            },
+        ];
+        let path = dir.join(format!("unreachable-goal-{g}.png"));
+        let title = format!(
+            "Unreachable sweep, goal {g} ({:?}, TCP {:.2?} m), {} torque filter",
+            goal.region,
+            goal.tcp,
+            if filtered { "with the" } else { "without a" }
+        );
+        hcc_report::plot_time_series(&path, &title, &self.t, &panels).unwrap();
+        println!("wrote {}", path.display());
+    }
+}
+
 fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> GoalRun {
     let mut s = base.clone();
     s.spec.levels[0].goal = DVector::from_row_slice(&goal.tcp);
@@ -197,6 +288,8 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
     let mut low = f64::INFINITY;
     let mut still = 0usize;
     let mut last_t = 0.0;
+    let plot = std::env::var_os("UNREACHABLE_PLOT").filter(|_| trace);
+    let mut course = Course::default();
     run_observed(&s, &mut |v| {
         let (q, qd) = (v.state.q(), v.state.qd());
         let out = v.cycle.controller().output();
@@ -221,6 +314,9 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
             r.rise = (h - low, v.t);
         }
         let speed = qd.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        if plot.is_some() {
+            course.push(v.t, out, speed);
+        }
         if speed < REST_SPEED {
             still += 1;
         } else {
@@ -243,10 +339,12 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
         }
         if trace && v.k % 250 == 0 {
             println!(
-                "goal {g} t {:6.2}: H {h:9.4} J V {:.4?} β {:.3?} guard {:.4} |q̇| {speed:.4} errors {:.4?} q {:.3?}",
+                "goal {g} t {:6.2}: H {h:9.4} J V {:.4?} fade {:.3?} tank {:.3?} valve {:.3?} guard {:.4} |q̇| {speed:.4} errors {:.4?} q {:.3?}",
                 v.t,
                 out.potential,
                 out.fade,
+                out.tank,
+                out.tank_valve,
                 out.safety.guard_potential,
                 out.task_error.iter().map(|e| e.norm()).collect::<Vec<_>>(),
                 q,
@@ -257,6 +355,10 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
     .unwrap_or_else(|e| panic!("closed loop: {e}"));
     if r.rest > last_t {
         r.rest = f64::INFINITY;
+    }
+    if let Some(dir) = plot {
+        let filtered = s.torque_filter.torque_rate_limit.is_some();
+        course.plot(std::path::Path::new(&dir), g, goal, filtered);
     }
     r
 }
@@ -376,36 +478,50 @@ fn unreachable_goals_energy_and_rest() {
         runs.push(r);
     }
     report(&runs, seconds);
+    let filtered = !std::env::var("UNREACHABLE_FILTER").is_ok_and(|v| v == "0");
+    let known = if filtered {
+        &WITH_FILTER
+    } else {
+        &WITHOUT_FILTER
+    };
     for r in &runs {
         let g = r.g;
         assert!(r.finite, "goal {g}: a non-finite torque or H");
-        // What holds today (the measurement before the energy tanks): every
-        // goal inside its position limits and at most at 0.95 of a velocity
-        // limit but four goals that step from 500–620 J of storage, which go
-        // up to 6.8 mrad past a position limit and to 0.951 of a velocity
-        // limit.
-        let (beyond, ratio) = if PAST_A_LIMIT.contains(&g) {
-            (7e-3, 0.952)
+        // Inside the position limits, at most at 0.95 of a velocity limit
+        // (but the known exceptions, at 0.951).
+        let ratio = if known.past_a_limit.contains(&g) {
+            0.952
         } else {
-            (0.0, 0.95)
+            0.95
         };
-        assert!(
-            r.beyond <= beyond,
-            "goal {g}: {} rad beyond a limit",
-            r.beyond
-        );
+        assert!(r.beyond <= 0.0, "goal {g}: {} rad beyond a limit", r.beyond);
         assert!(
             r.speed_ratio <= ratio,
             "goal {g}: a joint at {:.3} × its velocity limit",
             r.speed_ratio
         );
+        // The storage H rises by no more than what is not booked yet (the
+        // velocity limits, the guard; with a filter, its lag).
+        let (within_10ms, over_a_run) = known.rise;
+        assert!(
+            r.rise_10ms.0 <= within_10ms,
+            "goal {g}: H rose by {} J within 10 ms at {} s",
+            r.rise_10ms.0,
+            r.rise_10ms.1
+        );
+        assert!(
+            r.rise.0 <= over_a_run,
+            "goal {g}: H rose by {} J at {} s",
+            r.rise.0,
+            r.rise.1
+        );
         if seconds >= 30.0 {
             assert!(
-                r.rest <= 30.0 || NOT_AT_REST.contains(&g),
+                r.rest <= 30.0 || known.not_at_rest.contains(&g),
                 "goal {g}: not at rest by 30 s"
             );
             assert!(
-                r.moved_again.is_none() || MOVES_AGAIN.contains(&g),
+                r.moved_again.is_none() || known.moves_again.contains(&g),
                 "goal {g}: moved again after resting, at {:?} s",
                 r.moved_again
             );
@@ -413,11 +529,35 @@ fn unreachable_goals_energy_and_rest() {
     }
 }
 
-/// The goals of the 200 that go past a position or a velocity limit today.
-const PAST_A_LIMIT: [usize; 4] = [87, 103, 139, 195];
-/// The goals of the 200 not at rest by 30 s today: 9 swings in a limit cycle
-/// (H rises by up to 55 J over 4 s at 0.2–0.3 rad/s, then a burst to 1.4
-/// rad/s, every 4.5 s), the others creep.
-const NOT_AT_REST: [usize; 5] = [9, 32, 69, 99, 161];
-/// The goals of the 200 that move again after resting today.
-const MOVES_AGAIN: [usize; 1] = [10];
+/// What the 200 goals do that the targets do not allow yet, with
+/// the energy tanks: the exceptions and the largest rises of H.
+struct Known {
+    /// Goals at up to 0.951 of a velocity limit.
+    past_a_limit: &'static [usize],
+    /// Goals not at rest by 30 s.
+    not_at_rest: &'static [usize],
+    /// Goals that move again after resting.
+    moves_again: &'static [usize],
+    /// The largest rise of H within 10 ms and over a run (J).
+    rise: (f64, f64),
+}
+
+/// With the shipped torque filter: its lag feeds energy in (H up to 26.5 J
+/// over goal 141's run); 32 and 141 are not at rest by 30 s (141 swings
+/// against the joint-limit guard, 32's wrist chatters at it), 26 moves again
+/// (to 0.053 rad/s), 103 reaches 0.951 of a velocity limit.
+const WITH_FILTER: Known = Known {
+    past_a_limit: &[103],
+    not_at_rest: &[32, 141],
+    moves_again: &[26],
+    rise: (2.0, 30.0),
+};
+
+/// Without a filter: every goal at rest by 15 s, none moves again; H rises
+/// by at most 0.15 J over a run (goal 186).
+const WITHOUT_FILTER: Known = Known {
+    past_a_limit: &[],
+    not_at_rest: &[],
+    moves_again: &[],
+    rise: (0.01, 0.2),
+};

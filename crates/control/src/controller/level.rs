@@ -2,6 +2,7 @@
 //! (Z_i, J̄_i of eq. 5, Λ_i of eq. 18, v_i = J̄_i q̇ of eq. 3) and, for a level
 //! between the first and the lowest, the blocks of the projector of eq. (8).
 
+use crate::energy_tank::EnergyTank;
 use crate::rate::RateWork;
 use crate::spec::{ControllerSpec, LevelSpec};
 use crate::task::PotentialWork;
@@ -33,6 +34,12 @@ pub(super) struct Level {
     pub(super) potential: f64,
     /// (∂V_i/∂x_i) J_i q̇: the rate of V_i the arm's motion makes (not the goal's).
     pub(super) spring_rate: f64,
+    /// The level's energy tank and its spring point's shift (crate::energy_tank;
+    /// unused for level 1), whether it acted this cycle, w_i and κ_i.
+    pub(super) tank: EnergyTank,
+    pub(super) tank_planned: bool,
+    pub(super) w_up: DVector<f64>,
+    pub(super) kappa: DVector<f64>,
     // decomposition
     pub(super) z: DMatrix<f64>,
     pub(super) zdot: DMatrix<f64>,
@@ -123,7 +130,8 @@ impl Level {
     }
 
     /// Buffers of level `i` (0-based) of `r` for `n` joints: m = m_i, `k` = Σ_{j<i} m_j,
-    /// `ktop` the rows of the levels above the lowest.
+    /// `ktop` the rows of the levels above the lowest (its tank empty: the
+    /// controller fills it in its first cycle).
     fn new(
         spec: &LevelSpec,
         i: usize,
@@ -155,6 +163,10 @@ impl Level {
             grad: DVector::zeros(m),
             xdot: DVector::zeros(m),
             spring_rate: 0.0,
+            tank: EnergyTank::new(m, 0.0),
+            tank_planned: false,
+            w_up: DVector::zeros(m),
+            kappa: DVector::zeros(m),
             f: DVector::zeros(m),
             potential: 0.0,
             z: DMatrix::zeros(d, n),

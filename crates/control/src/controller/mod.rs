@@ -6,7 +6,8 @@
 //! 2. the task terms of each level, F_i of eqs. (20), (21) (`task_force.rs`);
 //! 3. the decomposition: Z_i, J̄_i, Λ_i, Λ̇_i (eqs. 3–13, 15–18;
 //!    `projection.rs`, `null_space.rs`);
-//! 4. the fades and the safety layer's passive fade (`safety_terms.rs`);
+//! 4. the fades and the safety layer's passive fade (`safety_terms.rs`), the
+//!    levels' energy tanks (`tanks.rs`, crate::energy_tank);
 //! 5. the level torques τ_i (eqs. 20, 21; `law.rs`) and τ_μ (eqs. 17, 22;
 //!    `coriolis.rs`);
 //! 6. τ_safety, τ = Σ τ_i + τ_μ + g (eq. 19), the velocity barrier.
@@ -24,6 +25,7 @@ mod output;
 mod projection;
 mod safety_terms;
 mod setters;
+mod tanks;
 mod task_force;
 
 pub use diagnostics::Diagnostics;
@@ -100,6 +102,11 @@ pub struct Controller {
     applied_qdd: DVector<f64>,
     /// κ, the factor on every level's spring ([`Controller::set_stiffness_scale`]).
     stiffness_scale: f64,
+    /// The share of the law's torque the robot receives ([`Controller::set_law_share`]).
+    law_share: f64,
+    /// The energy tanks are to be refilled in the next cycle (start, reset, a
+    /// goal or gains change; crate::energy_tank).
+    tank_refill: bool,
     out: StepOutput,
 }
 
@@ -160,6 +167,8 @@ impl Controller {
             have_applied: false,
             applied_qdd: DVector::zeros(n),
             stiffness_scale: 1.0,
+            law_share: 1.0,
+            tank_refill: true,
             out,
         };
         c.check_initial(q0)?;
@@ -173,6 +182,8 @@ impl Controller {
         self.basis.has_prev = false;
         // Safety layer: forget the fade memory and empty its energy tank.
         self.safety.reset();
+        // The levels' energy tanks back to their initial energy.
+        self.reset_tanks();
     }
 
     /// Number of joints.
@@ -284,6 +295,9 @@ impl Controller {
         self.decompose()?;
         // Safety layer: a fade-in is paid from the energy tank (crate::safety).
         self.passive_fade();
+        // The energy tanks (crate::energy_tank): what the levels above do to a
+        // level's spring is paid from its tank; F_i with the damper on dx̂_i/dt.
+        self.energy_tanks(qd);
         // τ_μ involves every level's Λ_i and J̄̇_i: it fades with any of them.
         self.out.fade_mu = self
             .out

@@ -38,6 +38,12 @@ pub struct StepOutput {
     pub fade: Vec<f64>,
     /// The factor τ_μ was scaled by (it fades with the conditioning of every level).
     pub fade_mu: f64,
+    /// Per level: the energy E_i in its energy tank (J; crate::energy_tank; 0 for
+    /// level 1, which has none, and with the tanks off).
+    pub tank: Vec<f64>,
+    /// Per level: its tank's valve β_i ∈ [0, 1] of this cycle (1: the paper's
+    /// law; 0: the spring point follows what the levels above do to it).
+    pub tank_valve: Vec<f64>,
     /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`](crate::Form::KinematicProjector) only (zero otherwise).
     pub coriolis: DVector<f64>,
     /// Safety layer (crate::safety): its torque (added to τ only when it acts), what
@@ -63,6 +69,8 @@ impl StepOutput {
             conditioning: vec![1.0; r],
             fade: vec![1.0; r],
             fade_mu: 1.0,
+            tank: vec![0.0; r],
+            tank_valve: vec![1.0; r],
             coriolis: DVector::zeros(n),
             safety: crate::safety::SafetyOutput::new(n, r),
         }

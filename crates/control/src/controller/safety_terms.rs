@@ -26,10 +26,15 @@ impl Controller {
     /// this cycle may only remove energy; a fade-in is paid from the energy tank.
     pub(super) fn passive_fade(&mut self) {
         // Σ β_i ẋ_iᵀ D_i ẋ_i = Σ β_i ẋ_iᵀ (F_i − ∂V_i/∂x_i) (β of the last cycle).
+        // With the energy tanks, the dampers of the levels below the first
+        // fill their own tanks (crate::energy_tank), not this one.
+        let tanks = self.tanks_on();
         let mut p1 = 0.0;
         for (i, l) in self.levels.iter().enumerate() {
-            let beta = self.safety.last_fade(i);
-            p1 += beta * (l.xdot.dot(&l.f) - l.xdot.dot(&l.grad));
+            if i == 0 || !tanks {
+                let beta = self.safety.last_fade(i);
+                p1 += beta * (l.xdot.dot(&l.f) - l.xdot.dot(&l.grad));
+            }
             self.out.potential[i] = l.potential;
         }
         let (fade, pot) = (&mut self.out.fade, &self.out.potential);
@@ -132,6 +137,7 @@ impl Controller {
             conditioning: &self.out.conditioning,
             potential: &self.out.potential,
             singular_ratio: self.spec.singular_ratio,
+            level_tanks: self.tank_energy(),
         };
         self.safety.torque(&terms, &mut self.out.safety);
     }

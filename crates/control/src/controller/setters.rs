@@ -73,6 +73,18 @@ impl Controller {
         }
     }
 
+    /// The share s ∈ [0, 1] of the law's torque the robot receives from the
+    /// next cycle on: 1 − h while a contact reaction `hold` blends the
+    /// torque towards its own (hcc-cycle). The energy tanks (crate::energy_tank)
+    /// book their levels' power scaled by it, as they do a fade: a level's
+    /// tank neither fills from nor pays for a torque that is not applied. A
+    /// value outside [0, 1] or not finite is ignored. Allocation-free.
+    pub fn set_law_share(&mut self, share: f64) {
+        if (0.0..=1.0).contains(&share) {
+            self.law_share = share;
+        }
+    }
+
     /// κ ([`Controller::set_stiffness_scale`]).
     pub fn stiffness_scale(&self) -> f64 {
         self.stiffness_scale
@@ -93,6 +105,7 @@ impl Controller {
             l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
             self.safety.release_conflict(i);
             self.safety.refill_passivity_budget();
+            self.refill_tanks();
         }
         Ok(())
     }
@@ -131,6 +144,7 @@ impl Controller {
         }
         self.safety.set_spring_radius(i, &l.stiffness, &l.damping);
         self.safety.refill_passivity_budget();
+        self.refill_tanks();
         Ok(())
     }
 

@@ -38,6 +38,7 @@ impl Controller {
             q,
             &l.stiffness,
             &l.goal,
+            l.tank.spring_shift(),
             &mut l.pot,
             &mut l.err,
             &mut l.grad,
@@ -56,6 +57,8 @@ impl Controller {
             l.grad *= kappa;
         }
         gemv(&mut l.xdot, 1.0, &l.j, qd, 0.0);
+        // The rate of V_i at the spring point; the energy tank takes its
+        // shift's rate off (crate::energy_tank).
         l.spring_rate = l.grad.dot(&l.xdot);
         if l.goal_moving {
             // A moving equilibrium: damp the velocity relative to it.

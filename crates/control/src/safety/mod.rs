@@ -74,6 +74,8 @@ pub(crate) struct CycleTerms<'a> {
     /// V_i per level.
     pub potential: &'a [f64],
     pub singular_ratio: f64,
+    /// Σ E_i of the levels' energy tanks (J; crate::energy_tank).
+    pub level_tanks: f64,
 }
 
 /// Workspace and memory of the safety layer.
@@ -285,7 +287,7 @@ impl Safety {
         out.joint_limit_cycles += u64::from(out.joint_limit_active);
         out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
         out.energy = kinetic + potential + out.guard_potential;
-        out.h = out.energy + self.tank;
+        out.h = out.energy + self.tank + c.level_tanks;
     }
 
     /// The joint-space parts, joint by joint (one m_k each): the joint-limit

@@ -61,8 +61,8 @@ pub struct SafetyOutput {
     pub energy: f64,
     /// Per level, its potential as E counts it: V_1, β_i V_i for i ≥ 2 (J).
     pub level_potential: Vec<f64>,
-    /// H = E + T: the storage of the arm and the controller together, the fade's
-    /// tank included (J). Without external input it can rise only by what the
+    /// H = E + T + Σ E_i: the storage of the arm and the controller together,
+    /// the fade's tank and the levels' energy tanks (crate::energy_tank) included (J). Without external input it can rise only by what the
     /// controller injects: the measure of passivity.
     pub h: f64,
     /// q̇ᵀ τ_safety (W): ≤ 0 but for the guard spring's exchange with its potential.

@@ -41,6 +41,14 @@ pub struct SafetySpec {
     pub passivity_budget: f64,
     /// The passivity damping's largest rate (1/s), > 0, ≤ 1/T.
     pub passivity_damping_rate: f64,
+    /// The [energy tanks](crate::energy_tank) of the levels below the first: what the levels above do to a level's spring is paid from its tank, so the hierarchy is passive.
+    pub energy_tanks: bool,
+    /// The energy each tank holds at the start and at least after a goal or gains change (J; plus half the storage then), ≥ 0: the sequential convergence of Sec. IV it pays for.
+    pub tank_initial: f64,
+    /// A tank's capacity (J), ≥ `tank_initial`: what is above it decays in 0.5 s, so the levels above cannot feed more into the arm from it for long.
+    pub tank_max: f64,
+    /// K_P (1/s): how fast a level's shifted spring point returns as its tank refills, ≥ 0, ≤ 1/T.
+    pub tank_return_rate: f64,
     /// The control period T (s), for the energy per cycle and the rates the loop carries, > 0.
     pub control_period_s: f64,
     /// The torque filter's rate limit R (N·m/s; set from `[torque_filter]`), so the barrier brakes early enough; `None`: no limit.
@@ -67,6 +75,10 @@ impl Default for SafetySpec {
             passivity_damping: true,
             passivity_budget: 0.25,
             passivity_damping_rate: 50.0,
+            energy_tanks: true,
+            tank_initial: 2.0,
+            tank_max: 4.0,
+            tank_return_rate: 2.0,
             control_period_s: 1e-3,
             torque_rate_limit: None,
         }
@@ -132,6 +144,13 @@ impl SafetySpec {
         if !nonneg(self.passivity_budget) {
             return bad("passivity_budget", "must be non-negative");
         }
+        if !nonneg(self.tank_initial) {
+            return bad("tank_initial", "must be non-negative");
+        }
+        if !(nonneg(self.tank_max) && self.tank_max >= self.tank_initial) {
+            return bad("tank_max", "must be at least tank_initial");
+        }
+        rate("tank_return_rate", self.tank_return_rate, false)?;
         if !pos(self.control_period_s) {
             return bad("control_period_s", "must be positive");
         }

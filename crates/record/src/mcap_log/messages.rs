@@ -201,6 +201,12 @@ pub struct LevelMsg {
     /// NaN in recordings made before it).
     #[serde(rename = "V", default = "nan", deserialize_with = "num")]
     pub potential: f64,
+    /// The energy in the level's energy tank, J, and its valve β_i (client
+    /// schema 6; NaN in recordings made before it).
+    #[serde(default = "nan", deserialize_with = "num")]
+    pub tank: f64,
+    #[serde(default = "nan", deserialize_with = "num")]
+    pub valve: f64,
     /// Torque τ_i of the level, eqs. (20)/(21) (n entries).
     #[serde(deserialize_with = "nums")]
     pub tau: Vec<f64>,
@@ -301,6 +307,8 @@ impl From<&Telemetry> for TelemetryMsg {
                     error_norm: norm(t.task_error(i)),
                     storage: t.storage[i],
                     potential: t.potential[i],
+                    tank: t.tank[i],
+                    valve: t.tank_valve[i],
                     tau: t.tau_level(i).to_vec(),
                     sigma_min: t.min_singular_value[i],
                     singular: t.is_singular(i),
@@ -394,6 +402,8 @@ impl TelemetryMsg {
             fill(&mut t.damping_diag[i], &l.damping, "levels.damping")?;
             t.storage[i] = l.storage;
             t.potential[i] = l.potential;
+            t.tank[i] = l.tank;
+            t.tank_valve[i] = l.valve;
             t.min_singular_value[i] = l.sigma_min;
             t.transition_progress[i] = l.transition_progress;
         }

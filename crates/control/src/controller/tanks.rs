@@ -1,0 +1,99 @@
+//! Where the cycle meets the energy tanks (crate::energy_tank): w_i and κ_i of
+//! every level below the first from the decomposition, the valve and the
+//! shift of its spring point, F_i with the damper on dx̂_i/dt, the booking.
+
+use super::Controller;
+use crate::energy_tank::{TANK_TRANSIENT_SHARE, TankTerms};
+use crate::spec::Form;
+use hcc_linalg::products::{gemv, gemv_t};
+use nalgebra::DVector;
+
+impl Controller {
+    /// The energy tanks act: the extended form (eq. 21, whose power splits
+    /// into κ_i and w_i) with the safety layer and its tanks on.
+    pub(super) fn tanks_on(&self) -> bool {
+        let s = &self.spec.safety;
+        s.enabled && s.energy_tanks && self.spec.form == Form::Extended
+    }
+
+    /// Every level i ≥ 2: v_i = J̄_i q̇ (eq. 3), κ_i = J_i Z_iᵀ v_i, w_i =
+    /// J_i q̇ − κ_i; the tank plans the cycle (F_i with the damper on dx̂_i/dt,
+    /// the rate of V_i at x̂_i) and books it. After the fades, before the level
+    /// torques (which read F_i).
+    pub(super) fn energy_tanks(&mut self, qd: &DVector<f64>) {
+        if !self.tanks_on() {
+            return;
+        }
+        let s = &self.spec.safety;
+        let (period, return_rate, max) = (s.control_period_s, s.tank_return_rate, s.tank_max);
+        if self.tank_refill {
+            // Start, goal or gains change: `tank_initial` plus a share of the
+            // storage ½ q̇ᵀ M q̇ + Σ V_i (crate::energy_tank).
+            gemv(&mut self.tmp_n, 1.0, &self.data.m, qd, 0.0);
+            let storage =
+                0.5 * qd.dot(&self.tmp_n) + self.levels.iter().map(|l| l.potential).sum::<f64>();
+            let e = s.tank_initial + TANK_TRANSIENT_SHARE * storage.max(0.0);
+            for l in self.levels.iter_mut().skip(1) {
+                l.tank.refill(e);
+            }
+            self.tank_refill = false;
+        }
+        for i in 1..self.levels.len() {
+            let l = &mut self.levels[i];
+            gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
+            gemv_t(&mut self.tmp_n, 1.0, &l.z, &l.v, 0.0);
+            gemv(&mut l.kappa, 1.0, &l.j, &self.tmp_n, 0.0);
+            gemv(&mut l.w_up, 1.0, &l.j, qd, 0.0);
+            l.w_up -= &l.kappa;
+            let terms = TankTerms {
+                w: &l.w_up,
+                damping: &l.damping,
+                return_rate,
+                // The torque's share the robot receives: its fade, and
+                // what a contact hold leaves of the law.
+                fade: self.out.fade[i] * self.law_share,
+                period,
+            };
+            l.tank_planned = l.tank.plan(&terms, &mut l.f);
+            // The damper's velocity e = ẋ_i − ẋ_{i,d} − δ̇_i and its power eᵀ D e
+            // (κ_i is no longer needed: its buffer holds e).
+            l.kappa.copy_from(&l.xdot);
+            if l.tank_planned {
+                l.kappa -= &l.tank.shift_rate;
+                l.spring_rate -= l.grad.dot(&l.tank.shift_rate);
+            }
+            let e = &l.kappa;
+            let mut dissipation = 0.0;
+            for a in 0..l.m {
+                for b in 0..l.m {
+                    dissipation += e[a] * l.damping[(a, b)] * e[b];
+                }
+            }
+            l.tank.book(&terms, &l.f, dissipation, l.tank_planned, max);
+            self.out.tank[i] = l.tank.energy;
+            self.out.tank_valve[i] = l.tank.valve;
+        }
+    }
+
+    /// Σ E_i of the levels' tanks (J; 0 when they are off).
+    pub(super) fn tank_energy(&self) -> f64 {
+        if !self.tanks_on() {
+            return 0.0;
+        }
+        self.levels.iter().skip(1).map(|l| l.tank.energy).sum()
+    }
+
+    /// A goal or gains changed (a command, an input): in the next cycle every
+    /// tank holds at least `tank_initial` plus a share of the storage again.
+    pub(super) fn refill_tanks(&mut self) {
+        self.tank_refill = true;
+    }
+
+    /// Every tank empty, every spring at x_i; refilled in the next cycle.
+    pub(super) fn reset_tanks(&mut self) {
+        for l in self.levels.iter_mut() {
+            l.tank.reset(0.0);
+        }
+        self.tank_refill = true;
+    }
+}
