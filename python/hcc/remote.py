@@ -54,7 +54,7 @@ QUATERNION_STAMPED = ("geometry_msgs/msg/QuaternionStamped",
 FLOAT64_MULTI_ARRAY = ("std_msgs/msg/Float64MultiArray",
                        "RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f")
 TELEMETRY = ("hcc_msgs/msg/Telemetry",
-             "RIHS01_8924b9911a67b8db34f9b5408d4f58c1ce82330aa0e4131504cee874f9fdc6d7")
+             "RIHS01_db220c33bd4c3256f681620f11badb3fa8643fa216a88b8d3ea0967161f44b86")
 GOAL_TYPES = (POSE_STAMPED, POINT_STAMPED, QUATERNION_STAMPED, FLOAT64_MULTI_ARRAY)
 
 #: Codes of the bridge's own refusals (RemoteAnswer.code).
@@ -332,6 +332,13 @@ class RemoteTelemetry:
     remote_answers: list[RemoteAnswer]
     #: The controller's estimate of the external joint torque (N·m per joint).
     tau_ext: list[float]
+    #: The storage H of the arm and the controller (J).
+    h: float
+    #: Per level: its potential as H counts it, its energy tank (J) and the
+    #: tank's valve in [0, 1] (1: the paper's law).
+    potential: list[float]
+    tank: list[float]
+    tank_valve: list[float]
 
     @classmethod
     def decode(cls, data: bytes) -> "RemoteTelemetry":
@@ -350,7 +357,10 @@ class RemoteTelemetry:
         remote = r.seq(lambda: RemoteAnswer(bytes(r.u8() for _ in range(16)), r.i64(), r.u32(),
                                             r.u32(), r.string(), r.f64()))
         tau_ext = r.seq(r.f64)
-        return cls(stamp, *head, tau, p_mu, levels, counters, answers, bridge_id, remote, tau_ext)
+        h = r.f64()
+        potential, tank, tank_valve = r.seq(r.f64), r.seq(r.f64), r.seq(r.f64)
+        return cls(stamp, *head, tau, p_mu, levels, counters, answers, bridge_id, remote, tau_ext,
+                   h, potential, tank, tank_valve)
 
     def levels(self) -> int:
         return len(self.level_list)
@@ -384,6 +394,15 @@ class RemoteTelemetry:
 
     def tau_ext_list(self) -> list[float]:
         return list(self.tau_ext)
+
+    def potential_list(self) -> list[float]:
+        return list(self.potential)
+
+    def tank_list(self) -> list[float]:
+        return list(self.tank)
+
+    def tank_valve_list(self) -> list[float]:
+        return list(self.tank_valve)
 
     def contact(self) -> bool:
         return bool(self.flags & TELEMETRY_FLAG_CONTACT)

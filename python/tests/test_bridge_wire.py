@@ -142,6 +142,10 @@ def check_telemetry(ts: Any, samples: list[tuple[bytes, bytes | None]], telemetr
         assert bits(m.tau) == bits(t.tau_list())
         assert bits([m.p_mu]) == bits([t.p_mu])
         assert bits(m.tau_ext) == bits(t.tau_ext_list())
+        assert bits([m.h]) == bits([t.h])
+        assert bits(m.potential) == bits(t.potential_list())
+        assert bits(m.tank) == bits(t.tank_list())
+        assert bits(m.tank_valve) == bits(t.tank_valve_list())
         assert [lv.name for lv in m.levels] == ["TCP position", "TCP orientation", "posture"]
         for i, lv in enumerate(m.levels):
             assert lv.dim == t.task_dims[i]

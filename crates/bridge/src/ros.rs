@@ -42,7 +42,7 @@ pub const FLOAT64_MULTI_ARRAY: RosType = RosType {
 /// `hcc_msgs/msg/Telemetry` (`ros/hcc_msgs/msg/Telemetry.msg`).
 pub const TELEMETRY: RosType = RosType {
     name: "hcc_msgs/msg/Telemetry",
-    hash: "RIHS01_8924b9911a67b8db34f9b5408d4f58c1ce82330aa0e4131504cee874f9fdc6d7",
+    hash: "RIHS01_db220c33bd4c3256f681620f11badb3fa8643fa216a88b8d3ea0967161f44b86",
 };
 
 /// `builtin_interfaces/msg/Time`.
@@ -245,6 +245,10 @@ pub fn write_telemetry(w: &mut CdrWriter, t: &Telemetry, stamp: RosTime, x: &Tel
             .f64(a.duration_s);
     }
     w.seq_f64(t.tau_ext());
+    w.f64(t.h)
+        .seq_f64(&t.potential[..r])
+        .seq_f64(&t.tank[..r])
+        .seq_f64(&t.tank_valve[..r]);
 }
 
 /// A goal message as received, before it is checked against its level.
@@ -384,6 +388,10 @@ mod tests {
         t.tau[..2].copy_from_slice(&[1.5, -2.5]);
         t.p_mu = 1e-12;
         t.tau_ext[..2].copy_from_slice(&[0.125, -7.0]);
+        t.h = 12.5;
+        t.potential[..2].copy_from_slice(&[3.0, 0.5]);
+        t.tank[..2].copy_from_slice(&[0.0, 2.25]);
+        t.tank_valve[..2].copy_from_slice(&[1.0, 0.75]);
         t.task_error[1][..2].copy_from_slice(&[0.25, 0.5]);
         t.singular_levels = 0b10;
         t.setpoint_answers[3] = hcc_msgs::SetpointAnswer {
@@ -468,6 +476,15 @@ mod tests {
         assert_eq!(r.f64("d").unwrap(), 0.5);
         r.seq_f64("tau_ext", &mut v).unwrap();
         assert_eq!(v, [0.125, -7.0]);
+        assert_eq!(r.f64("h").unwrap(), 12.5);
+        for (name, want) in [
+            ("potential", [3.0, 0.5]),
+            ("tank", [0.0, 2.25]),
+            ("tank_valve", [1.0, 0.75]),
+        ] {
+            r.seq_f64(name, &mut v).unwrap();
+            assert_eq!(v, want, "{name}");
+        }
         assert_eq!(r.remaining(), 0);
     }
 
