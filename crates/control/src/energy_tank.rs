@@ -107,7 +107,7 @@ pub struct EnergyTank {
     pub shifted: bool,
     /// δ̇_i of this cycle.
     pub shift_rate: DVector<f64>,
-    /// ŵ_i = w_i + K_P δ_i and D_i ŵ_i (scratch).
+    /// ŵ_i = w_i + K_P δ_i and D_i ŵ_i (scratch; D_i e in the booking).
     w_hat: DVector<f64>,
     d_w: DVector<f64>,
     /// F_0 − D_i w_i (scratch).
@@ -195,18 +195,21 @@ impl EnergyTank {
     }
 
     /// Books the cycle: E_i += T β^f (ρ eᵀ D_i e − β_i ŵ_iᵀ F_i) with the
-    /// damper's power eᵀ D_i e (`dissipation`; e = ẋ_i − ẋ_{i,d} − δ̇_i), ≥ 0;
-    /// what is above `max` decays with [`TANK_TRANSIENT_TIME`]; δ_i += T δ̇_i, dropped below [`SHIFT_SNAP`] with the valve
-    /// open. `f`: F_i as applied; `planned`: [`EnergyTank::plan`] acted this cycle.
+    /// damper's velocity e = ẋ_i − ẋ_{i,d} − δ̇_i (`damper_velocity`), ≥ 0;
+    /// what is above `max` decays with [`TANK_TRANSIENT_TIME`]; δ_i += T δ̇_i,
+    /// dropped below [`SHIFT_SNAP`] with the valve open. `f`: F_i as applied;
+    /// `planned`: [`EnergyTank::plan`] acted this cycle.
     pub fn book(
         &mut self,
         c: &TankTerms<'_>,
         f: &DVector<f64>,
-        dissipation: f64,
+        damper_velocity: &DVector<f64>,
         planned: bool,
         max: f64,
     ) {
-        let fill = TANK_FILL_SHARE * dissipation.max(0.0);
+        // The damper's power eᵀ D e (`d_w` is free once `plan` is done).
+        gemv(&mut self.d_w, 1.0, c.damping, damper_velocity, 0.0);
+        let fill = TANK_FILL_SHARE * damper_velocity.dot(&self.d_w).max(0.0);
         let drain = if planned {
             self.valve * self.w_hat.dot(f)
         } else {

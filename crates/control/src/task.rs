@@ -230,7 +230,13 @@ pub(crate) fn potential(
         o += m;
     }
     let Some(delta) = shift else {
-        return spring(tasks, n, stiffness, w, err, grad, false);
+        let rotations = Rotations {
+            quat: &w.quat,
+            goal: &w.goal_rotation,
+        };
+        return spring(
+            tasks, n, stiffness, &rotations, err, &mut w.e, &mut w.ke, grad,
+        );
     };
     // The spring point x̂ = x − δ: the error at it, x̃ − δ (an angle wrapped),
     // and on quaternion rows the error against R̂_d = exp([δ]×) R_d.
@@ -249,36 +255,41 @@ pub(crate) fn potential(
         }
         o += task.dim(n);
     }
-    let shifted = std::mem::replace(&mut w.shifted_err, DVector::zeros(0));
-    let v = spring(tasks, n, stiffness, w, &shifted, grad, true);
-    w.shifted_err = shifted;
-    v
+    let rotations = Rotations {
+        quat: &w.quat,
+        goal: &w.shifted_rotation,
+    };
+    let (e, ke) = (&mut w.e, &mut w.ke);
+    spring(tasks, n, stiffness, &rotations, &w.shifted_err, e, ke, grad)
 }
 
-/// V = ½ eᵀ K e and its gradient conjugate to ẋ_i at the error `err` (and the
-/// (η, ε) of the quaternion tasks in `w`), against the goal rotations R_d, or
-/// R̂_d where `shifted`.
+/// The quaternion tasks' (η, ε) and the goal rotations (R_d, or R̂_d at a
+/// shifted spring point) they are taken against.
+struct Rotations<'a> {
+    quat: &'a [(f64, Vector3<f64>)],
+    goal: &'a [Rotation3<f64>],
+}
+
+/// V = ½ eᵀ K e and its gradient conjugate to ẋ_i at the error `err`, the
+/// quaternion rows from `r`; `e`, `ke` scratch of the stacked case.
+#[allow(clippy::too_many_arguments)]
 fn spring(
     tasks: &[TaskSpec],
     n: usize,
     stiffness: &DMatrix<f64>,
-    w: &mut PotentialWork,
+    r: &Rotations<'_>,
     err: &DVector<f64>,
+    e: &mut DVector<f64>,
+    ke: &mut DVector<f64>,
     grad: &mut DVector<f64>,
-    shifted: bool,
 ) -> f64 {
     if let [TaskSpec::Orientation { .. }] = tasks {
         // V = 2 εᵀ K ε; its conjugate to ω (world) is R_d · 2 (ηI + [ε]×) K ε.
-        let (eta, eps) = w.quat[0];
+        let (eta, eps) = r.quat[0];
         let k = Matrix3::from_fn(|a, b| stiffness[(a, b)]);
         let keps = k * eps;
         let f_goal = 2.0 * (eta * keps + eps.cross(&keps));
-        let rd = if shifted {
-            &w.shifted_rotation[0]
-        } else {
-            &w.goal_rotation[0]
-        };
-        let g = rd * f_goal;
+        let g = r.goal[0] * f_goal;
         for a in 0..3 {
             grad[a] = g[a];
         }
@@ -289,7 +300,7 @@ fn spring(
         gemv(grad, 1.0, stiffness, err, 0.0);
         return 0.5 * err.dot(grad);
     }
-    stacked_quaternion_potential(tasks, n, stiffness, w, err, grad, shifted)
+    stacked_quaternion_potential(tasks, n, stiffness, r, err, e, ke, grad)
 }
 
 /// The error rows x̃ = x − x_d of one task (`goal`, `err`: its rows) at the
@@ -371,46 +382,43 @@ fn quaternion_error(
 /// V = ½ eᵀ K e of a level with quaternion rows (e = 2ε there, x̃ elsewhere) and its
 /// gradient: (K e) on the other rows, R_d (ηI + \[ε\]×) (K e) on the quaternion rows
 /// (ė = (ηI − \[ε\]×) R_dᵀ ω, so this is the conjugate to the world ω).
+#[allow(clippy::too_many_arguments)]
 fn stacked_quaternion_potential(
     tasks: &[TaskSpec],
     n: usize,
     stiffness: &DMatrix<f64>,
-    w: &mut PotentialWork,
+    r: &Rotations<'_>,
     err: &DVector<f64>,
+    e: &mut DVector<f64>,
+    ke: &mut DVector<f64>,
     grad: &mut DVector<f64>,
-    shifted: bool,
 ) -> f64 {
-    w.e.copy_from(err);
+    e.copy_from(err);
     let mut o = 0;
     for (t, task) in tasks.iter().enumerate() {
         if let Some(qr) = task.quaternion_rows() {
-            let eps = w.quat[t].1;
+            let eps = r.quat[t].1;
             for a in 0..3 {
-                w.e[o + qr + a] = 2.0 * eps[a];
+                e[o + qr + a] = 2.0 * eps[a];
             }
         }
         o += task.dim(n);
     }
-    gemv(&mut w.ke, 1.0, stiffness, &w.e, 0.0);
-    grad.copy_from(&w.ke);
+    gemv(ke, 1.0, stiffness, e, 0.0);
+    grad.copy_from(ke);
     let mut o = 0;
     for (t, task) in tasks.iter().enumerate() {
         if let Some(qr) = task.quaternion_rows() {
-            let (eta, eps) = w.quat[t];
-            let ke = Vector3::new(w.ke[o + qr], w.ke[o + qr + 1], w.ke[o + qr + 2]);
-            let rd = if shifted {
-                &w.shifted_rotation[t]
-            } else {
-                &w.goal_rotation[t]
-            };
-            let g = rd * (eta * ke + eps.cross(&ke));
+            let (eta, eps) = r.quat[t];
+            let kei = Vector3::new(ke[o + qr], ke[o + qr + 1], ke[o + qr + 2]);
+            let g = r.goal[t] * (eta * kei + eps.cross(&kei));
             for a in 0..3 {
                 grad[o + qr + a] = g[a];
             }
         }
         o += task.dim(n);
     }
-    0.5 * w.e.dot(&w.ke)
+    0.5 * e.dot(ke)
 }
 
 fn wrap_angle(a: f64) -> f64 {

@@ -157,6 +157,7 @@ pub mod ipc;
 mod sequence;
 mod service;
 mod setpoint;
+mod telemetry;
 mod types;
 
 pub use error::{MsgError, NamespaceError};
@@ -171,12 +172,15 @@ pub use setpoint::{
     SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
     SYMMETRY_TOLERANCE, Setpoint, answer_code,
 };
+pub use telemetry::{
+    MAX_SETPOINT_CLIENTS, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_CONTACT,
+    TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
+    TelemetryTimings,
+};
 pub use types::{
     COMMAND_FLAG_GRAVITY_INCLUDED, COMMAND_FLAGS_KNOWN, CommandMode, DriverStatus, Header,
-    JOINT_STATE, JointState, MAX_SETPOINT_CLIENTS, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
-    STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, SetpointAnswer, TELEMETRY,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, TORQUE_COMMAND,
-    Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand,
+    JOINT_STATE, JointState, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+    STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, TORQUE_COMMAND, TorqueCommand,
 };
 
 /// Version of the driver-facing part of the contract: [`JointState`],

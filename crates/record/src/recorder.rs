@@ -248,12 +248,11 @@ impl Recorder {
         for i in 0..self.dims.len() {
             self.row.push(out.potential_in_h(i).unwrap_or(f64::NAN));
         }
-        for part in [0, 1] {
-            for i in 0..self.dims.len() {
-                let tank = out.tank(i).map(|t| if part == 0 { t.0 } else { t.1 });
-                self.row.push(tank.unwrap_or(f64::NAN));
-            }
-        }
+        let r = self.dims.len();
+        let tanks = (0..r).map(|i| out.tank(i).map_or(f64::NAN, |t| t.0));
+        self.row.extend(tanks);
+        let valves = (0..r).map(|i| out.tank(i).map_or(f64::NAN, |t| t.1));
+        self.row.extend(valves);
         self.push_contact_columns(cycle.output);
         sink.push_row(&self.row)
     }

@@ -10,12 +10,21 @@ use hcc_linalg::products::{copy, gemv, gemv_t, transpose_cols_into};
 use nalgebra::DVector;
 
 impl Controller {
-    /// Torques of the levels (eqs. 20, 21) and the local velocities v_i (eq. 3).
-    pub(super) fn level_torques(&mut self, qd: &DVector<f64>) {
+    /// The local velocities v_i = J̄_i q̇ (eq. 3) of every level, once per
+    /// cycle after the decomposition (the energy tanks and the level torques
+    /// read them).
+    pub(super) fn local_velocities(&mut self, qd: &DVector<f64>) {
+        for l in &mut self.levels {
+            gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
+        }
+    }
+
+    /// Torques of the levels (eqs. 20, 21) from F_i and v_i
+    /// ([`Controller::local_velocities`]).
+    pub(super) fn level_torques(&mut self) {
         let r = self.levels.len();
         for i in 0..r {
             let l = &mut self.levels[i];
-            gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
             let tau_i = &mut self.out.tau_level[i];
             if i == 0 {
                 gemv_t(tau_i, -1.0, &l.j, &l.f, 0.0);

@@ -293,6 +293,8 @@ impl Controller {
 
         // Z_i, J̄_i, Λ_i of every level (eqs. 3–13, 15–18).
         self.decompose()?;
+        // v_i = J̄_i q̇ (eq. 3).
+        self.local_velocities(qd);
         // Safety layer: a fade-in is paid from the energy tank (crate::safety).
         self.passive_fade();
         // The energy tanks (crate::energy_tank): what the levels above do to a
@@ -307,7 +309,7 @@ impl Controller {
             .product();
 
         self.out.safety.spring_saturated_cycles += u64::from(self.out.safety.spring_saturated);
-        self.level_torques(qd);
+        self.level_torques();
         self.coriolis_cancellation(qd)?;
         // Safety layer: null-space damping of faded levels, the passivity
         // damping, joint position and velocity limits (crate::safety); zero and

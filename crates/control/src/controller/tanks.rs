@@ -16,7 +16,7 @@ impl Controller {
         s.enabled && s.energy_tanks && self.spec.form == Form::Extended
     }
 
-    /// Every level i ≥ 2: v_i = J̄_i q̇ (eq. 3), κ_i = J_i Z_iᵀ v_i, w_i =
+    /// Every level i ≥ 2: κ_i = J_i Z_iᵀ v_i (v_i of this cycle), w_i =
     /// J_i q̇ − κ_i; the tank plans the cycle (F_i with the damper on dx̂_i/dt,
     /// the rate of V_i at x̂_i) and books it. After the fades, before the level
     /// torques (which read F_i).
@@ -40,10 +40,13 @@ impl Controller {
         }
         for i in 1..self.levels.len() {
             let l = &mut self.levels[i];
-            gemv(&mut l.v, 1.0, &l.jbar, qd, 0.0);
             gemv_t(&mut self.tmp_n, 1.0, &l.z, &l.v, 0.0);
             gemv(&mut l.kappa, 1.0, &l.j, &self.tmp_n, 0.0);
-            gemv(&mut l.w_up, 1.0, &l.j, qd, 0.0);
+            // J_i q̇ = ẋ_i, which `xdot` holds relative to a moving goal.
+            l.w_up.copy_from(&l.xdot);
+            if l.goal_moving {
+                l.w_up += &l.goal_velocity;
+            }
             l.w_up -= &l.kappa;
             let terms = TankTerms {
                 w: &l.w_up,
@@ -55,21 +58,14 @@ impl Controller {
                 period,
             };
             l.tank_planned = l.tank.plan(&terms, &mut l.f);
-            // The damper's velocity e = ẋ_i − ẋ_{i,d} − δ̇_i and its power eᵀ D e
-            // (κ_i is no longer needed: its buffer holds e).
+            // The damper's velocity e = ẋ_i − ẋ_{i,d} − δ̇_i (κ_i is no longer
+            // needed: its buffer holds e).
             l.kappa.copy_from(&l.xdot);
             if l.tank_planned {
                 l.kappa -= &l.tank.shift_rate;
                 l.spring_rate -= l.grad.dot(&l.tank.shift_rate);
             }
-            let e = &l.kappa;
-            let mut dissipation = 0.0;
-            for a in 0..l.m {
-                for b in 0..l.m {
-                    dissipation += e[a] * l.damping[(a, b)] * e[b];
-                }
-            }
-            l.tank.book(&terms, &l.f, dissipation, l.tank_planned, max);
+            l.tank.book(&terms, &l.f, &l.kappa, l.tank_planned, max);
             self.out.tank[i] = l.tank.energy;
             self.out.tank_valve[i] = l.tank.valve;
         }

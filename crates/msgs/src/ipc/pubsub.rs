@@ -12,8 +12,9 @@ use iceoryx2::service::port_factory::publish_subscribe;
 use super::error::IpcError;
 use super::node::Ipc;
 use super::settings::{MAX_LOANED_SAMPLES, MAX_SUBSCRIBER_BUFFER};
+use crate::Telemetry;
 use crate::setpoint::Setpoint;
-use crate::types::{JointState, Telemetry, TorqueCommand};
+use crate::types::{JointState, TorqueCommand};
 
 /// Publisher of [`JointState`] (driver/simulator).
 pub type StatePublisher = Publisher<Ipc, JointState, ()>;

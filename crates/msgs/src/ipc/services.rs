@@ -22,9 +22,10 @@ use super::settings::{
     MAX_NOTIFIERS, MAX_SETPOINT_PUBLISHERS, MAX_SETPOINT_SUBSCRIBERS, MAX_STATE_SUBSCRIBERS,
     MAX_SUBSCRIBER_BUFFER, MAX_TELEMETRY_SUBSCRIBERS,
 };
+use crate::Telemetry;
 use crate::service::{EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, ServiceNames};
 use crate::setpoint::Setpoint;
-use crate::types::{JointState, Telemetry, TorqueCommand};
+use crate::types::{JointState, TorqueCommand};
 
 fn pubsub_open_reason(e: PublishSubscribeOpenError) -> String {
     use PublishSubscribeOpenError as E;

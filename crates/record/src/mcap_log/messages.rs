@@ -201,8 +201,8 @@ pub struct LevelMsg {
     /// NaN in recordings made before it).
     #[serde(rename = "V", default = "nan", deserialize_with = "num")]
     pub potential: f64,
-    /// The energy in the level's energy tank, J, and its valve β_i (client
-    /// schema 6; NaN in recordings made before it).
+    /// The energy in the level's energy tank, J, and the tank's valve in
+    /// [0, 1] (client schema 6; NaN in recordings made before it).
     #[serde(default = "nan", deserialize_with = "num")]
     pub tank: f64,
     #[serde(default = "nan", deserialize_with = "num")]
