@@ -80,7 +80,7 @@ impl Header {
         Self::of(SchemaPart::Driver)
     }
 
-    /// A header of the client-facing part ([`crate::Setpoint`], [`Telemetry`]):
+    /// A header of the client-facing part ([`crate::Setpoint`], [`crate::Telemetry`]):
     /// [`crate::CLIENT_SCHEMA_VERSION`].
     pub const fn client() -> Self {
         Self::of(SchemaPart::Client)
