@@ -40,7 +40,8 @@
 //! [`ControlCycle::take_setpoints`] (the setpoints waiting for this state,
 //! then those that arrived with it, in arrival order), then
 //! [`ControlCycle::decide`] (stream checks → transitions advance one period →
-//! law → saturation → torque filter → command, then telemetry).
+//! law → saturation → torque filter → the output stages' energy tank (module
+//! `output_tank`) → velocity limit → command, then telemetry).
 //! [`ControlCycle::step`] is both. The controller daemon calls the parts
 //! itself to time them, and fills the telemetry once the command is out
 //! ([`ControlCycle::decide_command`], [`ControlCycle::fill_telemetry`]).
@@ -55,6 +56,7 @@ use hcc_msgs::{
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
+use crate::output_tank::{OutputTank, RateBox};
 use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
 use crate::settings::{CycleError, CycleSettings};
@@ -92,6 +94,8 @@ pub struct ControlCycle {
     velocity_limit: VelocityLimit,
     /// The largest correction it made so far (N·m).
     velocity_limit_largest: f64,
+    /// The energy tank of the stages after the law (module `output_tank`).
+    output_tank: OutputTank,
     /// The external-torque observer and the contact detection (module
     /// `contact`).
     contact: ContactWatch,
@@ -158,6 +162,12 @@ impl ControlCycle {
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
             velocity_limit: VelocityLimit::new(&controller, &limits, settings.period_s()),
             velocity_limit_largest: 0.0,
+            output_tank: OutputTank::new(
+                spec.safety.enabled && spec.safety.energy_tanks,
+                spec.safety.tank_initial,
+                spec.safety.tank_max,
+                settings.period_s(),
+            ),
             contact: ContactWatch::new(&settings.contact),
             reaction: ContactReaction::new(&settings.contact),
             wrench,
@@ -200,6 +210,13 @@ impl ControlCycle {
     /// The control law (after the last decision: its output and terms at that state).
     pub fn controller(&self) -> &Controller {
         &self.controller
+    }
+
+    /// The storage H of the last decision (J): the law's
+    /// (`hcc_control::SafetyOutput::h`) and the tank of the stages after it
+    /// (module `output_tank`).
+    pub fn storage(&self) -> f64 {
+        self.controller.output().safety.h + self.output_tank.energy()
     }
 
     /// How long `Controller::step` took in the last decision, ns (`None` if
@@ -381,7 +398,11 @@ impl ControlCycle {
             None => self.filter.bypass(&tau[..n]),
         }
         if law_mode.is_some() {
+            self.hold_energy(state, &mut tau);
             self.limit_velocity(state, gravity_in_tau, &mut tau);
+            self.output_tank.book(&state.qd()[..n], &tau[..n]);
+            // mJ, rounded up: energy fed in is never shown as 0.
+            self.counters.core.energy_unpaid_mj = (self.output_tank.unpaid() * 1e3).ceil() as u64;
         }
         let mode = law_mode.unwrap_or(CommandMode::SafeHold);
         self.fill_command(state, mode, gravity_conflict, &tau);
@@ -460,6 +481,7 @@ impl ControlCycle {
                 if new_peer {
                     c.core.peer_restarts += 1;
                     self.controller.reset();
+                    self.output_tank.reset();
                     self.contact.reset();
                     self.wrench.clear();
                 }
@@ -498,6 +520,30 @@ impl ControlCycle {
         let c = &mut self.counters.telemetry;
         c.rate_limited += u64::from(stages.rate_limited);
         c.low_passed += u64::from(stages.low_passed);
+    }
+
+    /// What the stages after the law feed in beyond what their tank pays is
+    /// held back (module `output_tank`), counted; the filter's next step
+    /// starts from what is sent.
+    fn hold_energy(&mut self, state: &JointState, tau: &mut [f64; MAX_JOINTS]) {
+        let n = self.n;
+        let origin = self.filter.origin();
+        let rate = self.filter.max_step().map(|max_step| RateBox {
+            previous: &origin[..n],
+            max_step,
+        });
+        if self.output_tank.hold(
+            &state.qd()[..n],
+            &self.controller.model_terms().m,
+            &mut tau[..n],
+            &self.limits[..n],
+            rate,
+        ) {
+            self.counters.core.energy_held += 1;
+            if self.filter.is_active() {
+                self.filter.bypass(&tau[..n]);
+            }
+        }
     }
 
     /// The discrete-time velocity limit on the law's torque about to be sent
@@ -571,6 +617,7 @@ impl ControlCycle {
         self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
         let gravity = self.gravity_compensation.then_some(&self.gravity_last[..n]);
         self.reaction.blend(&mut tau[..n], gravity, state.qd());
+        self.output_tank.set_law(&tau[..n]);
         self.have_valid = true;
         let singular = out.any_singular;
         // The observer reads the model terms the law computed at this state
@@ -650,6 +697,7 @@ impl ControlCycle {
         self.setpoints.fill(t);
         if fresh {
             telemetry::write_law_terms(t, self.controller.output(), self.gravity_compensation);
+            t.h += self.output_tank.energy();
         }
     }
 }

@@ -19,6 +19,13 @@ hcc_msgs::define_counters! {
         contact_events: "contacts detected",
         /// Cycles with the contact flag set.
         contact_cycles: "cycles in contact",
+        /// Cycles whose command the output stages' energy tank held back
+        /// (what the saturation, the torque filter and the velocity limit
+        /// would have fed in beyond what it pays: module `output_tank`).
+        energy_held: "cycles held back by the output stages' energy tank",
+        /// The energy the output stages fed in beyond what their tank held
+        /// (mJ, total; H rose by it).
+        energy_unpaid_mj: "energy fed in beyond the output stages' tank (mJ)",
     }
 }
 

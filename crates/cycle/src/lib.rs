@@ -24,6 +24,10 @@
 //!   the level's equilibrium and gains through a transition.
 //! * [`torque_filter`]: [`TorqueFilter`] — the `[torque_filter]` rate limit
 //!   and low-pass on the saturated torque, against the previous command.
+//! * `output_tank`: the energy tank of the stages after the law — what the
+//!   saturation, the torque filter and the velocity limit change in the law's
+//!   power is booked, and held back when the tank is empty
+//!   ([`ControlCycle::storage`] includes it).
 //! * [`schedule`]: a scenario's `[[setpoint]]` entries, delivered to a cycle
 //!   as a client would send them.
 //! * `contact`: the generalized-momentum observer of the external joint
@@ -41,6 +45,7 @@
 mod contact;
 pub mod control_cycle;
 pub mod counters;
+mod output_tank;
 mod reaction;
 pub mod schedule;
 pub mod setpoints;

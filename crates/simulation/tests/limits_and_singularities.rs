@@ -143,7 +143,7 @@ impl Logged {
             q: q.to_vec(),
             qd: qd.to_vec(),
             energy: out.safety.energy,
-            h: out.safety.h,
+            h: v.cycle.storage(),
             errors: out.task_error.iter().map(|e| e.norm()).collect(),
             finite: out.tau.iter().all(|x| x.is_finite()),
             guard: out.safety.joint_limit_active,

@@ -9,9 +9,9 @@
 //! nothing but the controller can raise the storage
 //!
 //! H = ½ q̇ᵀ M q̇ + V_1 + Σ_{i≥2} β_i V_i + the joint-limit guard's potential
-//!     + the fade's tank
+//!     + the fade's tank + the levels' energy tanks + the output stages' tank
 //!
-//! (`SafetyOutput::h`, the telemetry's `h`; β_i the fades). The TCP goals, a
+//! (`ControlCycle::storage`, the telemetry's `h`; β_i the fades). The TCP goals, a
 //! quarter each:
 //! within 0.2 m of the base axis; below the base; behind it; 0.95–1.6 m from
 //! the shoulder (beyond reach). Every goal: the hand turned to a random
@@ -38,9 +38,10 @@
 //! (`hcc_control::energy_tank`): no NaN, inside the position limits, at most
 //! 0.95 of a velocity limit, at rest by 30 s, never moving again after rest,
 //! and H rising by at most 0.01 J within 10 ms and 0.2 J over a run without
-//! the torque filter — with it, the filter's lag still feeds energy in (up to
-//! 2 J and 30 J) — but the known exceptions of the 200 goals (`Known`; the
-//! figures in docs/limits-and-singularities.md).
+//! the torque filter — with it, where the rate limit cannot build the guard's
+//! torque in time its lag still feeds energy in (up to 5 J and 10 J) — but
+//! the known exceptions of the 200 goals (`Known`; the figures in
+//! docs/limits-and-singularities.md).
 
 mod seeded;
 use seeded::{Rng, quantile};
@@ -189,7 +190,7 @@ struct Course {
 }
 
 impl Course {
-    fn push(&mut self, t: f64, out: &hcc_control::StepOutput, speed: f64) {
+    fn push(&mut self, t: f64, h: f64, out: &hcc_control::StepOutput, speed: f64) {
         let r = out.tank.len();
         if self.potential.is_empty() {
             self.potential = vec![Vec::new(); r];
@@ -197,7 +198,7 @@ impl Course {
             self.valve = vec![Vec::new(); r];
         }
         self.t.push(t);
-        self.h.push(out.safety.h);
+        self.h.push(h);
         for i in 0..r {
             self.potential[i].push(out.safety.level_potential[i]);
             self.tank[i].push(out.tank[i]);
@@ -293,7 +294,7 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
     run_observed(&s, &mut |v| {
         let (q, qd) = (v.state.q(), v.state.qd());
         let out = v.cycle.controller().output();
-        let h = out.safety.h;
+        let h = v.cycle.storage();
         r.finite &= v.cycle.command().tau().iter().all(|x| x.is_finite()) && h.is_finite();
         if v.k == 0 {
             r.h_start = h;
@@ -315,7 +316,7 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
         }
         let speed = qd.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
         if plot.is_some() {
-            course.push(v.t, out, speed);
+            course.push(v.t, h, out, speed);
         }
         if speed < REST_SPEED {
             still += 1;
@@ -488,13 +489,22 @@ fn unreachable_goals_energy_and_rest() {
         let g = r.g;
         assert!(r.finite, "goal {g}: a non-finite torque or H");
         // Inside the position limits, at most at 0.95 of a velocity limit
-        // (but the known exceptions, at 0.951).
+        // (but the known exceptions: at 0.951, up to 0.01 rad beyond).
         let ratio = if known.past_a_limit.contains(&g) {
             0.952
         } else {
             0.95
         };
-        assert!(r.beyond <= 0.0, "goal {g}: {} rad beyond a limit", r.beyond);
+        let beyond = if known.beyond_a_limit.contains(&g) {
+            0.01
+        } else {
+            0.0
+        };
+        assert!(
+            r.beyond <= beyond,
+            "goal {g}: {} rad beyond a limit",
+            r.beyond
+        );
         assert!(
             r.speed_ratio <= ratio,
             "goal {g}: a joint at {:.3} × its velocity limit",
@@ -534,6 +544,8 @@ fn unreachable_goals_energy_and_rest() {
 struct Known {
     /// Goals at up to 0.951 of a velocity limit.
     past_a_limit: &'static [usize],
+    /// Goals up to 0.01 rad beyond a position limit.
+    beyond_a_limit: &'static [usize],
     /// Goals not at rest by 30 s.
     not_at_rest: &'static [usize],
     /// Goals that move again after resting.
@@ -542,21 +554,27 @@ struct Known {
     rise: (f64, f64),
 }
 
-/// With the shipped torque filter: its lag feeds energy in (H up to 26.5 J
-/// over goal 141's run); 32 and 141 are not at rest by 30 s (141 swings
-/// against the joint-limit guard, 32's wrist chatters at it), 26 moves again
-/// (to 0.053 rad/s), 103 reaches 0.951 of a velocity limit.
+/// With the shipped torque filter: what its lag feeds in is paid from the
+/// output stages' tank (hcc-cycle's `output_tank`) and held back when it is
+/// empty, but where the rate limit cannot build the joint-limit guard's
+/// torque in time the lag still feeds energy in: H rises by up to 4.1 J
+/// within 10 ms and 8.7 J over a run (goal 139, whose shoulder then goes
+/// 7.5 mrad past its limit at 1.85 rad/s); 26 and 182 move again (to 0.054
+/// and 0.13 rad/s: H falls all the while), 103 reaches 0.951 of a velocity
+/// limit. Every goal at rest by 19 s.
 const WITH_FILTER: Known = Known {
     past_a_limit: &[103],
-    not_at_rest: &[32, 141],
-    moves_again: &[26],
-    rise: (2.0, 30.0),
+    beyond_a_limit: &[139],
+    not_at_rest: &[],
+    moves_again: &[26, 182],
+    rise: (5.0, 10.0),
 };
 
 /// Without a filter: every goal at rest by 15 s, none moves again; H rises
 /// by at most 0.15 J over a run (goal 186).
 const WITHOUT_FILTER: Known = Known {
     past_a_limit: &[],
+    beyond_a_limit: &[],
     not_at_rest: &[],
     moves_again: &[],
     rise: (0.01, 0.2),
