@@ -50,8 +50,10 @@ pub struct OutputTank {
     period: f64,
     /// τ_law of this cycle (the first n entries).
     law: [f64; MAX_JOINTS],
-    /// M q̇ (scratch).
+    /// M q̇ and the box the held command stays in (scratch).
     u: [f64; MAX_JOINTS],
+    lo: [f64; MAX_JOINTS],
+    hi: [f64; MAX_JOINTS],
     /// The energy the stages fed in beyond what the tank held (J, total).
     unpaid: f64,
 }
@@ -79,6 +81,8 @@ impl OutputTank {
             period,
             law: [0.0; MAX_JOINTS],
             u: [0.0; MAX_JOINTS],
+            lo: [0.0; MAX_JOINTS],
+            hi: [0.0; MAX_JOINTS],
             unpaid: 0.0,
         }
     }
@@ -150,6 +154,8 @@ impl OutputTank {
                 lo = lo.max(r.previous[k] - r.max_step);
                 hi = hi.min(r.previous[k] + r.max_step);
             }
+            // τ is within the box but for rounding: the box never excludes it.
+            (self.lo[k], self.hi[k]) = (lo.min(tau[k]), hi.max(tau[k]));
             let c = -lambda * self.u[k];
             if c > 0.0 {
                 scale = scale.min((hi - tau[k]).max(0.0) / c);
@@ -160,8 +166,10 @@ impl OutputTank {
         if scale.is_nan() || scale <= 0.0 {
             return false;
         }
-        for (t, u) in tau.iter_mut().zip(&self.u) {
-            *t -= scale * lambda * u;
+        let bounds = self.lo.iter().zip(&self.hi);
+        for ((t, u), (lo, hi)) in tau.iter_mut().zip(&self.u).zip(bounds) {
+            // Bounded: the scaled step may overshoot a bound by a rounding.
+            *t = (*t - scale * lambda * u).max(*lo).min(*hi);
         }
         true
     }
