@@ -56,14 +56,14 @@ use hcc_msgs::{
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
-use crate::output_tank::{OutputTank, RateBox};
+use crate::output_tank::OutputTank;
 use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
 use crate::settings::{CycleError, CycleSettings};
 use crate::stream::{StreamCheck, Verdict};
 use crate::telemetry;
 use crate::torque_filter::TorqueFilter;
-use crate::velocity_limit::{RateLimit, VelocityLimit};
+use crate::velocity_limit::VelocityLimit;
 use crate::wrench::WrenchEstimate;
 
 /// What [`ControlCycle::decide`] made of a state.
@@ -527,17 +527,12 @@ impl ControlCycle {
     /// starts from what is sent.
     fn hold_energy(&mut self, state: &JointState, tau: &mut [f64; MAX_JOINTS]) {
         let n = self.n;
-        let origin = self.filter.origin();
-        let rate = self.filter.max_step().map(|max_step| RateBox {
-            previous: &origin[..n],
-            max_step,
-        });
         if self.output_tank.hold(
             &state.qd()[..n],
             &self.controller.model_terms().m,
             &mut tau[..n],
             &self.limits[..n],
-            rate,
+            self.filter.rate_limit(n),
         ) {
             self.counters.core.energy_held += 1;
             if self.filter.is_active() {
@@ -555,11 +550,7 @@ impl ControlCycle {
         tau: &mut [f64; MAX_JOINTS],
     ) {
         let n = self.n;
-        let origin = self.filter.origin();
-        let rate = self.filter.max_step().map(|max_step| RateLimit {
-            previous: &origin[..n],
-            max_step,
-        });
+        let rate = self.filter.rate_limit(n);
         let out = self.velocity_limit.apply(
             &self.controller,
             &state.qd()[..n],

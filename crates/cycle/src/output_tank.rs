@@ -39,6 +39,8 @@ use hcc_control::energy_tank::{TANK_FLOOR, TANK_TRANSIENT_TIME, valve};
 use hcc_msgs::MAX_JOINTS;
 use nalgebra::DMatrix;
 
+use crate::torque_filter::RateLimit;
+
 /// The tank of the stages after the law (module docs).
 #[derive(Debug, Clone)]
 pub struct OutputTank {
@@ -61,13 +63,6 @@ pub struct OutputTank {
 /// The fastest the hold decelerates the arm (1/s): −λ M q̇ with λ at most
 /// this, a damper that halves every joint's speed in no less than 14 ms.
 pub const HOLD_RATE: f64 = 50.0;
-
-/// The previous command and the rate limit's largest step: the box a command
-/// stays in.
-pub struct RateBox<'a> {
-    pub previous: &'a [f64],
-    pub max_step: f64,
-}
 
 impl OutputTank {
     /// A tank holding `initial` (J), of capacity `max`, booked every `period`
@@ -124,7 +119,7 @@ impl OutputTank {
         m: &DMatrix<f64>,
         tau: &mut [f64],
         limits: &[f64],
-        rate: Option<RateBox<'_>>,
+        rate: Option<RateLimit<'_>>,
     ) -> bool {
         if !self.on {
             return false;
@@ -247,7 +242,7 @@ mod tests {
         let qd = [1.0];
         let mut tau = [0.0];
         let previous = [0.5];
-        let rate = RateBox {
+        let rate = RateLimit {
             previous: &previous,
             max_step: 1.0,
         };

@@ -31,6 +31,14 @@
 use hcc_config::torque_filter::{RateLimitMode, TorqueFilterSpec};
 use hcc_msgs::MAX_JOINTS;
 
+/// The rate limit in force for the stages after the filter: the command the
+/// last [`TorqueFilter::apply`] stepped from and the largest step per period
+/// (what a later stage must stay within).
+pub struct RateLimit<'a> {
+    pub previous: &'a [f64],
+    pub max_step: f64,
+}
+
 /// What the stages did to one torque.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Stages {
@@ -114,10 +122,14 @@ impl TorqueFilter {
         self.max_step
     }
 
-    /// The command the last [`TorqueFilter::apply`] stepped from (first n
-    /// entries): what a later stage must stay within one rate step of.
-    pub fn origin(&self) -> &[f64; MAX_JOINTS] {
-        &self.origin
+    /// The rate limit in force (first `n` joints), if one is on: a later
+    /// stage stays within one rate step of the command the last
+    /// [`TorqueFilter::apply`] stepped from.
+    pub fn rate_limit(&self, n: usize) -> Option<RateLimit<'_>> {
+        self.max_step.map(|max_step| RateLimit {
+            previous: &self.origin[..n],
+            max_step,
+        })
     }
 
     /// A command that did not come through [`TorqueFilter::apply`] was sent

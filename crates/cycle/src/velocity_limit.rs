@@ -24,6 +24,8 @@ use hcc_control::{
 use hcc_model::linalg::products::gemv_slices;
 use nalgebra::DVector;
 
+use crate::torque_filter::RateLimit;
+
 /// The limit's state: on or off, the URDF velocity and effort limits, the
 /// nominal period, the workspaces.
 pub(crate) struct VelocityLimit {
@@ -37,12 +39,6 @@ pub(crate) struct VelocityLimit {
     g: DVector<f64>,
     work: VelocityLimitWork,
     brake: BrakeWork,
-}
-
-/// The rate limit in force: the command sent last period and the largest step.
-pub(crate) struct RateLimit<'a> {
-    pub previous: &'a [f64],
-    pub max_step: f64,
 }
 
 impl VelocityLimit {
