@@ -36,6 +36,7 @@
 //! `tank_initial` at the start and after a new peer. Allocation-free.
 
 use hcc_control::energy_tank::{TANK_FLOOR, TANK_TRANSIENT_TIME, valve};
+use hcc_model::linalg::products::gemv_slices;
 use hcc_msgs::MAX_JOINTS;
 use nalgebra::DMatrix;
 
@@ -45,7 +46,7 @@ use crate::torque_filter::RateLimit;
 #[derive(Debug, Clone)]
 pub struct OutputTank {
     on: bool,
-    /// E_o (J); below the floor (even negative) once a hold could not pay.
+    /// E_o (J, ≥ 0; what the stages feed in beyond it is `unpaid`).
     energy: f64,
     initial: f64,
     max: f64,
@@ -124,7 +125,10 @@ impl OutputTank {
         if !self.on {
             return false;
         }
-        let n = tau.len().min(MAX_JOINTS).min(m.nrows());
+        let n = tau.len().min(MAX_JOINTS);
+        if m.shape() != (n, n) {
+            return false;
+        }
         let (qd, tau) = (&qd[..n], &mut tau[..n]);
         let p = self.power(qd, tau);
         let room = ((self.energy - TANK_FLOOR) / self.period).max(0.0);
@@ -133,9 +137,7 @@ impl OutputTank {
             return false;
         }
         // u = M q̇; the hold −λ u takes 2λ of the kinetic energy's rate.
-        for k in 0..n {
-            self.u[k] = (0..n).map(|j| m[(k, j)] * qd[j]).sum();
-        }
+        gemv_slices(&mut self.u[..n], 1.0, m, qd, 0.0);
         let kinetic2: f64 = qd.iter().zip(&self.u).map(|(v, u)| v * u).sum();
         if kinetic2.is_nan() || kinetic2 <= 0.0 {
             return false;
@@ -153,9 +155,9 @@ impl OutputTank {
             (self.lo[k], self.hi[k]) = (lo.min(tau[k]), hi.max(tau[k]));
             let c = -lambda * self.u[k];
             if c > 0.0 {
-                scale = scale.min((hi - tau[k]).max(0.0) / c);
+                scale = scale.min((self.hi[k] - tau[k]) / c);
             } else if c < 0.0 {
-                scale = scale.min((lo - tau[k]).min(0.0) / c);
+                scale = scale.min((self.lo[k] - tau[k]) / c);
             }
         }
         if scale.is_nan() || scale <= 0.0 {
