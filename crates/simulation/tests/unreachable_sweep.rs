@@ -29,7 +29,8 @@
 //! is the full sweep of docs/limits-and-singularities.md.
 //! `UNREACHABLE_SHARD=i/n` runs the goals g with g mod n = i (one process per
 //! core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
-//! and prints its course every 0.25 s (`UNREACHABLE_PLOT=<dir>`: and draws
+//! and prints its course every 0.25 s (`UNREACHABLE_EVERY=k`: every k
+//! cycles; with q, q̇ and the torque sent) (`UNREACHABLE_PLOT=<dir>`: and draws
 //! it, H, the potentials, the tanks and their valves, as
 //! `<dir>/unreachable-goal-<g>.png`); `UNREACHABLE_FILTER=0` runs without the
 //! torque filter.
@@ -290,6 +291,12 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
     let mut still = 0usize;
     let mut last_t = 0.0;
     let plot = std::env::var_os("UNREACHABLE_PLOT").filter(|_| trace);
+    // The trace's spacing in cycles (`UNREACHABLE_EVERY`, 250 by default).
+    let every: u64 = std::env::var("UNREACHABLE_EVERY")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(250)
+        .max(1);
     let mut course = Course::default();
     run_observed(&s, &mut |v| {
         let (q, qd) = (v.state.q(), v.state.qd());
@@ -338,9 +345,9 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
             r.speed_ratio = r.speed_ratio.max(qd[k].abs() / j.velocity_limit);
             r.beyond = r.beyond.max(q[k] - j.upper).max(j.lower - q[k]);
         }
-        if trace && v.k % 250 == 0 {
+        if trace && v.k % every == 0 {
             println!(
-                "goal {g} t {:6.2}: H {h:9.4} J V {:.4?} fade {:.3?} tank {:.3?} valve {:.3?} guard {:.4} |q̇| {speed:.4} errors {:.4?} q {:.3?}",
+                "goal {g} t {:6.3}: H {h:9.4} J V {:.4?} fade {:.3?} tank {:.3?} valve {:.3?} guard {:.4} |q̇| {speed:.4} errors {:.4?} q {:.3?} q̇ {:.3?} τ {:.2?}",
                 v.t,
                 out.potential,
                 out.fade,
@@ -349,6 +356,8 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
                 out.safety.guard_potential,
                 out.task_error.iter().map(|e| e.norm()).collect::<Vec<_>>(),
                 q,
+                qd,
+                v.cycle.command().tau(),
             );
         }
         Ok(())
