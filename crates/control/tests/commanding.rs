@@ -82,3 +82,39 @@ fn bad_gains_and_velocities_are_errors_and_change_nothing() {
     assert!(c.set_goal_velocity(7, &[0.0; 3]).is_err());
     assert!(c.level_target(3).is_none());
 }
+
+#[test]
+fn the_same_gains_again_refill_no_tank() {
+    // A transition that moves only a goal hands the law the same gains in
+    // every cycle: that is no command, and must not refill the energy tanks
+    // (a gain change does: the tanks pay what the new gains do).
+    let mut a = controller();
+    let mut b = controller();
+    let mut c = controller();
+    for _ in 0..300 {
+        for x in [&mut a, &mut b, &mut c] {
+            x.step(&Q0, &QD).expect("step");
+        }
+    }
+    let drained = a.output().tank.clone();
+    for i in 1..3 {
+        let target = b.level_target(i).expect("level");
+        let (k, d) = (target.stiffness.clone(), target.damping.clone());
+        b.set_gains(i, Some(&k), Some(&d)).expect("gains");
+        c.set_gains(i, Some(&(k * 1.01)), Some(&d)).expect("gains");
+    }
+    let (ta, tb, tc) = (
+        a.step(&Q0, &QD).expect("step").clone(),
+        b.step(&Q0, &QD).expect("step").clone(),
+        c.step(&Q0, &QD).expect("step").clone(),
+    );
+    assert_eq!(ta.tank, tb.tank, "the same gains refilled a tank");
+    assert_eq!(ta.tau, tb.tau, "bit-identical");
+    // Changed gains refill: the tanks were below what a refill gives.
+    assert!(
+        (1..3).any(|i| tc.tank[i] > ta.tank[i] + 1e-3),
+        "no refill after a gain change: {:?} → {:?} (drained {drained:?})",
+        ta.tank,
+        tc.tank
+    );
+}

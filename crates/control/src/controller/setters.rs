@@ -116,6 +116,8 @@ impl Controller {
     /// of Sec. IV: a wrong size, a non-finite or asymmetric matrix, or a
     /// diagonal entry ≤ 0 is an error and changes nothing; full positive
     /// definiteness is the caller's check (`hcc_msgs::Setpoint::validate`).
+    /// Gains equal to those in force change nothing (no tank or budget is
+    /// refilled: only a change is a command).
     pub fn set_gains(
         &mut self,
         i: usize,
@@ -135,6 +137,13 @@ impl Controller {
                     "gain has the wrong size, a non-finite value, is asymmetric or not positive",
                 ));
             }
+        }
+        let changed = stiffness.is_some_and(|k| *k != l.stiffness)
+            || damping.is_some_and(|d| *d != l.damping);
+        if !changed {
+            // The same gains again (a transition that moves only the goal
+            // hands them on every cycle): nothing is commanded, nothing refilled.
+            return Ok(());
         }
         if let Some(k) = stiffness {
             l.stiffness.copy_from(k);
