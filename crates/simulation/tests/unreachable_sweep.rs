@@ -33,7 +33,8 @@
 //! cycles; with q, q̇ and the torque sent) (`UNREACHABLE_PLOT=<dir>`: and draws
 //! it, H, the potentials, the tanks and their valves, as
 //! `<dir>/unreachable-goal-<g>.png`); `UNREACHABLE_FILTER=0` runs without the
-//! torque filter.
+//! torque filter; `SWEEP_SAFETY=field=value,…` changes `[safety]` fields for
+//! a comparison, as in the 500-goal sweep.
 //!
 //! Asserted on every goal (30 s each), with the energy tanks
 //! (`hcc_control::energy_tank`): no NaN, inside the position limits, at most
@@ -44,7 +45,9 @@
 //! the known exceptions of the 200 goals (`Known`; the figures in
 //! docs/limits-and-singularities.md).
 
+mod safety_overrides;
 mod seeded;
+use safety_overrides::sweep_safety_overrides;
 use seeded::{Rng, quantile};
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -269,6 +272,7 @@ fn run(base: &Scenario, g: usize, goal: &Goal, seconds: f64, trace: bool) -> Goa
         s.torque_filter.torque_rate_limit = None;
         s.spec.safety.torque_rate_limit = None;
     }
+    sweep_safety_overrides(&mut s);
     s.set_duration(seconds).unwrap();
     let joints = s.model.joints.clone();
     let mut r = GoalRun {
