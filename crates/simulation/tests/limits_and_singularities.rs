@@ -68,7 +68,8 @@ struct Sample {
     goal_moving: bool,
 }
 
-/// `SWEEP_TRACE=t0,t1`: print every cycle in [t0, t1) (energy terms, fades, powers).
+/// `SWEEP_TRACE=t0,t1`: print every cycle in [t0, t1) (energy terms, the levels' tanks
+/// and valves, fades, powers).
 fn trace_window() -> Option<(f64, f64)> {
     let v = std::env::var("SWEEP_TRACE").ok()?;
     let (a, b) = v.split_once(',')?;
@@ -120,7 +121,7 @@ impl Logged {
                 .map(|((c, l), w)| (c - l) * w)
                 .sum();
             println!(
-                "trace t {:.3} E {:.6} tank {:.4} P_h {:.4} budget {:.4} pd {} V {:.4?} fade {:.4?} guard {:.5} P_safety {:.4} P_mu {:.2e} P_filter {:.4} safety_tau {:.3?} qd {:.4?}",
+                "trace t {:.3} E {:.6} tank {:.4} P_h {:.4} budget {:.4} pd {} V {:.4?} tanks {:.4?} valves {:.3?} fade {:.4?} guard {:.5} P_safety {:.4} P_mu {:.2e} P_filter {:.4} safety_tau {:.3?} qd {:.4?}",
                 v.t,
                 out.safety.energy,
                 out.safety.tank,
@@ -128,6 +129,8 @@ impl Logged {
                 out.safety.passivity_budget,
                 out.safety.passivity_active,
                 out.potential,
+                out.tank,
+                out.tank_valve,
                 out.fade,
                 out.safety.guard_potential,
                 out.safety.power,
