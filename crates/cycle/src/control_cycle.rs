@@ -216,7 +216,7 @@ impl ControlCycle {
     /// (`hcc_control::SafetyOutput::h`) and the tank of the stages after it
     /// (module `output_tank`).
     pub fn storage(&self) -> f64 {
-        self.controller.output().safety.h + self.output_tank.energy()
+        self.controller.output().safety.h + self.output_tank.energy_at_sample()
     }
 
     /// How long `Controller::step` took in the last decision, ns (`None` if
@@ -688,7 +688,7 @@ impl ControlCycle {
         self.setpoints.fill(t);
         if fresh {
             telemetry::write_law_terms(t, self.controller.output(), self.gravity_compensation);
-            t.h += self.output_tank.energy();
+            t.h += self.output_tank.energy_at_sample();
         }
     }
 }

@@ -48,6 +48,9 @@ pub struct OutputTank {
     on: bool,
     /// E_o (J, ≥ 0; what the stages feed in beyond it is `unpaid`).
     energy: f64,
+    /// E_o at the last booked cycle's sample, before it booked the coming
+    /// period (what H counts with that state's storage).
+    at_sample: f64,
     initial: f64,
     max: f64,
     period: f64,
@@ -72,6 +75,7 @@ impl OutputTank {
         OutputTank {
             on,
             energy: if on { initial } else { 0.0 },
+            at_sample: if on { initial } else { 0.0 },
             initial,
             max,
             period,
@@ -83,15 +87,18 @@ impl OutputTank {
         }
     }
 
-    /// E_o (J; 0 when off).
-    pub fn energy(&self) -> f64 {
-        self.energy
+    /// E_o at the last booked cycle's sample (J; 0 when off): the content
+    /// before that cycle booked the period it starts, which H adds to the
+    /// storage of the same state.
+    pub fn energy_at_sample(&self) -> f64 {
+        self.at_sample
     }
 
     /// A new peer: the tank holds `tank_initial` again.
     pub fn reset(&mut self) {
         if self.on {
             self.energy = self.initial;
+            self.at_sample = self.initial;
         }
     }
 
@@ -177,6 +184,7 @@ impl OutputTank {
         if !self.on {
             return;
         }
+        self.at_sample = self.energy;
         let n = sent.len().min(MAX_JOINTS);
         let p = self.power(&qd[..n], &sent[..n]);
         if !p.is_finite() {
@@ -213,7 +221,7 @@ mod tests {
         assert!(!t.hold(&[1.0, 0.0], &m, &mut tau, &[100.0, 100.0], None));
         assert_eq!(tau, [1.5, 2.0]);
         t.book(&[1.0, 0.0], &tau);
-        assert!((t.energy() - (2.0 - 0.5e-3)).abs() < 1e-15);
+        assert!((t.energy - (2.0 - 0.5e-3)).abs() < 1e-15);
     }
 
     #[test]
@@ -232,7 +240,7 @@ mod tests {
         assert!((tau[1] - (-1.0 + 1.875)).abs() < 1e-12, "{tau:?}");
         assert_eq!(tau[2], 7.0);
         t.book(&qd, &tau);
-        assert!(t.energy().abs() < 1e-15);
+        assert!(t.energy.abs() < 1e-15);
         assert!(t.unpaid().abs() < 1e-15);
     }
 
@@ -252,7 +260,7 @@ mod tests {
         assert!(t.hold(&qd, &m, &mut tau, &[100.0], Some(rate)));
         assert_eq!(tau, [-0.5]);
         t.book(&qd, &tau);
-        assert_eq!(t.energy(), 0.0);
+        assert_eq!(t.energy, 0.0);
         assert!((t.unpaid() - 9.5e-3).abs() < 1e-15, "{}", t.unpaid());
         // The cap: at most HOLD_RATE.
         let mut tau = [0.0];
@@ -272,7 +280,7 @@ mod tests {
         off.set_law(&[0.0]);
         assert!(!off.hold(&[1.0], &m, &mut tau, &[100.0], None));
         off.book(&[1.0], &tau);
-        assert_eq!(off.energy(), 0.0);
+        assert_eq!(off.energy, 0.0);
         assert_eq!(tau, [5.0]);
     }
 
@@ -282,6 +290,6 @@ mod tests {
         t.set_law(&[1.0]);
         t.book(&[1.0], &[0.0]);
         let e = 4.0 + 1e-3 * (-1e-3 / TANK_TRANSIENT_TIME).exp();
-        assert!((t.energy() - e).abs() < 1e-15);
+        assert!((t.energy - e).abs() < 1e-15);
     }
 }

@@ -38,6 +38,9 @@ pub(super) struct Level {
     /// unused for level 1), whether it acted this cycle, w_i and κ_i.
     pub(super) tank: EnergyTank,
     pub(super) tank_planned: bool,
+    /// E_i at this cycle's sample: after the refill, before the cycle books
+    /// the coming period (what H counts with the state's ½q̇ᵀMq̇ and V_i).
+    pub(super) tank_at_sample: f64,
     pub(super) w_up: DVector<f64>,
     pub(super) kappa: DVector<f64>,
     // decomposition
@@ -165,6 +168,7 @@ impl Level {
             spring_rate: 0.0,
             tank: EnergyTank::new(m, 0.0),
             tank_planned: false,
+            tank_at_sample: 0.0,
             w_up: DVector::zeros(m),
             kappa: DVector::zeros(m),
             f: DVector::zeros(m),

@@ -40,6 +40,7 @@ impl Controller {
         }
         for i in 1..self.levels.len() {
             let l = &mut self.levels[i];
+            l.tank_at_sample = l.tank.energy;
             gemv_t(&mut self.tmp_n, 1.0, &l.z, &l.v, 0.0);
             gemv(&mut l.kappa, 1.0, &l.j, &self.tmp_n, 0.0);
             // J_i q̇ = ẋ_i, which `xdot` holds relative to a moving goal.
@@ -66,17 +67,19 @@ impl Controller {
                 l.spring_rate -= l.grad.dot(&l.tank.shift_rate);
             }
             l.tank.book(&terms, &l.f, &l.kappa, l.tank_planned, max);
-            self.out.tank[i] = l.tank.energy;
+            self.out.tank[i] = l.tank_at_sample;
             self.out.tank_valve[i] = l.tank.valve;
         }
     }
 
-    /// Σ E_i of the levels' tanks (J; 0 when they are off).
+    /// Σ E_i of the levels' tanks at this cycle's sample (J; 0 when they are
+    /// off): the content the state's storage is counted with, before this
+    /// cycle books the coming period.
     pub(super) fn tank_energy(&self) -> f64 {
         if !self.tanks_on() {
             return 0.0;
         }
-        self.levels.iter().skip(1).map(|l| l.tank.energy).sum()
+        self.levels.iter().skip(1).map(|l| l.tank_at_sample).sum()
     }
 
     /// A goal or gains changed (a command, an input): in the next cycle every
