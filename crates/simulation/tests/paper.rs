@@ -147,7 +147,7 @@ fn rises_of_h(h: &[f64]) -> (f64, f64) {
 /// potentials, the guard's, and every tank at the same sample — never rises
 /// from one cycle to the next by more than rounding (1e-9 J), on the paper's
 /// two simulations and the shipped Panda scenarios (with the torque filter and
-/// its tank), while it falls by tens of joules as they converge. Without the
+/// its tank), while it falls as they converge (by 57, 31, 11 and 0.37 J). Without the
 /// energy tanks the paper's sim #1 feeds 3.2 J in (the sequential convergence
 /// of Sec. IV), which the tanks pay.
 #[test]

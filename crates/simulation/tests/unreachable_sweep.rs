@@ -30,7 +30,8 @@
 //! `UNREACHABLE_SHARD=i/n` runs the goals g with g mod n = i (one process per
 //! core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
 //! and prints its course every 0.25 s (`UNREACHABLE_EVERY=k`: every k
-//! cycles; with q, q̇ and the torque sent) (`UNREACHABLE_PLOT=<dir>`: and draws
+//! cycles; with q, q̇, the torque sent and which safety parts act)
+//! (`UNREACHABLE_PLOT=<dir>`: and draws
 //! it, H, the potentials, the tanks and their valves, as
 //! `<dir>/unreachable-goal-<g>.png`); `UNREACHABLE_FILTER=0` runs without the
 //! torque filter; `SWEEP_SAFETY=field=value,…` changes `[safety]` fields for
