@@ -400,7 +400,9 @@ impl ControlCycle {
         if law_mode.is_some() {
             self.hold_energy(state, &mut tau);
             self.limit_velocity(state, gravity_in_tau, &mut tau);
-            self.output_tank.book(&state.qd()[..n], &tau[..n]);
+            let controller = &mut self.controller;
+            let draw = |e| controller.draw_tank_spare(e);
+            self.output_tank.book(&state.qd()[..n], &tau[..n], draw);
             // mJ, rounded up: energy fed in is never shown as 0.
             self.counters.core.energy_unpaid_mj = (self.output_tank.unpaid() * 1e3).ceil() as u64;
         }
@@ -530,6 +532,7 @@ impl ControlCycle {
         if self.output_tank.hold(
             &state.qd()[..n],
             &self.controller.model_terms().m,
+            self.controller.tank_spare(),
             &mut tau[..n],
             &self.limits[..n],
             self.filter.rate_limit(n),

@@ -119,12 +119,14 @@ impl OutputTank {
 
     /// Holds back what the stages would feed in beyond what the tank pays
     /// (module docs): `tau` (length n) the command after the filter, within
-    /// `limits` and `rate`'s box; `m` the inertia M(q). Returns whether it
-    /// changed `tau`.
+    /// `limits` and `rate`'s box; `m` the inertia M(q); `spare` what the
+    /// levels' tanks may give when this one is empty
+    /// (`Controller::tank_spare`). Returns whether it changed `tau`.
     pub fn hold(
         &mut self,
         qd: &[f64],
         m: &DMatrix<f64>,
+        spare: f64,
         tau: &mut [f64],
         limits: &[f64],
         rate: Option<RateLimit<'_>>,
@@ -138,8 +140,10 @@ impl OutputTank {
         }
         let (qd, tau) = (&qd[..n], &mut tau[..n]);
         let p = self.power(qd, tau);
-        let room = ((self.energy - TANK_FLOOR) / self.period).max(0.0);
-        let allowed = (valve(self.energy) * p).min(room).max(0.0);
+        // Its own content, and the levels' spare once that is gone.
+        let available = self.energy + spare.max(0.0);
+        let room = ((available - TANK_FLOOR) / self.period).max(0.0);
+        let allowed = (valve(available) * p).min(room).max(0.0);
         if p.is_nan() || p <= allowed {
             return false;
         }
@@ -179,8 +183,10 @@ impl OutputTank {
     }
 
     /// Books the command sent: E_o ← E_o − T q̇ᵀ (τ_sent − τ_law), the
-    /// excess above the capacity decaying.
-    pub fn book(&mut self, qd: &[f64], sent: &[f64]) {
+    /// excess above the capacity decaying; what the tank does not hold is
+    /// asked of `draw` (J asked → J given: the levels' spare,
+    /// `Controller::draw_tank_spare`), the rest counted as fed in.
+    pub fn book(&mut self, qd: &[f64], sent: &[f64], draw: impl FnOnce(f64) -> f64) {
         if !self.on {
             return;
         }
@@ -195,8 +201,10 @@ impl OutputTank {
             e = self.max + (e - self.max) * (-self.period / TANK_TRANSIENT_TIME).exp();
         }
         if e < 0.0 {
-            // Fed in beyond the tank: H rises by it (counted).
-            self.unpaid -= e;
+            // Beyond the tank: from the levels' spare, else H rises by it
+            // (counted).
+            let given = draw(-e).clamp(0.0, -e);
+            self.unpaid -= e + given;
             e = 0.0;
         }
         self.energy = e;
@@ -218,9 +226,9 @@ mod tests {
         t.set_law(&[1.0, 2.0]);
         let mut tau = [1.5, 2.0];
         let m = DMatrix::identity(2, 2);
-        assert!(!t.hold(&[1.0, 0.0], &m, &mut tau, &[100.0, 100.0], None));
+        assert!(!t.hold(&[1.0, 0.0], &m, 0.0, &mut tau, &[100.0, 100.0], None));
         assert_eq!(tau, [1.5, 2.0]);
-        t.book(&[1.0, 0.0], &tau);
+        t.book(&[1.0, 0.0], &tau, |_| 0.0);
         assert!((t.energy - (2.0 - 0.5e-3)).abs() < 1e-15);
     }
 
@@ -232,14 +240,14 @@ mod tests {
         let qd = [0.1, -0.2, 0.0];
         // The filter lags: it feeds 0.1·3 + (−0.2)(−1) = 0.5 W in.
         let mut tau = [3.0, -1.0, 7.0];
-        assert!(t.hold(&qd, &m, &mut tau, &[100.0; 3], None));
+        assert!(t.hold(&qd, &m, 0.0, &mut tau, &[100.0; 3], None));
         let p: f64 = qd.iter().zip(&tau).map(|(v, x)| v * x).sum();
         assert!(p.abs() < 1e-12, "nothing fed in: {p} {tau:?}");
         // M q̇ = (0.1, −0.15, 0), q̇ᵀ M q̇ = 0.04: λ = 12.5.
         assert!((tau[0] - (3.0 - 1.25)).abs() < 1e-12, "{tau:?}");
         assert!((tau[1] - (-1.0 + 1.875)).abs() < 1e-12, "{tau:?}");
         assert_eq!(tau[2], 7.0);
-        t.book(&qd, &tau);
+        t.book(&qd, &tau, |_| 0.0);
         assert!(t.energy.abs() < 1e-15);
         assert!(t.unpaid().abs() < 1e-15);
     }
@@ -257,15 +265,15 @@ mod tests {
             max_step: 1.0,
         };
         // λ = 10 (below the cap), but one rate step allows only down to −0.5.
-        assert!(t.hold(&qd, &m, &mut tau, &[100.0], Some(rate)));
+        assert!(t.hold(&qd, &m, 0.0, &mut tau, &[100.0], Some(rate)));
         assert_eq!(tau, [-0.5]);
-        t.book(&qd, &tau);
+        t.book(&qd, &tau, |_| 0.0);
         assert_eq!(t.energy, 0.0);
         assert!((t.unpaid() - 9.5e-3).abs() < 1e-15, "{}", t.unpaid());
         // The cap: at most HOLD_RATE.
         let mut tau = [0.0];
         let qd = [0.01];
-        assert!(t.hold(&qd, &m, &mut tau, &[100.0], None));
+        assert!(t.hold(&qd, &m, 0.0, &mut tau, &[100.0], None));
         assert!((tau[0] + HOLD_RATE * 0.01).abs() < 1e-12, "{tau:?}");
     }
 
@@ -275,11 +283,11 @@ mod tests {
         t.set_law(&[0.0]);
         let m = DMatrix::from_element(1, 1, 1.0);
         let mut tau = [5.0];
-        assert!(!t.hold(&[0.0], &m, &mut tau, &[100.0], None));
+        assert!(!t.hold(&[0.0], &m, 0.0, &mut tau, &[100.0], None));
         let mut off = OutputTank::new(false, 2.0, 4.0, 1e-3);
         off.set_law(&[0.0]);
-        assert!(!off.hold(&[1.0], &m, &mut tau, &[100.0], None));
-        off.book(&[1.0], &tau);
+        assert!(!off.hold(&[1.0], &m, 0.0, &mut tau, &[100.0], None));
+        off.book(&[1.0], &tau, |_| 0.0);
         assert_eq!(off.energy, 0.0);
         assert_eq!(tau, [5.0]);
     }
@@ -288,8 +296,37 @@ mod tests {
     fn above_the_capacity_the_excess_decays() {
         let mut t = OutputTank::new(true, 4.0, 4.0, 1e-3);
         t.set_law(&[1.0]);
-        t.book(&[1.0], &[0.0]);
+        t.book(&[1.0], &[0.0], |_| 0.0);
         let e = 4.0 + 1e-3 * (-1e-3 / TANK_TRANSIENT_TIME).exp();
         assert!((t.energy - e).abs() < 1e-15);
+    }
+
+    #[test]
+    fn an_empty_tank_draws_on_the_levels_spare_before_it_holds() {
+        let mut t = OutputTank::new(true, 0.0, 4.0, 1e-3);
+        t.set_law(&[0.0]);
+        let m = DMatrix::from_element(1, 1, 1.0);
+        let qd = [1.0];
+        // The filter lags by 2 N·m along the motion: 2 W, 2 mJ this period.
+        let mut tau = [2.0];
+        // The levels hold 1 J to spare: nothing is held back…
+        assert!(!t.hold(&qd, &m, 1.0, &mut tau, &[100.0], None));
+        assert_eq!(tau, [2.0]);
+        // …and the booking draws the 2 mJ from them: nothing unpaid.
+        let mut asked = 0.0;
+        t.book(&qd, &tau, |e| {
+            asked = e;
+            e
+        });
+        assert!((asked - 2e-3).abs() < 1e-15, "{asked}");
+        assert_eq!(t.energy, 0.0);
+        assert_eq!(t.unpaid(), 0.0);
+        // What the levels cannot give is counted.
+        t.book(&qd, &tau, |e| 0.5 * e);
+        assert!((t.unpaid() - 1e-3).abs() < 1e-15, "{}", t.unpaid());
+        // Without spare an empty tank holds back.
+        let mut tau = [2.0];
+        assert!(t.hold(&qd, &m, 0.0, &mut tau, &[100.0], None));
+        assert!(tau[0] < 2.0);
     }
 }

@@ -315,7 +315,7 @@ impl Controller {
         // damping, joint position and velocity limits (crate::safety); zero and
         // not added where nothing acts.
         self.safety_torque(q, qd);
-        self.assemble_torque(qd)
+        self.assemble_torque(q, qd)
     }
 
     /// The model's terms at (q, q̇): M = L Lᵀ (M⁻¹ is only ever applied, by
@@ -333,7 +333,7 @@ impl Controller {
     /// τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts, the comparison
     /// law's C q̇, the velocity barrier on the acceleration this τ gives);
     /// an error for a non-finite torque.
-    fn assemble_torque(&mut self, qd: &DVector<f64>) -> Result<(), ControlError> {
+    fn assemble_torque(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
         copy(&mut self.out.tau, &self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
@@ -347,7 +347,7 @@ impl Controller {
             self.out.tau += &self.out.coriolis;
         }
         // Safety layer: the velocity barrier, on the acceleration this τ gives.
-        self.velocity_barrier(qd);
+        self.velocity_barrier(q, qd);
         if self.spec.gravity_compensation {
             self.out.tau += &self.data.g;
         }

@@ -67,8 +67,8 @@ impl Controller {
     /// rate limit downstream, driven faster than it could still be stopped).
     /// Nothing is computed while every joint is below the band and no rate
     /// limit follows.
-    pub(super) fn velocity_barrier(&mut self, qd: &DVector<f64>) {
-        if !self.safety.barrier_needs_acceleration(qd) {
+    pub(super) fn velocity_barrier(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
+        if !self.safety.barrier_needs_acceleration(q, qd, &self.chol) {
             if self.out.safety.barrier_active {
                 self.out.safety.barrier_tau.fill(0.0);
                 self.out.safety.barrier_active = false;
@@ -85,6 +85,7 @@ impl Controller {
         }
         let applied_qdd = self.have_applied.then_some(&self.applied_qdd);
         if self.safety.velocity_barrier(
+            q,
             qd,
             &self.barrier_qdd,
             applied_qdd,

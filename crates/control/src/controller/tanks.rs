@@ -3,7 +3,7 @@
 //! shift of its spring point, F_i with the damper on dx̂_i/dt, the booking.
 
 use super::Controller;
-use crate::energy_tank::{TANK_TRANSIENT_SHARE, TankTerms};
+use crate::energy_tank::{TANK_BAND, TANK_FLOOR, TANK_TRANSIENT_SHARE, TankTerms};
 use crate::spec::Form;
 use hcc_linalg::products::{gemv, gemv_t};
 use nalgebra::DVector;
@@ -80,6 +80,37 @@ impl Controller {
             return 0.0;
         }
         self.levels.iter().skip(1).map(|l| l.tank_at_sample).sum()
+    }
+
+    /// What the levels' tanks hold above the band their valves open over (J;
+    /// 0 when they are off): what the stages after the law may draw when
+    /// their own tank is empty without closing any level's valve, so that
+    /// no level loses accuracy for it (hcc-cycle's output tank).
+    pub fn tank_spare(&self) -> f64 {
+        if !self.tanks_on() {
+            return 0.0;
+        }
+        let spare = |l: &super::level::Level| (l.tank.energy - TANK_FLOOR - TANK_BAND).max(0.0);
+        self.levels.iter().skip(1).map(spare).sum()
+    }
+
+    /// Takes up to `energy` (J) of the [spare](Controller::tank_spare), the
+    /// lowest level first (its accuracy matters least); returns what it took.
+    /// H is unchanged by it: the energy moves from one tank to another.
+    pub fn draw_tank_spare(&mut self, energy: f64) -> f64 {
+        if !self.tanks_on() || energy.is_nan() || energy <= 0.0 {
+            return 0.0;
+        }
+        let mut left = energy;
+        for l in self.levels.iter_mut().skip(1).rev() {
+            let take = (l.tank.energy - TANK_FLOOR - TANK_BAND).max(0.0).min(left);
+            l.tank.energy -= take;
+            left -= take;
+            if left <= 0.0 {
+                break;
+            }
+        }
+        energy - left
     }
 
     /// A goal or gains changed (a command, an input): in the next cycle every
