@@ -82,32 +82,39 @@ impl Controller {
         self.levels.iter().skip(1).map(|l| l.tank_at_sample).sum()
     }
 
-    /// What the levels' tanks hold above the band their valves open over (J;
-    /// 0 when they are off): what the stages after the law may draw when
-    /// their own tank is empty without closing any level's valve, so that
-    /// no level loses accuracy for it (hcc-cycle's output tank).
+    /// What the fade's tank holds and the levels' tanks hold above the band
+    /// their valves open over (J; 0 when the tanks are off): what the stages
+    /// after the law may draw when their own tank is empty without closing
+    /// any level's valve, so that no level loses accuracy for it (hcc-cycle's
+    /// output tank).
     pub fn tank_spare(&self) -> f64 {
         if !self.tanks_on() {
             return 0.0;
         }
         let spare = |l: &super::level::Level| (l.tank.energy - TANK_FLOOR - TANK_BAND).max(0.0);
-        self.levels.iter().skip(1).map(spare).sum()
+        self.safety.fade_tank() + self.levels.iter().skip(1).map(spare).sum::<f64>()
     }
 
-    /// Takes up to `energy` (J) of the [spare](Controller::tank_spare), the
-    /// lowest level first (its accuracy matters least); returns what it took.
+    /// Takes up to `energy` (J) of the [spare](Controller::tank_spare): the
+    /// fade's tank first (it overflows at `fade_tank_max`), then the lowest
+    /// level first (its accuracy matters least); returns what it took.
     /// H is unchanged by it: the energy moves from one tank to another.
     pub fn draw_tank_spare(&mut self, energy: f64) -> f64 {
         if !self.tanks_on() || energy.is_nan() || energy <= 0.0 {
             return 0.0;
         }
-        let mut left = energy;
+        let mut left = energy - self.safety.draw_fade_tank(energy);
         for l in self.levels.iter_mut().skip(1).rev() {
-            let take = (l.tank.energy - TANK_FLOOR - TANK_BAND).max(0.0).min(left);
-            l.tank.energy -= take;
-            left -= take;
             if left <= 0.0 {
                 break;
+            }
+            let keep = TANK_FLOOR + TANK_BAND;
+            let take = (l.tank.energy - keep).max(0.0).min(left);
+            if take > 0.0 {
+                // Never below the band's top, rounding included: the valve
+                // stays open.
+                l.tank.energy = (l.tank.energy - take).max(keep);
+                left -= take;
             }
         }
         energy - left

@@ -71,4 +71,19 @@ impl Safety {
         out.tank = self.tank;
         out.fade_in_limited_cycles += u64::from(limited);
     }
+
+    /// The fade's tank (J; 0 with the safety layer off).
+    pub(crate) fn fade_tank(&self) -> f64 {
+        if self.spec.enabled { self.tank } else { 0.0 }
+    }
+
+    /// Takes up to `energy` (J) from the fade's tank; returns what it took.
+    pub(crate) fn draw_fade_tank(&mut self, energy: f64) -> f64 {
+        if !self.spec.enabled || energy.is_nan() {
+            return 0.0;
+        }
+        let take = energy.clamp(0.0, self.tank);
+        self.tank -= take;
+        take
+    }
 }
