@@ -18,8 +18,13 @@
 //! so H + E_o changes only by what the law itself does, and what is above
 //! `tank_max` decays in `TANK_TRANSIENT_TIME` (dissipated).
 //!
-//! **Held back.** The stages may feed in β(E_o) P_o⁺ and never more than the
-//! tank holds above its floor ((E_o − floor)/T; β the levels' valve, closed at
+//! **The spare.** Once E_o is empty the stages draw on what the fade's tank
+//! holds and the levels' tanks hold above their valves' band
+//! (`Controller::tank_spare`): a transfer between tanks, which leaves H as
+//! it is and closes no level's valve. S below is E_o plus that spare.
+//!
+//! **Held back.** The stages may feed in β(S) P_o⁺ and never more than S
+//! holds above the floor ((S − floor)/T; β the levels' valve, closed at
 //! the floor, open a band above it: the hold comes in smoothly). What is
 //! above that is taken out by a damper on the whole arm, τ ← τ − λ M q̇ with
 //! λ = (P_o − allowed)/(q̇ᵀ M q̇) ≤ [`HOLD_RATE`]: it slows every joint in
@@ -27,7 +32,7 @@
 //! and as a whole it is scaled into the box of the torque limits and one rate
 //! step from the previous command, so the hold never makes a torque step the
 //! rate limit forbids, nor leaves the limits. What it cannot take out (the
-//! cap, the box) is fed in: the tank stays at 0 and H rises by it, counted
+//! cap, the box) is fed in: the tanks stay empty and H rises by it, counted
 //! (`energy_unpaid_mj`). At rest (q̇ = 0) nothing is held: the equilibria
 //! are the law's. While the tank pays, the command is the stages' bit for
 //! bit.
@@ -120,7 +125,7 @@ impl OutputTank {
     /// Holds back what the stages would feed in beyond what the tank pays
     /// (module docs): `tau` (length n) the command after the filter, within
     /// `limits` and `rate`'s box; `m` the inertia M(q); `spare` what the
-    /// levels' tanks may give when this one is empty
+    /// fade's and the levels' tanks may give when this one is empty
     /// (`Controller::tank_spare`). Returns whether it changed `tau`.
     pub fn hold(
         &mut self,

@@ -27,16 +27,17 @@
 //! band as they bound the speed's.
 
 use super::{Safety, SafetyOutput, diagonal_of_llt, smoothstep};
+use nalgebra::{DMatrix, DVector};
 
 /// The share of a joint's guard torque at half the margin (its effort limit by
 /// default) the approach bound brakes with.
 pub const APPROACH_BRAKE_SHARE: f64 = 0.25;
-use nalgebra::{DMatrix, DVector};
 
 impl Safety {
     /// Whether the velocity barrier needs the acceleration of this cycle: it is
-    /// on and a joint is above f_on of its velocity limit, or a torque rate
-    /// limit follows (then a hard acceleration below the band counts too).
+    /// on and a joint is above f_on of its velocity limit or of its approach
+    /// bound v_d, or a torque rate limit follows (then a hard acceleration
+    /// below the band counts too).
     pub(crate) fn barrier_needs_acceleration(
         &self,
         q: &DVector<f64>,
