@@ -258,9 +258,9 @@ fn cases() -> Vec<Case> {
         ),
         case(
             "zero control rate",
-            edit("control_rate_hz = 1000.0", "control_rate_hz = 0.0"),
-            "simulation.control_rate_hz",
-            Some("control_rate_hz = 0.0"),
+            edit("rate_hz = 1000.0", "rate_hz = 0.0"),
+            "controller.rate_hz",
+            Some("rate_hz = 0.0"),
         ),
         case(
             "integrator step not dividing the period",

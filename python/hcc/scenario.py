@@ -48,7 +48,7 @@ class Scenario:
     q0: list[float]
     qd0: list[float] | None
     duration_s: float
-    control_rate_hz: float
+    rate_hz: float
     integrator_dt_s: float
     joint_friction: float | list[float]
     wrenches: list[Wrench]
@@ -60,8 +60,8 @@ class Scenario:
 
     @property
     def period_s(self) -> float:
-        """Control period T = 1 / control_rate_hz."""
-        return 1.0 / self.control_rate_hz
+        """Control period T = 1 / rate_hz (``[controller] rate_hz``)."""
+        return 1.0 / self.rate_hz
 
     @property
     def substeps(self) -> int:
@@ -129,7 +129,13 @@ def _parse(path: pathlib.Path, doc: dict[str, Any]) -> Scenario:
     q0 = _vector(path, "initial.q0", initial["q0"])
     qd0 = _vector(path, "initial.qd0", initial["qd0"], len(q0)) if "qd0" in initial else None
     sim = _table(path, doc, "simulation")
-    rate = _number(path, "simulation.control_rate_hz", sim.get("control_rate_hz", 1000.0), True)
+    if "control_rate_hz" in sim:
+        raise ScenarioError(
+            f"{path}: simulation.control_rate_hz: the control rate moved to [controller] rate_hz "
+            "(the same value, in Hz): move the line there"
+        )
+    controller = _table(path, doc, "controller")
+    rate = _number(path, "controller.rate_hz", controller.get("rate_hz", 1000.0), True)
     dt = _number(path, "simulation.integrator_dt_s", sim.get("integrator_dt_s", 1e-4), True)
     ratio = (1.0 / rate) / dt
     if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6 * ratio:
@@ -166,7 +172,7 @@ def _parse(path: pathlib.Path, doc: dict[str, Any]) -> Scenario:
         q0=q0,
         qd0=qd0,
         duration_s=_number(path, "simulation.duration_s", sim.get("duration_s", 3.0), True),
-        control_rate_hz=rate,
+        rate_hz=rate,
         integrator_dt_s=dt,
         joint_friction=_per_joint(path, "simulation.joint_friction", sim.get("joint_friction", 0.0)),
         wrenches=wrenches,

@@ -82,6 +82,11 @@ def test_bad_input_gets_clear_errors(tmp_path: pathlib.Path) -> None:
     bad.write_text(SIM1.read_text().replace("integrator_dt_s = 1e-4", "integrator_dt_s = 3e-4"))
     with pytest.raises(ScenarioError, match="must divide the control period"):
         Scenario.load(bad)
+    bad.write_text(SIM1.read_text().replace("duration_s = 3.0", "duration_s = 3.0\ncontrol_rate_hz = 1000.0", 1))
+    with pytest.raises(ScenarioError, match=r"simulation.control_rate_hz: .*\[controller\] rate_hz"):
+        Scenario.load(bad)
+    bad.write_text(SIM1.read_text().replace("rate_hz = 1000.0", "rate_hz = 500.0"))
+    assert Scenario.load(bad).period_s == 0.002
     text = SIM1.read_text().replace('urdf = "', f'urdf = "{(ROOT / "config").as_posix()}/', 1)
     bad.write_text(text.replace('tip_link = "tcp"', 'tip_link = "nowhere"'))
     with pytest.raises(ScenarioError, match="tip link 'nowhere'"):

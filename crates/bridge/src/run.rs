@@ -179,7 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &counters,
     )?;
     let node = format!("hcc-bridge-{}", std::process::id());
-    let rates = (scenario.simulation.control_rate_hz, args.rate);
+    let rates = (scenario.rate_hz, args.rate);
     let reader = IpcReader::start(&node, file_prefix, names, rates, counters.clone())?;
     if !args.quiet {
         eprintln!(

@@ -68,7 +68,7 @@ impl<'a> RowBuilder<'a> {
             scenario,
             n: scenario.model.nq(),
             dims: scenario.task_dims(),
-            period: 1.0 / scenario.simulation.control_rate_hz,
+            period: scenario.period_s(),
             rows: 0,
             rows_without_law: 0,
             recorder: hcc_simulation::recorder(scenario)?,
@@ -395,7 +395,7 @@ pub fn derive<'a>(
     let s = &scenario.simulation;
     let expected_rows = run_meta
         .contains_key("duration_s")
-        .then(|| (s.duration_s * s.control_rate_hz).round() as u64 + 1);
+        .then(|| (s.duration_s * scenario.rate_hz).round() as u64 + 1);
     let mode = run_meta
         .get("mode")
         .cloned()

@@ -71,10 +71,7 @@ fn positive(what: &str, v: f64) -> anyhow::Result<Duration> {
 fn run_info(namespace: &str, scenario: Option<&Scenario>, clock: (u64, u64)) -> RunInfo {
     let mut run = capture::run_metadata("hcc record", namespace, clock);
     if let Some(s) = scenario {
-        run.insert(
-            "control_rate_hz".into(),
-            s.simulation.control_rate_hz.to_string(),
-        );
+        run.insert("control_rate_hz".into(), s.rate_hz.to_string());
     }
     RunInfo {
         run,

@@ -121,7 +121,7 @@ impl Comparison {
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let scenario = derive::scenario_of(&args.recording, args.config.as_deref())?;
     let n = scenario.model.nq();
-    let period = 1.0 / scenario.simulation.control_rate_hz;
+    let period = scenario.period_s();
     let mut replay = Replay::new(&scenario)?;
     let mut cmp = Comparison::default();
     let mut going = true;

@@ -558,10 +558,7 @@ fn run_info(scenario: &Scenario, launch: &Launch, recorder: &str, clock: (u64, u
     let mut run = capture::run_metadata(recorder, launch.namespace.as_str(), clock);
     run.insert("mode".into(), launch.mode.into());
     run.insert("duration_s".into(), format!("{:?}", launch.duration));
-    run.insert(
-        "control_rate_hz".into(),
-        scenario.simulation.control_rate_hz.to_string(),
-    );
+    run.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
     RunInfo {
         run,
         scenario: RunInfo::describe_scenario(scenario),
@@ -724,7 +721,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (controller, sim, scheduler) = launch.spawn(&scenario, 1 + usize::from(view.is_some()))?;
     let mut children = Children { controller, sim };
     let started = Instant::now();
-    let period = 1.0 / scenario.simulation.control_rate_hz;
+    let period = scenario.period_s();
     let end = record_run(
         &receiver,
         &mut recorder,

@@ -116,7 +116,7 @@ impl SimLog {
             crate::capture::run_metadata("hcc simulate", &scenario.ipc.namespace, (unix, 0));
         run.insert("mode".into(), "in-process".into());
         run.insert("duration_s".into(), format!("{:?}", s.duration_s));
-        run.insert("control_rate_hz".into(), s.control_rate_hz.to_string());
+        run.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
         let info = RunInfo {
             run,
             scenario: RunInfo::describe_scenario(scenario),

@@ -61,8 +61,16 @@ impl Scenario {
             ));
         }
 
+        let rate_hz = file.controller.rate_hz;
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return Err(cx.err(
+                "controller.rate_hz",
+                format!("must be a positive finite number, got {rate_hz}"),
+            ));
+        }
+
         let (q0, qd0) = resolve_initial(&cx, &model, &file.initial)?;
-        let simulation = resolve_simulation(&cx, &model, &file.simulation)?;
+        let simulation = resolve_simulation(&cx, &model, &file.simulation, rate_hz)?;
         check_namespace(&cx, &file.ipc.namespace)?;
 
         let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
@@ -72,29 +80,19 @@ impl Scenario {
             coriolis_cancellation: file.controller.coriolis_cancellation,
             form: file.controller.form,
             singular_ratio: ratio,
-            safety: safety_spec(
-                &cx,
-                &file.safety,
-                simulation.control_rate_hz,
-                torque_filter.torque_rate_limit,
-            )?,
+            safety: safety_spec(&cx, &file.safety, rate_hz, torque_filter.torque_rate_limit)?,
         };
         check_with_controller(&cx, &model, &spec, &q0)?;
 
-        let controller_daemon = resolve_controller_daemon(
-            &cx,
-            &model,
-            &file.controller_daemon,
-            simulation.control_rate_hz,
-        )?;
+        let controller_daemon =
+            resolve_controller_daemon(&cx, &model, &file.controller_daemon, rate_hz)?;
         let sim_daemon = resolve_sim_daemon(&cx, n, &file.sim_daemon)?;
         check_renamed_tables(&cx, &file)?;
         let setpoint_limits =
             setpoint_limits::resolve(cx.file, cx.text, &file.setpoint_limits, &spec.levels, n)?;
         let setpoints = schedule::resolve(cx.file, cx.text, &file.setpoints, &spec.levels, n)?;
         let franka = franka::resolve(cx.file, cx.text, &file.franka)?;
-        let contact =
-            contact::resolve(&cx, &model, &q0, &file.contact, simulation.control_rate_hz)?;
+        let contact = contact::resolve(&cx, &model, &q0, &file.contact, rate_hz)?;
 
         let name = file.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -107,6 +105,7 @@ impl Scenario {
             urdf_path,
             model,
             spec,
+            rate_hz,
             q0,
             qd0,
             simulation,

@@ -32,6 +32,9 @@ pub struct Scenario {
     /// tasks) and `[controller]`, `[robot] gravity_compensation` (checked by
     /// `hcc_control::Controller::new` at load).
     pub spec: ControllerSpec,
+    /// `[controller] rate_hz`: the control rate (Hz) of the cycle, the
+    /// drivers and the bridge.
+    pub rate_hz: f64,
     pub q0: DVector<f64>,
     pub qd0: DVector<f64>,
     pub simulation: Simulation,
@@ -53,7 +56,7 @@ pub struct Scenario {
 impl Scenario {
     /// Overrides the simulated duration (e.g. from the command line).
     pub fn set_duration(&mut self, duration_s: f64) -> Result<(), ConfigError> {
-        let cycles = duration_s * self.simulation.control_rate_hz;
+        let cycles = duration_s * self.rate_hz;
         if !(duration_s.is_finite() && (1.0..=1e8).contains(&cycles)) {
             return Err(ConfigError::Invalid {
                 file: self.path.clone(),
@@ -129,14 +132,24 @@ impl Scenario {
     /// Control cycles of the run: duration × control rate (the states
     /// k = 0..=cycles are sampled).
     pub fn cycles(&self) -> u64 {
-        let s = &self.simulation;
-        (s.duration_s * s.control_rate_hz).round() as u64
+        (self.simulation.duration_s * self.rate_hz).round() as u64
+    }
+
+    /// The control period T = 1 / `rate_hz` (s).
+    pub fn period_s(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+
+    /// The control period in whole ns (as the daemons count it): 1e9 /
+    /// `rate_hz`, rounded.
+    pub fn period_ns(&self) -> u64 {
+        (1e9 / self.rate_hz).round() as u64
     }
 
     /// The `[[setpoint]]` entries due within the run, as the messages a client
     /// sends (each applied at the state of its cycle), in time order.
     pub fn scheduled_messages(&self) -> Vec<hcc_msgs::Setpoint> {
-        let rate = self.simulation.control_rate_hz;
+        let rate = self.rate_hz;
         self.setpoints
             .iter()
             .filter(|e| e.cycle(rate) <= self.cycles())

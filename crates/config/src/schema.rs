@@ -201,11 +201,16 @@ pub struct ControllerSection {
     pub form: hcc_control::Form,
     #[serde(default)]
     pub singularity: SingularitySection,
+    /// The control rate (Hz): the cycle's, the drivers' and the bridge's
+    /// period is its inverse; default 1000.
+    #[serde(default = "default_rate")]
+    pub rate_hz: f64,
 }
 
 impl Default for ControllerSection {
     fn default() -> Self {
         ControllerSection {
+            rate_hz: default_rate(),
             coriolis_cancellation: true,
             form: hcc_control::Form::Extended,
             singularity: SingularitySection::default(),
@@ -251,8 +256,9 @@ pub struct InitialSection {
 pub struct SimulationSection {
     #[serde(default = "default_duration")]
     pub duration_s: f64,
-    #[serde(default = "default_rate")]
-    pub control_rate_hz: f64,
+    /// Moved to `[controller] rate_hz` (the rate is the controller's, also
+    /// with a real robot): refused with that name.
+    pub control_rate_hz: Option<toml::Value>,
     #[serde(default = "default_dt")]
     pub integrator_dt_s: f64,
     /// Viscous joint friction in the plant, Nms/rad (scalar or per joint, default 0).
@@ -276,7 +282,7 @@ impl Default for SimulationSection {
     fn default() -> Self {
         SimulationSection {
             duration_s: default_duration(),
-            control_rate_hz: default_rate(),
+            control_rate_hz: None,
             integrator_dt_s: default_dt(),
             joint_friction: None,
             wrench: Vec::new(),

@@ -23,7 +23,6 @@ pub struct Wrench {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Simulation {
     pub duration_s: f64,
-    pub control_rate_hz: f64,
     pub integrator_dt_s: f64,
     /// Plant steps per control period (control period / integrator dt, an integer).
     pub substeps: usize,
@@ -32,20 +31,20 @@ pub struct Simulation {
     pub wrenches: Vec<Wrench>,
 }
 
-impl Simulation {
-    /// The control period in whole ns (as the daemons count it): 1e9 /
-    /// `control_rate_hz`, rounded.
-    pub fn period_ns(&self) -> u64 {
-        (1e9 / self.control_rate_hz).round() as u64
-    }
-}
-
 pub(crate) fn resolve_simulation(
     cx: &Ctx,
     model: &Model,
     s: &SimulationSection,
+    rate_hz: f64,
 ) -> Result<Simulation, ConfigError> {
-    let substeps = plant_substeps(cx, s)?;
+    if s.control_rate_hz.is_some() {
+        return Err(cx.err(
+            "simulation.control_rate_hz",
+            "the control rate moved to [controller] rate_hz (the same value, in Hz): \
+             move the line there",
+        ));
+    }
+    let substeps = plant_substeps(cx, s, rate_hz)?;
     let n = model.nq();
     let joint_friction = match &s.joint_friction {
         Some(f) => cx.per_joint("simulation.joint_friction", f, n, false)?,
@@ -57,7 +56,6 @@ pub(crate) fn resolve_simulation(
     }
     Ok(Simulation {
         duration_s: s.duration_s,
-        control_rate_hz: s.control_rate_hz,
         integrator_dt_s: s.integrator_dt_s,
         substeps: substeps as usize,
         joint_friction,
@@ -66,9 +64,9 @@ pub(crate) fn resolve_simulation(
 }
 
 /// The times of `[simulation]`: positive, an integrator step that divides the
-/// control period, a duration of 1 to 1e8 control periods. Returns the plant steps
-/// per control period.
-fn plant_substeps(cx: &Ctx, s: &SimulationSection) -> Result<f64, ConfigError> {
+/// control period (of `[controller] rate_hz`, checked before), a duration of 1
+/// to 1e8 control periods. Returns the plant steps per control period.
+fn plant_substeps(cx: &Ctx, s: &SimulationSection, rate_hz: f64) -> Result<f64, ConfigError> {
     let positive = |name: &str, v: f64| -> Result<(), ConfigError> {
         if v.is_finite() && v > 0.0 {
             Ok(())
@@ -80,9 +78,8 @@ fn plant_substeps(cx: &Ctx, s: &SimulationSection) -> Result<f64, ConfigError> {
         }
     };
     positive("duration_s", s.duration_s)?;
-    positive("control_rate_hz", s.control_rate_hz)?;
     positive("integrator_dt_s", s.integrator_dt_s)?;
-    let period = 1.0 / s.control_rate_hz;
+    let period = 1.0 / rate_hz;
     let ratio = period / s.integrator_dt_s;
     let substeps = ratio.round();
     if substeps < 1.0 || (ratio - substeps).abs() > 1e-6 * ratio {
@@ -90,17 +87,17 @@ fn plant_substeps(cx: &Ctx, s: &SimulationSection) -> Result<f64, ConfigError> {
             "simulation.integrator_dt_s",
             format!(
                 "{} s must divide the control period 1/{} Hz = {period} s into a whole number of steps",
-                s.integrator_dt_s, s.control_rate_hz
+                s.integrator_dt_s, rate_hz
             ),
         ));
     }
-    if s.duration_s * s.control_rate_hz < 1.0 {
+    if s.duration_s * rate_hz < 1.0 {
         return Err(cx.err(
             "simulation.duration_s",
             "is shorter than one control period",
         ));
     }
-    if s.duration_s * s.control_rate_hz > 1e8 {
+    if s.duration_s * rate_hz > 1e8 {
         return Err(cx.err(
             "simulation.duration_s",
             "is too long (more than 1e8 control cycles)",

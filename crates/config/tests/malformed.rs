@@ -37,6 +37,7 @@ damping = 15.0
 goal = [0.35]
 
 [controller]
+rate_hz = 1000.0
 coriolis_cancellation = true
 
 [initial]
@@ -44,7 +45,6 @@ q0 = [0.4, -0.5088, -1.6578, 0.3966]
 
 [simulation]
 duration_s = 3.0
-control_rate_hz = 1000.0
 integrator_dt_s = 1e-4
 
 [[simulation.wrench]]
@@ -175,19 +175,19 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
                 "q0 = [0.4, -0.5088, -1.6578]",
             ),
             "initial.q0",
-            Some(35),
+            Some(36),
         ),
         (
             "qd0 length",
             edit("[initial]\n", "[initial]\nqd0 = [0.0, 0.0]\n"),
             "initial.qd0",
-            Some(35),
+            Some(36),
         ),
         (
             "q0 not finite",
             edit("q0 = [0.4,", "q0 = [nan,"),
             "initial.q0[0]",
-            Some(35),
+            Some(36),
         ),
         (
             "gravity length",
@@ -329,9 +329,9 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
         ),
         (
             "zero control rate",
-            edit("control_rate_hz = 1000.0", "control_rate_hz = 0.0"),
-            "simulation.control_rate_hz",
-            Some(39),
+            edit("rate_hz = 1000.0", "rate_hz = 0.0"),
+            "controller.rate_hz",
+            Some(32),
         ),
         (
             "dt not dividing the period",
@@ -343,7 +343,7 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
             "negative duration",
             edit("duration_s = 3.0", "duration_s = -3.0"),
             "simulation.duration_s",
-            Some(38),
+            Some(39),
         ),
         (
             "friction length",
@@ -457,7 +457,7 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
                 "coriolis_cancellation = true\nform = \"other\"",
             ),
             "controller.form",
-            Some(33),
+            Some(34),
         ),
         (
             "singular ratio",
@@ -466,7 +466,7 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
                 "coriolis_cancellation = true\nsingularity = { singular_ratio = 2.0 }",
             ),
             "controller.singularity.singular_ratio",
-            Some(33),
+            Some(34),
         ),
         (
             "unknown singularity field",
@@ -475,7 +475,7 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
                 "coriolis_cancellation = true\n[controller.singularity]\nthreshold = 1e-4",
             ),
             "controller.singularity.threshold",
-            Some(34),
+            Some(35),
         ),
         (
             "weights missing",
@@ -511,9 +511,26 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
                 "coriolis_cancellation = \"yes\"",
             ),
             "controller.coriolis_cancellation",
-            Some(32),
+            Some(33),
         ),
     ]
+}
+
+#[test]
+fn the_control_rate_under_simulation_is_refused_naming_the_controller_table() {
+    let e = load(&edit(
+        "duration_s = 3.0\n",
+        "duration_s = 3.0\ncontrol_rate_hz = 1000.0\n",
+    ))
+    .unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("simulation.control_rate_hz"), "{msg}");
+    assert!(msg.contains("[controller] rate_hz"), "{msg}");
+    assert_eq!(e.line(), Some(40), "{msg}");
+    // The key in its place runs, at the rate it gives.
+    let s = load(&edit("rate_hz = 1000.0", "rate_hz = 500.0")).unwrap();
+    assert_eq!(s.rate_hz, 500.0);
+    assert_eq!(s.period_ns(), 2_000_000);
 }
 
 #[test]
@@ -607,7 +624,7 @@ fn cpu_cores_are_checked_against_the_available_ones() {
     // The default stale timeout is three control periods; the cache warm-up is on.
     assert_eq!(s.controller_daemon.stale_timeout_ms, 3.0);
     assert!(s.controller_daemon.warm_up);
-    let slow = load(&edit("control_rate_hz = 1000.0", "control_rate_hz = 500.0")).unwrap();
+    let slow = load(&edit("rate_hz = 1000.0", "rate_hz = 500.0")).unwrap();
     assert_eq!(slow.controller_daemon.stale_timeout_ms, 6.0);
 }
 

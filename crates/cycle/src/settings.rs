@@ -32,7 +32,7 @@ impl CycleSettings {
     /// `[torque_filter]` and `[contact]`.
     pub fn from_scenario(scenario: &Scenario) -> CycleSettings {
         CycleSettings {
-            period_ns: scenario.simulation.period_ns(),
+            period_ns: scenario.period_ns(),
             torque_limits: scenario
                 .controller_daemon
                 .torque_limits

@@ -102,7 +102,7 @@ impl SimDriver {
         let s = &scenario.simulation;
         let n = plant.model().nq();
         // The same arithmetic as run_zoh.
-        let period_s = 1.0 / s.control_rate_hz;
+        let period_s = scenario.period_s();
         Ok(SimDriver {
             data: Data::new(plant.model()),
             n,

@@ -24,7 +24,7 @@ pub fn describe(scenario: &Scenario) -> RunDescription {
     put("config", scenario.path.display().to_string().into());
     put("urdf", scenario.urdf_path.display().to_string().into());
     put("duration_s", s.duration_s.into());
-    put("control_rate_hz", s.control_rate_hz.into());
+    put("control_rate_hz", scenario.rate_hz.into());
     put("integrator_dt_s", s.integrator_dt_s.into());
     put("integrator", "RK4".into());
     put(

@@ -120,7 +120,7 @@ impl InProcess {
             schedule: Schedule::new(scenario),
             state: JointState::zeroed(),
             period_ns: settings.period_ns,
-            period_s: 1.0 / scenario.simulation.control_rate_hz,
+            period_s: scenario.period_s(),
         })
     }
 

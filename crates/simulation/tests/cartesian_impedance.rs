@@ -129,7 +129,7 @@ fn posture_does_not_disturb_the_pose_with_dynamically_consistent_projections() {
     );
 
     let mut fast = s.clone();
-    fast.simulation.control_rate_hz = 2000.0;
+    fast.rate_hz = 2000.0;
     fast.simulation.substeps = 5;
     let ext2 = figures(&fast, Form::Extended);
     let kin2 = figures(&fast, Form::KinematicProjector);

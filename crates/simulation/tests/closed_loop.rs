@@ -92,7 +92,7 @@ fn simulate_with(s: &Scenario, law: &mut JointPd) -> Result<Trajectory, SimError
     let mut recorder = Recorder::new(s, false, Box::new(energy)).unwrap();
     let mut table = recorder.trajectory(cycles + 1).unwrap();
     let timing = LoopTiming {
-        control_period_s: 1.0 / s.simulation.control_rate_hz,
+        control_period_s: s.period_s(),
         substeps: s.simulation.substeps,
         cycles,
     };

@@ -337,14 +337,14 @@ fn run_against(
     let mut cycle = ControlCycle::new(controller, &CycleSettings::from_scenario(scenario)).unwrap();
     let s = &scenario.simulation;
     let timing = LoopTiming {
-        control_period_s: 1.0 / s.control_rate_hz,
+        control_period_s: scenario.period_s(),
         substeps: s.substeps,
         cycles: scenario.cycles() as usize,
     };
     let n = scenario.model.nq();
     let mut state = JointState::zeroed();
     let mut out = Vec::new();
-    let period_ns = scenario.simulation.period_ns();
+    let period_ns = scenario.period_ns();
     hcc_plant::run_zoh(&mut plant, timing, |k, t, q, qd, tau| {
         state
             .set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
@@ -380,7 +380,7 @@ fn a_torque_on_one_joint_is_estimated_and_flagged() {
     let samples = run_with_joint_torque(&scenario, joint, torque);
     // The torque held over [t_k, t_k+1) for t_k in the push: the observer
     // sees it from the state after, t_k+1.
-    let period = 1.0 / scenario.simulation.control_rate_hz;
+    let period = scenario.period_s();
     let end = PUSH_START + PUSH_S;
     let reference: Vec<Vec<f64>> = samples
         .iter()

@@ -205,7 +205,7 @@ fn run_logged(
         hcc_control::Controller::new(&scenario.model, spec, &scenario.q0).unwrap()
     });
     let mut logged = Logged {
-        period_s: 1.0 / scenario.simulation.control_rate_hz,
+        period_s: scenario.period_s(),
         prev_safety: DVector::zeros(n),
         twin,
         prev_twin: DVector::zeros(n),
@@ -1208,10 +1208,7 @@ fn the_hierarchy_power_is_the_rate_of_the_storage() {
     let text = std::fs::read_to_string(&path).unwrap();
     let mismatch = |rate: f64| -> f64 {
         let text = text
-            .replace(
-                "control_rate_hz = 1000.0",
-                &format!("control_rate_hz = {rate:.1}"),
-            )
+            .replace("rate_hz = 1000.0", &format!("rate_hz = {rate:.1}"))
             .replace(
                 "integrator_dt_s = 1e-4",
                 &format!("integrator_dt_s = {:e}", 0.1 / rate),

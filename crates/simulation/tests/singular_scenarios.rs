@@ -100,7 +100,7 @@ fn run(
         tau: DVector::zeros(scenario.model.nq()),
         limits: scenario.controller_daemon.torque_limits.clone(),
         gravity: scenario.spec.gravity_compensation,
-        period_s: 1.0 / scenario.simulation.control_rate_hz,
+        period_s: scenario.period_s(),
         k: 0,
         switch_s,
         level,

@@ -127,7 +127,7 @@ impl Plan {
         };
         Ok(Plan {
             floor_s,
-            period_ns: (1e9 / scenario.simulation.control_rate_hz).round() as u64,
+            period_ns: (1e9 / scenario.rate_hz).round() as u64,
             cores,
             fifo: (!args.no_fifo).then_some(args.priority),
         })

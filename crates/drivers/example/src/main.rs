@@ -4,7 +4,7 @@
 //! joint state; the driver samples the joints and applies τ).
 //!
 //! It takes the place of `hcc-sim`: it publishes a [`JointState`] per control
-//! period (1 kHz by default, `[simulation] control_rate_hz` of the scenario)
+//! period (1 kHz by default, `[controller] rate_hz` of the scenario)
 //! from [`RobotHardware::read`] and applies the controller's
 //! [`TorqueCommand`]s through [`RobotHardware::write_torque`], following the
 //! hcc-msgs contract exactly through its driver logic ([`hcc_msgs::driver`],
@@ -222,7 +222,7 @@ impl Driver<'_> {
 /// The contract settings of this driver: the scenario's miss policy, the
 /// command line's tolerance and timeout, the robot's gravity handling.
 fn settings(args: &Args, scenario: &hcc_config::Scenario, hw: &StubHardware) -> DriverSettings {
-    let rate = scenario.simulation.control_rate_hz;
+    let rate = scenario.rate_hz;
     let mut fallback_damping = [0.0; MAX_JOINTS];
     for (to, d) in fallback_damping
         .iter_mut()
@@ -256,7 +256,7 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
     let namespace =
         Namespace::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("namespace")?;
     let file_prefix = args.ipc.file_prefix();
-    let rate = scenario.simulation.control_rate_hz;
+    let rate = scenario.rate_hz;
     let period_ns = (1e9 / rate).round() as u64;
     let window_ns = (args.command_window_us * 1000).min(period_ns * 9 / 10);
     let end_periods = args

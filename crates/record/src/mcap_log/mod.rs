@@ -155,10 +155,7 @@ impl RunInfo {
             m.insert("urdf_name".into(), robot_name(&urdf).unwrap_or_default());
         }
         m.insert("n_joints".into(), scenario.model.nq().to_string());
-        m.insert(
-            "control_rate_hz".into(),
-            scenario.simulation.control_rate_hz.to_string(),
-        );
+        m.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
         m.insert(
             "levels".into(),
             serde_json::to_string(
