@@ -926,8 +926,10 @@ class Setpoint(ctypes.Structure):
         return self
 
     def check(self) -> Rejection | None:
-        """The model-free checks of ``Setpoint::validate``, in its order; the
-        first failure or None."""
+        """The model-free checks of ``Setpoint::validate``, in its order, and
+        the positive definiteness of a full K or D that the controller checks
+        next (so the client refuses it before sending); the first failure or
+        None."""
         if self.header.schema_version != CLIENT_SCHEMA_VERSION:
             return Rejection.SCHEMA_MISMATCH
         if self.fields & ~SETPOINT_FIELDS_KNOWN:

@@ -74,6 +74,20 @@ fn with_field(
         alone = alone.with_goal(&vec![0.0; base.dim()]).map_err(fail)?;
     }
     alone.validate().map_err(fail)?;
+    // A full K or D: positive definite (Setpoint::validate checks the shape
+    // only; the controller factorises it when it takes the setpoint).
+    let full = match name {
+        "stiffness" => alone.stiffness_full().then(|| alone.stiffness()),
+        "damping" => alone.damping_full().then(|| alone.damping()),
+        _ => None,
+    };
+    if let Some(values) = full {
+        let m = alone.dim();
+        let mut l = nalgebra::DMatrix::from_row_slice(m, m, values);
+        if hcc_model::linalg::cholesky_in_place(&mut l).is_err() {
+            return Err(fail(Rejection::NotPositiveDefinite));
+        }
+    }
     Ok(sp)
 }
 

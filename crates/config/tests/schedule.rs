@@ -67,6 +67,11 @@ fn bad_entries_name_the_field() {
             "setpoint[0].stiffness",
         ),
         (
+            // Symmetric and indefinite (eigenvalues 3 and -1).
+            "t = 1.0\nlevel = 1\ndamping = [1, 2, 2, 1]",
+            "setpoint[0].damping",
+        ),
+        (
             "t = 1.0\nlevel = 1\ndamping = [1, 2, 3]",
             "setpoint[0].damping",
         ),

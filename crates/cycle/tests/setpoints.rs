@@ -91,6 +91,12 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
     let not_spd = Setpoint::for_level(1, 1, 0, 3)
         .with_stiffness(&[100.0, 0.0, -5.0])
         .unwrap();
+    // Symmetric (the message's shape is right), indefinite: the cycle's
+    // factorisation rejects it.
+    let not_spd_full = Setpoint::for_level(1, 1, 0, 3)
+        .with_damping(&[10.0, 20.0, 0.0, 20.0, 10.0, 0.0, 0.0, 0.0, 10.0])
+        .unwrap();
+    assert_eq!(not_spd_full.validate(), Ok(()));
     let too_stiff = Setpoint::for_level(1, 1, 0, 3)
         .with_stiffness(&[100.0, 100.0, 4.0 * 350.0 + 1.0])
         .unwrap();
@@ -106,6 +112,7 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
         (goal(0, &[0.5, 0.1]), Rejection::DimensionMismatch),
         (nan, Rejection::NonFinite),
         (not_spd, Rejection::NotPositiveDefinite),
+        (not_spd_full, Rejection::NotPositiveDefinite),
         (too_stiff, Rejection::StiffnessAboveLimit),
         (goal(2, &joint), Rejection::JointLimit),
         (goal(0, &[3.0, 0.0, 0.3]), Rejection::OutsideWorkspace),
@@ -126,7 +133,7 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
         assert_eq!(target.stiffness[(2, 2)], 350.0);
         assert_eq!(d.telemetry().transition_progress[0], 1.0);
     }
-    assert_eq!(d.telemetry().answer_for(1).unwrap().answered, 9);
+    assert_eq!(d.telemetry().answer_for(1).unwrap().answered, 10);
     assert_eq!(d.controller().level_target(2).unwrap().damping[(6, 6)], 1.5);
 }
 

@@ -1,8 +1,9 @@
 //! Setpoints applied to the running law, allocation-free.
 //!
 //! [`SetpointHandler::take`] checks a [`Setpoint`] — first the model-free checks of
-//! [`Setpoint::validate`], then against the law: the level exists, `dim`
-//! equals m_i, every eigenvalue of K ≤ the level's `max_stiffness`, joint goals
+//! [`Setpoint::validate`], then against the law: a full K and D positive
+//! definite, the level exists, `dim` equals m_i, every eigenvalue of K ≤ the
+//! level's `max_stiffness`, joint goals
 //! inside the URDF limits, position goals inside the level's workspace (the
 //! `[[setpoint_limits.level]]` box, by default the ball the chain reaches from its
 //! root) — and, if accepted, starts the level's transition
@@ -41,6 +42,7 @@ use nalgebra::DMatrix;
 
 use crate::settings::CycleError;
 
+mod gain_check;
 mod pending;
 mod workspace;
 
@@ -229,6 +231,7 @@ impl SetpointHandler {
     /// The law-side checks (module docs), after the model-free ones.
     fn check(&self, sp: &Setpoint) -> Result<(), Rejection> {
         sp.validate()?;
+        gain_check::check_positive_definite(sp)?;
         let level = self
             .levels
             .get(sp.level as usize)
@@ -237,7 +240,7 @@ impl SetpointHandler {
         if sp.dim() != m {
             return Err(Rejection::DimensionMismatch);
         }
-        if sp.sets(SETPOINT_STIFFNESS) && !sp.stiffness_within(level.max_stiffness) {
+        if sp.sets(SETPOINT_STIFFNESS) && !gain_check::stiffness_within(sp, level.max_stiffness) {
             return Err(Rejection::StiffnessAboveLimit);
         }
         if !sp.sets(SETPOINT_GOAL) {
