@@ -14,7 +14,7 @@
 """
 
 from .client import Client, SetpointRejected, new_client_id
-from .driver import Action, Driver, DriverSettings, Offer, Rejection, StopReason
+from .driver import Action, CommandRejection, Driver, DriverSettings, Offer, StopReason
 from .msgs import (
     ANSWER_ACCEPTED,
     CLIENT_SCHEMA_VERSION,
@@ -42,12 +42,12 @@ from .msgs import (
     Setpoint,
     SetpointAnswer,
     SetpointError,
+    SetpointRejection,
     Telemetry,
     TelemetryCounters,
     TelemetryTimings,
     TorqueCommand,
 )
-from .msgs import Rejection as SetpointRejection
 
 __all__ = [
     "ANSWER_ACCEPTED",
@@ -69,7 +69,7 @@ __all__ = [
     "MAX_TASK_DIM",
     "MsgError",
     "Offer",
-    "Rejection",
+    "CommandRejection",
     "SETPOINT_DAMPING",
     "SETPOINT_GOAL",
     "SETPOINT_STIFFNESS",

@@ -7,7 +7,7 @@ driver's :class:`~hcc.msgs.JointState`, and commands the controller with
 the Rust ``hcc-client``): :meth:`Client.set_goal`, :meth:`Client.set_gains`
 and :meth:`Client.send` return the setpoint's sequence number, and
 :meth:`Client.wait_until_accepted` waits for the controller's answer in its
-telemetry (accepted, or the controller's :class:`~hcc.msgs.Rejection`).
+telemetry (accepted, or the controller's :class:`~hcc.msgs.SetpointRejection`).
 Levels are 0-based, in the order of the scenario's ``[[level]]``\ s.
 
 Example::
@@ -29,7 +29,7 @@ from . import ipc
 from .msgs import (
     ANSWER_ACCEPTED,
     JointState,
-    Rejection,
+    SetpointRejection,
     Setpoint,
     SetpointAnswer,
     SetpointError,
@@ -49,12 +49,12 @@ class SetpointRejected(SetpointError):
     """
 
     def __init__(self, answer: SetpointAnswer) -> None:
-        rejection = Rejection.from_code(answer.code)
+        rejection = SetpointRejection.from_code(answer.code)
         what = str(rejection) if rejection is not None else f"unknown code {answer.code}"
         super().__init__(
             rejection, f"setpoint {answer.seq} rejected by the controller: {what}"
         )
-        #: The answer code (a :class:`~hcc.msgs.Rejection` value).
+        #: The answer code (a :class:`~hcc.msgs.SetpointRejection` value).
         self.code: int = answer.code
         #: The controller's answer.
         self.answer: SetpointAnswer = answer
@@ -167,32 +167,6 @@ class Client:
                 return getattr(self, attr)
             time.sleep(POLL_S)
 
-    def wait_converged(
-        self, level: int, tolerance: float, timeout: float = 10.0, settle_samples: int = 1
-    ) -> Telemetry:
-        """Waits until the task error norm ‖x̃‖ of ``level`` (0-based) is below ``tolerance``.
-
-        The error comes from the controller's telemetry; ``settle_samples``
-        samples in a row must be below the tolerance. Returns the sample that
-        completed the wait; raises TimeoutError after ``timeout`` s.
-        """
-        deadline = time.monotonic() + timeout
-        below = 0
-        last: Telemetry | None = None
-        for t in self.telemetry(timeout=timeout):
-            last = t
-            if level >= t.levels():
-                raise ValueError(f"level {level} does not exist (the controller has {t.levels()})")
-            below = below + 1 if t.error_norm(level) < tolerance else 0
-            if below >= settle_samples:
-                return t
-            if time.monotonic() >= deadline:
-                break
-        error = "no telemetry" if last is None else f"error norm {last.error_norm(level):.3g}"
-        raise TimeoutError(
-            f"level {level} not converged to {tolerance} within {timeout} s ({error})"
-        )
-
     # --- Commanding -----------------------------------------------------------
 
     @property
@@ -268,7 +242,7 @@ class Client:
                 if v is not None}
         if len(set(dims.values())) > 1:
             raise SetpointError(
-                Rejection.DIMENSION_MISMATCH,
+                SetpointRejection.DIMENSION_MISMATCH,
                 f"setpoint not sent: stiffness is {dims['stiffness']}-dimensional, "
                 f"damping {dims['damping']}-dimensional",
             )
@@ -302,18 +276,31 @@ class Client:
                 )
             time.sleep(POLL_S)
 
-    def wait_until_converged(self, level: int, tolerance: float, timeout: float = 10.0) -> float:
+    def wait_until_converged(
+        self, level: int, tolerance: float, timeout: float = 10.0, settle_samples: int = 1
+    ) -> float:
         """Waits until ``level``'s (0-based) transition is over and its task
-        error norm ‖x̃‖ is ≤ ``tolerance``; returns that norm. Call it after
+        error norm ‖x̃‖ is ≤ ``tolerance`` in ``settle_samples`` telemetry
+        samples in a row; returns the last norm. Call it after
         :meth:`wait_until_accepted` (before, the old goal may count). Raises
-        TimeoutError after ``timeout`` s."""
+        ValueError for a level the controller does not have, TimeoutError
+        after ``timeout`` s."""
         deadline = time.monotonic() + timeout
         last = float("nan")
+        below = 0
+        seen: int | None = None
         while True:
             t = self._poll_telemetry()
-            if t is not None and level < t.levels():
+            if t is not None and t.header.seq != seen:
+                seen = t.header.seq
+                if level >= t.levels():
+                    raise ValueError(
+                        f"level {level} does not exist (the controller has {t.levels()})"
+                    )
                 last = t.error_norm(level)
-                if t.transition_progress[level] >= 1.0 and last <= tolerance:
+                done = t.transition_progress[level] >= 1.0 and last <= tolerance
+                below = below + 1 if done else 0
+                if below >= settle_samples:
                     return last
             if time.monotonic() >= deadline:
                 raise TimeoutError(

@@ -69,7 +69,7 @@ class DriverSettings:
             )
 
 
-class Rejection(enum.Enum):
+class CommandRejection(enum.Enum):
     """Why a received command was not applied."""
 
     #: Its sequence number repeats or goes back.
@@ -93,7 +93,7 @@ class Offer:
     #: Applicable: whether it answers the latest published state.
     current: bool = False
     #: Not applicable: why.
-    rejection: Rejection | None = None
+    rejection: CommandRejection | None = None
     #: TOO_LATE: by how many periods.
     cycles: int = 0
     #: INVALID / GRAVITY_CONFLICT: the reason.
@@ -136,7 +136,7 @@ class Driver:
         self.missed_commands = 0
         self.fallback_cycles = 0
         self.applied = 0
-        self.rejections: dict[Rejection, int] = {r: 0 for r in Rejection}
+        self.rejections: dict[CommandRejection, int] = {r: 0 for r in CommandRejection}
         self._next_state_seq = 0
         self._last_command_seq: int | None = None
         self._misses_in_a_row = 0
@@ -178,7 +178,7 @@ class Driver:
             return True
         return False
 
-    def _reject(self, rejection: Rejection, cycles: int = 0, reason: str = "") -> Offer:
+    def _reject(self, rejection: CommandRejection, cycles: int = 0, reason: str = "") -> Offer:
         self.rejections[rejection] += 1
         return Offer(False, rejection=rejection, cycles=cycles, reason=reason)
 
@@ -187,25 +187,25 @@ class Driver:
         latest_seq = latest.header.seq
         current = command.state_seq == latest_seq
         if not self._observe_command_seq(command.header.seq, current):
-            return self._reject(Rejection.OLD)
+            return self._reject(CommandRejection.OLD)
         try:
             command.validate(self.settings.n)
         except MsgError as e:
-            return self._reject(Rejection.INVALID, reason=str(e))
+            return self._reject(CommandRejection.INVALID, reason=str(e))
         if command.gravity_included() == latest.driver_compensates_gravity():
             return self._reject(
-                Rejection.GRAVITY_CONFLICT,
+                CommandRejection.GRAVITY_CONFLICT,
                 reason=f"command includes gravity: {command.gravity_included()}, "
                 f"driver compensates gravity: {latest.driver_compensates_gravity()}",
             )
         if current:
             return Offer(True, current=True)
         if command.state_seq > latest_seq:
-            return self._reject(Rejection.FUTURE)
+            return self._reject(CommandRejection.FUTURE)
         cycles = latest_seq - command.state_seq
         if cycles <= self.settings.late_tolerance:
             return Offer(True, current=False)
-        return self._reject(Rejection.TOO_LATE, cycles=cycles)
+        return self._reject(CommandRejection.TOO_LATE, cycles=cycles)
 
     def decide(
         self,

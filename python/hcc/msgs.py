@@ -57,7 +57,7 @@ TELEMETRY_FLAG_CONTACT_HOLD: int = 1 << 18
 MAX_SETPOINT_CLIENTS: int = 8
 #: Setpoints the controller keeps waiting for their application point
 #: (:attr:`Setpoint.apply_at_state_seq`), over all clients; one more is
-#: rejected with :attr:`Rejection.PENDING_FULL`.
+#: rejected with :attr:`SetpointRejection.PENDING_FULL`.
 MAX_PENDING_SETPOINTS: int = 32
 
 _Joints = ctypes.c_double * MAX_JOINTS
@@ -372,7 +372,7 @@ class SetpointAnswer(ctypes.Structure):
     seq: int
     #: Setpoints answered for this client so far (0: an empty slot).
     answered: int
-    #: :data:`ANSWER_ACCEPTED` or a :class:`Rejection` code.
+    #: :data:`ANSWER_ACCEPTED` or a :class:`SetpointRejection` code.
     code: int
     #: The level it addressed (0-based, as sent).
     level: int
@@ -394,9 +394,9 @@ class SetpointAnswer(ctypes.Structure):
         """Whether the setpoint was accepted."""
         return self.code == ANSWER_ACCEPTED
 
-    def rejection(self) -> "Rejection | None":
+    def rejection(self) -> "SetpointRejection | None":
         """The rejection, None when accepted or for an unknown code."""
-        return Rejection.from_code(self.code)
+        return SetpointRejection.from_code(self.code)
 
     def __repr__(self) -> str:
         return (
@@ -565,7 +565,7 @@ class Telemetry(ctypes.Structure):
         return 0 <= level < 32 and bool(self.singular_levels & (1 << level))
 
 
-# --- Setpoints (mirror of hcc_msgs::Setpoint, Rejection and their constants) ---
+# --- Setpoints (mirror of hcc_msgs::Setpoint, SetpointRejection and their constants) ---
 
 #: :attr:`Setpoint.fields` bit: set the goal x_{i,d} (``goal``).
 SETPOINT_GOAL: int = 1 << 0
@@ -594,19 +594,19 @@ MAX_TRANSITION_S: float = 3600.0
 #: Relative tolerance of the symmetry check of a full K or D:
 #: |A_jk − A_kj| ≤ tolerance · max |A_jk|.
 SYMMETRY_TOLERANCE: float = 1e-9
-#: The answer code of an accepted setpoint; every other code is a :class:`Rejection`.
+#: The answer code of an accepted setpoint; every other code is a :class:`SetpointRejection`.
 ANSWER_ACCEPTED: int = 0
 
 _REJECTION_TEXT: dict[int, str] = {}
 
 
-class Rejection(enum.IntEnum):
+class SetpointRejection(enum.IntEnum):
     """Why a setpoint was rejected (a rejected setpoint changes nothing).
 
     The codes are stable (they travel in telemetry). :meth:`Setpoint.validate`
     checks codes 1-11 (no model needed); the controller checks 12-16 and 18 against
     its law and model, and 17 against its queue of setpoints waiting for
-    their state. :attr:`label` is the Rust ``Rejection::name()``
+    their state. :attr:`label` is the Rust ``SetpointRejection::name()``
     (snake_case, as in ``hcc goal`` and ``hcc monitor --json``), :attr:`reason`
     the text for a person.
     """
@@ -660,7 +660,7 @@ class Rejection(enum.IntEnum):
         return _REJECTION_TEXT[self.value]
 
     @classmethod
-    def from_code(cls, code: int) -> "Rejection | None":
+    def from_code(cls, code: int) -> "SetpointRejection | None":
         """Decodes a code; None for :data:`ANSWER_ACCEPTED` and unknown codes."""
         try:
             return cls(code)
@@ -700,7 +700,7 @@ class SetpointError(MsgError):
     builders (the controller's codes for the same faults).
     """
 
-    def __init__(self, rejection: Rejection | None, message: str | None = None) -> None:
+    def __init__(self, rejection: SetpointRejection | None, message: str | None = None) -> None:
         super().__init__(message or f"setpoint not sent: {rejection}")
         #: The rejection (None only for an answer code this schema does not know).
         self.rejection = rejection
@@ -724,10 +724,10 @@ def _floats(values: Any) -> list[float]:
 
 def _copy_values(dst: ctypes.Array, values: Sequence[float], dim: int) -> None:
     if dim == 0 or dim > MAX_TASK_DIM:
-        raise SetpointError(Rejection.DIMENSION_CAPACITY)
+        raise SetpointError(SetpointRejection.DIMENSION_CAPACITY)
     if len(values) != dim:
         raise SetpointError(
-            Rejection.DIMENSION_MISMATCH,
+            SetpointRejection.DIMENSION_MISMATCH,
             f"setpoint not sent: {len(values)} values for dimension {dim}",
         )
     ctypes.memset(dst, 0, ctypes.sizeof(dst))
@@ -737,11 +737,11 @@ def _copy_values(dst: ctypes.Array, values: Sequence[float], dim: int) -> None:
 
 def _copy_gain(dst: ctypes.Array, values: Sequence[float], dim: int) -> bool:
     if dim == 0 or dim > MAX_TASK_DIM:
-        raise SetpointError(Rejection.DIMENSION_CAPACITY)
+        raise SetpointError(SetpointRejection.DIMENSION_CAPACITY)
     full = len(values) == dim * dim and dim > 1
     if not full and len(values) != dim:
         raise SetpointError(
-            Rejection.DIMENSION_MISMATCH,
+            SetpointRejection.DIMENSION_MISMATCH,
             f"setpoint not sent: {len(values)} gain values for dimension {dim} "
             f"(give {dim} diagonal values or {dim * dim} row-major)",
         )
@@ -769,15 +769,15 @@ def _cholesky_ok(a: Sequence[float], m: int) -> bool:
     return True
 
 
-def _check_spd(values: Sequence[float], full: bool, m: int) -> Rejection | None:
+def _check_spd(values: Sequence[float], full: bool, m: int) -> SetpointRejection | None:
     if not full:
-        return None if all(v > 0.0 for v in values) else Rejection.NOT_POSITIVE_DEFINITE
+        return None if all(v > 0.0 for v in values) else SetpointRejection.NOT_POSITIVE_DEFINITE
     scale = max((abs(v) for v in values), default=0.0)
     for j in range(m):
         for k in range(j):
             if abs(values[j * m + k] - values[k * m + j]) > SYMMETRY_TOLERANCE * scale:
-                return Rejection.NOT_SYMMETRIC
-    return None if _cholesky_ok(values, m) else Rejection.NOT_POSITIVE_DEFINITE
+                return SetpointRejection.NOT_SYMMETRIC
+    return None if _cholesky_ok(values, m) else SetpointRejection.NOT_POSITIVE_DEFINITE
 
 
 class Setpoint(ctypes.Structure):
@@ -925,25 +925,25 @@ class Setpoint(ctypes.Structure):
         self.apply_at_state_seq = int(state_seq)
         return self
 
-    def check(self) -> Rejection | None:
+    def check(self) -> SetpointRejection | None:
         """The model-free checks of ``Setpoint::validate``, in its order, and
         the positive definiteness of a full K or D that the controller checks
         next (so the client refuses it before sending); the first failure or
         None."""
         if self.header.schema_version != CLIENT_SCHEMA_VERSION:
-            return Rejection.SCHEMA_MISMATCH
+            return SetpointRejection.SCHEMA_MISMATCH
         if self.fields & ~SETPOINT_FIELDS_KNOWN:
-            return Rejection.UNKNOWN_FIELDS
+            return SetpointRejection.UNKNOWN_FIELDS
         if self.fields == 0:
-            return Rejection.NOTHING_SET
+            return SetpointRejection.NOTHING_SET
         if self.sets(SETPOINT_VELOCITY) and not self.sets(SETPOINT_GOAL):
-            return Rejection.VELOCITY_WITHOUT_GOAL
+            return SetpointRejection.VELOCITY_WITHOUT_GOAL
         if self.gain_layout & ~GAIN_LAYOUT_KNOWN:
-            return Rejection.UNKNOWN_LAYOUT
+            return SetpointRejection.UNKNOWN_LAYOUT
         if self.level >= MAX_LEVELS:
-            return Rejection.LEVEL_CAPACITY
+            return SetpointRejection.LEVEL_CAPACITY
         if self.dim == 0 or self.dim > MAX_TASK_DIM:
-            return Rejection.DIMENSION_CAPACITY
+            return SetpointRejection.DIMENSION_CAPACITY
         used = (
             (SETPOINT_GOAL, self.goal_list),
             (SETPOINT_VELOCITY, self.velocity_list),
@@ -952,11 +952,11 @@ class Setpoint(ctypes.Structure):
         )
         for bit, values in used:
             if self.sets(bit) and not all(math.isfinite(v) for v in values()):
-                return Rejection.NON_FINITE
+                return SetpointRejection.NON_FINITE
         if not math.isfinite(self.duration_s):
-            return Rejection.NON_FINITE
+            return SetpointRejection.NON_FINITE
         if not 0.0 <= self.duration_s <= MAX_TRANSITION_S:
-            return Rejection.BAD_DURATION
+            return SetpointRejection.BAD_DURATION
         m = self.n_dim()
         if self.sets(SETPOINT_STIFFNESS):
             found = _check_spd(self.stiffness_list(), self.stiffness_full(), m)

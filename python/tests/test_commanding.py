@@ -15,7 +15,6 @@ import time
 import pytest
 
 from hcc import Client, SetpointError, SetpointRejected, SetpointRejection
-from hcc.msgs import Rejection
 
 from conftest import ROOT
 from procs import sim_pair
@@ -57,23 +56,23 @@ def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Pat
         seq = client.set_goal(0, [3.0, 0.0, 0.3], duration=1.0)
         with pytest.raises(SetpointRejected) as e:
             client.wait_until_accepted(seq, timeout=5.0)
-        assert e.value.rejection is Rejection.OUTSIDE_WORKSPACE is SetpointRejection(16)
+        assert e.value.rejection is SetpointRejection.OUTSIDE_WORKSPACE is SetpointRejection(16)
         assert e.value.answer.seq == seq and "outside_workspace" in str(e.value)
         assert "workspace" in e.value.rejection.reason
         print(f"rejected: {e.value}")
         seq = client.set_gains(0, stiffness=[1e6, 1e6, 1e6])
         with pytest.raises(SetpointRejected) as e:
             client.wait_until_accepted(seq, timeout=5.0)
-        assert e.value.rejection is Rejection.STIFFNESS_ABOVE_LIMIT
+        assert e.value.rejection is SetpointRejection.STIFFNESS_ABOVE_LIMIT
 
         # Refused before sending (no sequence number used, nothing sent).
         before = client.last_seq
         with pytest.raises(SetpointError) as e:
             client.set_gains(0, damping=[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-        assert e.value.rejection is Rejection.NOT_POSITIVE_DEFINITE
+        assert e.value.rejection is SetpointRejection.NOT_POSITIVE_DEFINITE
         with pytest.raises(SetpointError) as e:
             client.set_goal(0, [0.5, math.nan, 0.3])
-        assert e.value.rejection is Rejection.NON_FINITE
+        assert e.value.rejection is SetpointRejection.NON_FINITE
         assert client.last_seq == before + 2, "each setpoint built takes a number"
 
         # A valid full stiffness and diagonal damping are accepted.

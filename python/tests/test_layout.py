@@ -58,15 +58,15 @@ def test_constants(rust: dict[str, Any]) -> None:
 
 def test_rejection_codes_names_and_reasons(rust: dict[str, Any]) -> None:
     codes = rust["rejections"]
-    assert [r["code"] for r in codes] == [r.value for r in msgs.Rejection]
+    assert [r["code"] for r in codes] == [r.value for r in msgs.SetpointRejection]
     for r in codes:
-        mine = msgs.Rejection(r["code"])
+        mine = msgs.SetpointRejection(r["code"])
         assert mine.label == r["name"], r
         assert mine.reason == r["reason"], r
         assert str(mine) == f"{r['name']} (code {r['code']}): {r['reason']}"
-        assert msgs.Rejection.from_code(r["code"]) is mine
-    assert msgs.Rejection.from_code(msgs.ANSWER_ACCEPTED) is None
-    assert msgs.Rejection.from_code(len(codes) + 1) is None
+        assert msgs.SetpointRejection.from_code(r["code"]) is mine
+    assert msgs.SetpointRejection.from_code(msgs.ANSWER_ACCEPTED) is None
+    assert msgs.SetpointRejection.from_code(len(codes) + 1) is None
 
 
 def test_every_struct_has_the_rust_layout(rust: dict[str, Any]) -> None:
@@ -148,7 +148,7 @@ def _full_stiffness(m: int, a: list[float]) -> msgs.Setpoint:
     return s
 
 
-R = msgs.Rejection
+R = msgs.SetpointRejection
 
 
 def test_setpoint_checks_mirror_the_rust_validate() -> None:

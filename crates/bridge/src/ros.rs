@@ -9,7 +9,7 @@
 //! from the message definitions (the `rosbags` package) and compare them
 //! with the hashes the running bridge announces.
 
-use hcc_msgs::{MAX_SETPOINT_CLIENTS, Rejection, Telemetry};
+use hcc_msgs::{MAX_SETPOINT_CLIENTS, SetpointRejection, Telemetry};
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
 use crate::names::RosType;
@@ -169,7 +169,9 @@ pub struct TelemetryExtras<'a> {
 pub fn answer_reason(code: u32) -> String {
     match code {
         hcc_msgs::ANSWER_ACCEPTED => "accepted".into(),
-        c => Rejection::from_code(c).map_or_else(|| format!("code {c}"), |r| r.name().into()),
+        c => {
+            SetpointRejection::from_code(c).map_or_else(|| format!("code {c}"), |r| r.name().into())
+        }
     }
 }
 
@@ -398,7 +400,7 @@ mod tests {
             client_id: 7,
             seq: 4,
             answered: 4,
-            code: Rejection::OutsideWorkspace.code(),
+            code: SetpointRejection::OutsideWorkspace.code(),
             level: 1,
             duration_s: 0.0,
             rejected: 2,

@@ -31,7 +31,7 @@ use anyhow::{Context, bail};
 use hcc_client::Client;
 use hcc_config::Scenario;
 use hcc_config::schedule::{SCHEDULE_CLIENT_ID, ScheduledSetpoint};
-use hcc_msgs::{ANSWER_ACCEPTED, Rejection, Setpoint};
+use hcc_msgs::{ANSWER_ACCEPTED, Setpoint, SetpointRejection};
 
 /// Scheduled setpoints in flight at most (sent, not yet answered).
 pub const WINDOW: usize = 8;
@@ -78,8 +78,8 @@ impl ScheduleReport {
 
     /// One entry's rejection in words.
     fn describe(&self, schedule: &[ScheduledSetpoint], k: usize, code: u32) -> String {
-        let reason =
-            Rejection::from_code(code).map_or("unknown code".to_string(), |r| r.to_string());
+        let reason = SetpointRejection::from_code(code)
+            .map_or("unknown code".to_string(), |r| r.to_string());
         match schedule.get(k) {
             Some(e) => format!(
                 "the scheduled setpoint at t = {} s for level {} was rejected: {reason}",

@@ -3,7 +3,7 @@
 //! A [`Client`] connects to a controller's namespace, sends [`Setpoint`]s on
 //! `hcc/<ns>/setpoint` (goals, velocity feed-forward, stiffness, damping,
 //! transitions) and reads its telemetry, where the controller answers every
-//! setpoint ([`hcc_msgs::SetpointAnswer`]: accepted, or a [`Rejection`]
+//! setpoint ([`hcc_msgs::SetpointAnswer`]: accepted, or a [`SetpointRejection`]
 //! code). Levels are 0-based here, in the order of the scenario's
 //! `[[level]]`s.
 //!
@@ -22,7 +22,9 @@
 use std::time::{Duration, Instant};
 
 use hcc_msgs::ipc::{self, IpcError, IpcNode, Services, SetpointPublisher, TelemetrySubscriber};
-use hcc_msgs::{ANSWER_ACCEPTED, Rejection, ServiceNames, Setpoint, SetpointAnswer, Telemetry};
+use hcc_msgs::{
+    ANSWER_ACCEPTED, ServiceNames, Setpoint, SetpointAnswer, SetpointRejection, Telemetry,
+};
 use iceoryx2::prelude::SignalHandlingMode;
 
 /// Telemetry queue of a client (it keeps the newest sample).
@@ -41,13 +43,13 @@ pub enum ClientError {
     Namespace(#[from] hcc_msgs::NamespaceError),
     /// The setpoint failed the checks before it was sent (nothing was sent).
     #[error("setpoint not sent: {0}")]
-    Invalid(Rejection),
+    Invalid(SetpointRejection),
     /// Publishing failed.
     #[error("cannot send the setpoint: {0}")]
     Send(String),
     /// The controller rejected the setpoint.
     #[error("rejected by the controller: {0}")]
-    Rejected(Rejection),
+    Rejected(SetpointRejection),
     /// The controller answered with a code this client does not know.
     #[error("the controller answered with unknown code {0}")]
     UnknownCode(u32),
@@ -190,7 +192,7 @@ impl Client {
             if let Some(a) = answer {
                 return match a.code {
                     ANSWER_ACCEPTED => Ok(a),
-                    code => Err(Rejection::from_code(code)
+                    code => Err(SetpointRejection::from_code(code)
                         .map_or(ClientError::UnknownCode(code), ClientError::Rejected)),
                 };
             }

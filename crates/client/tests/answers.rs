@@ -11,7 +11,7 @@ use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::ipc::{self, Services};
-use hcc_msgs::{JointState, Namespace, Rejection, ServiceNames};
+use hcc_msgs::{JointState, Namespace, ServiceNames, SetpointRejection};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[test]
@@ -63,7 +63,7 @@ fn answers_reach_the_client() {
     let seq = client.set_goal(0, &[3.0, 0.0, 0.3], 0.5).unwrap();
     cycle(&mut d, 2);
     match client.wait_until_accepted(seq, Duration::from_secs(1)) {
-        Err(ClientError::Rejected(r)) => assert_eq!(r, Rejection::OutsideWorkspace),
+        Err(ClientError::Rejected(r)) => assert_eq!(r, SetpointRejection::OutsideWorkspace),
         other => panic!("{other:?}"),
     }
     // Invalid before sending: nothing is sent.
@@ -71,7 +71,10 @@ fn answers_reach_the_client() {
         .set_gains(0, 3, &[1.0, -1.0, 1.0], &[], 0.0)
         .unwrap_err();
     assert!(
-        matches!(e, ClientError::Invalid(Rejection::NotPositiveDefinite)),
+        matches!(
+            e,
+            ClientError::Invalid(SetpointRejection::NotPositiveDefinite)
+        ),
         "{e}"
     );
 

@@ -21,7 +21,7 @@
 use std::path::Path;
 
 use hcc_control::LevelSpec;
-use hcc_msgs::{Rejection, Setpoint};
+use hcc_msgs::{Setpoint, SetpointRejection};
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
@@ -53,7 +53,7 @@ pub struct ScheduledSetpoint {
 }
 
 /// A `Setpoint::with_*` builder.
-type Builder = fn(Setpoint, &[f64]) -> Result<Setpoint, Rejection>;
+type Builder = fn(Setpoint, &[f64]) -> Result<Setpoint, SetpointRejection>;
 
 /// One field into the message, its model-free checks naming the field.
 fn with_field(
@@ -61,8 +61,8 @@ fn with_field(
     name: &str,
     values: &[f64],
     build: Builder,
-) -> Result<Setpoint, (String, Rejection)> {
-    let fail = |r: Rejection| (name.to_string(), r);
+) -> Result<Setpoint, (String, SetpointRejection)> {
+    let fail = |r: SetpointRejection| (name.to_string(), r);
     let sp = build(base, values).map_err(fail)?;
     // Alone (a velocity with a zero goal), so a failure is this field's.
     let mut alone = build(
@@ -85,14 +85,14 @@ fn with_field(
         let m = alone.dim();
         let mut l = nalgebra::DMatrix::from_row_slice(m, m, values);
         if hcc_model::linalg::cholesky_in_place(&mut l).is_err() {
-            return Err(fail(Rejection::NotPositiveDefinite));
+            return Err(fail(SetpointRejection::NotPositiveDefinite));
         }
     }
     Ok(sp)
 }
 
 /// The message of `entry` (level already checked), or the failing field and why.
-fn build(entry: &SetpointSection, dim: usize) -> Result<Setpoint, (String, Rejection)> {
+fn build(entry: &SetpointSection, dim: usize) -> Result<Setpoint, (String, SetpointRejection)> {
     let mut sp = Setpoint::for_level(SCHEDULE_CLIENT_ID, 0, entry.level - 1, dim);
     let fields: [(&str, &Option<Vec<f64>>, Builder); 4] = [
         ("goal", &entry.goal, Setpoint::with_goal),
@@ -108,9 +108,9 @@ fn build(entry: &SetpointSection, dim: usize) -> Result<Setpoint, (String, Rejec
     sp = sp.with_duration(entry.duration.unwrap_or(0.0));
     sp.validate().map_err(|r| {
         let field = match r {
-            Rejection::NonFinite | Rejection::BadDuration => "duration",
-            Rejection::VelocityWithoutGoal => "velocity",
-            Rejection::LevelCapacity => "level",
+            SetpointRejection::NonFinite | SetpointRejection::BadDuration => "duration",
+            SetpointRejection::VelocityWithoutGoal => "velocity",
+            SetpointRejection::LevelCapacity => "level",
             _ => "",
         };
         (field.to_string(), r)
@@ -152,11 +152,13 @@ pub(crate) fn resolve(
         let dim = levels[entry.level - 1].dim(n);
         let setpoint = build(entry, dim).map_err(|(field, r)| {
             let detail = match r {
-                Rejection::DimensionMismatch | Rejection::DimensionCapacity => format!(
-                    "level {} has m = {dim}: give {dim} values ({} for a full gain matrix)",
-                    entry.level,
-                    dim * dim
-                ),
+                SetpointRejection::DimensionMismatch | SetpointRejection::DimensionCapacity => {
+                    format!(
+                        "level {} has m = {dim}: give {dim} values ({} for a full gain matrix)",
+                        entry.level,
+                        dim * dim
+                    )
+                }
                 _ => r.reason().to_string(),
             };
             let at = if field.is_empty() {

@@ -8,7 +8,7 @@
 
 use hcc_config::Scenario;
 use hcc_config::schedule::SCHEDULE_CLIENT_ID;
-use hcc_msgs::{ANSWER_ACCEPTED, Rejection, Setpoint, Telemetry};
+use hcc_msgs::{ANSWER_ACCEPTED, Setpoint, SetpointRejection, Telemetry};
 
 /// The schedule: its messages in time order, and what was delivered.
 #[derive(Debug, Clone)]
@@ -78,7 +78,8 @@ impl Schedule {
             return Ok(());
         }
         self.rejected = answer.rejected;
-        let reason = Rejection::from_code(answer.code).map_or("unknown code", |r| r.reason());
+        let reason =
+            SetpointRejection::from_code(answer.code).map_or("unknown code", |r| r.reason());
         // The answer names the last setpoint taken (its seq = 1 + its index).
         let named = (answer.seq as usize)
             .checked_sub(1)

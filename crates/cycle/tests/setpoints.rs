@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{ControlCycle, CycleSettings};
-use hcc_msgs::{ANSWER_ACCEPTED, JointState, Rejection, Setpoint};
+use hcc_msgs::{ANSWER_ACCEPTED, JointState, Setpoint, SetpointRejection};
 
 const PERIOD: u64 = 1_000_000;
 
@@ -108,19 +108,22 @@ fn every_bad_setpoint_is_rejected_with_its_code_and_changes_nothing() {
         .with_damping(&[100.0; 7])
         .unwrap();
     let cases = [
-        (goal(5, &[0.5, 0.1, 0.3]), Rejection::UnknownLevel),
-        (goal(0, &[0.5, 0.1]), Rejection::DimensionMismatch),
-        (nan, Rejection::NonFinite),
-        (not_spd, Rejection::NotPositiveDefinite),
-        (not_spd_full, Rejection::NotPositiveDefinite),
-        (too_stiff, Rejection::StiffnessAboveLimit),
-        (goal(2, &joint), Rejection::JointLimit),
-        (goal(0, &[3.0, 0.0, 0.3]), Rejection::OutsideWorkspace),
+        (goal(5, &[0.5, 0.1, 0.3]), SetpointRejection::UnknownLevel),
+        (goal(0, &[0.5, 0.1]), SetpointRejection::DimensionMismatch),
+        (nan, SetpointRejection::NonFinite),
+        (not_spd, SetpointRejection::NotPositiveDefinite),
+        (not_spd_full, SetpointRejection::NotPositiveDefinite),
+        (too_stiff, SetpointRejection::StiffnessAboveLimit),
+        (goal(2, &joint), SetpointRejection::JointLimit),
+        (
+            goal(0, &[3.0, 0.0, 0.3]),
+            SetpointRejection::OutsideWorkspace,
+        ),
         (
             goal(0, &[0.5, 0.1, 0.3]).with_duration(-1.0),
-            Rejection::BadDuration,
+            SetpointRejection::BadDuration,
         ),
-        (too_damped, Rejection::GainsAboveRate),
+        (too_damped, SetpointRejection::GainsAboveRate),
     ];
     for (k, (mut sp, reason)) in cases.into_iter().enumerate() {
         sp.header.seq = k as u64 + 10;
@@ -160,7 +163,7 @@ fn gains_the_control_rate_cannot_carry_are_rejected() {
     };
     assert_eq!(
         d.take_setpoint_now(&damping(1, 2.0 * carried)),
-        Rejection::GainsAboveRate.code()
+        SetpointRejection::GainsAboveRate.code()
     );
     assert_eq!(d.take_setpoint_now(&damping(2, carried)), ANSWER_ACCEPTED);
 }
@@ -179,7 +182,7 @@ fn a_workspace_box_and_the_velocity_feed_forward() {
         .unwrap();
     assert_eq!(
         d.take_setpoint_now(&outside),
-        Rejection::OutsideWorkspace.code()
+        SetpointRejection::OutsideWorkspace.code()
     );
     // Inside the box, with a feed-forward: the law damps ẋ − ẋ_d.
     let inside = Setpoint::for_level(3, 2, 0, 3)
@@ -282,7 +285,7 @@ fn setpoints_wait_for_their_state() {
     let mut bad = goal(5, 0.25, 100);
     bad.goal[0] = f64::NAN;
     let a = deliver(&mut d, &s6, &[bad], id).unwrap();
-    assert_eq!((a.seq, a.code), (5, Rejection::NonFinite.code()));
+    assert_eq!((a.seq, a.code), (5, SetpointRejection::NonFinite.code()));
     assert_eq!(d.pending_setpoints(), 0);
     // A full queue rejects with pending_full and changes nothing (the cycle
     // takes at most SETPOINT_BUFFER setpoints per state).
@@ -300,7 +303,7 @@ fn setpoints_wait_for_their_state() {
     let a = deliver(&mut d, &s6, &[goal(99, 0.25, 5000)], id).unwrap();
     assert_eq!(
         (a.seq, a.code, a.rejected),
-        (99, Rejection::PendingFull.code(), 2)
+        (99, SetpointRejection::PendingFull.code(), 2)
     );
     // They drain in order as their states come.
     deliver(&mut d, &state(&sc, 1000 + 9), &[], id);

@@ -15,9 +15,9 @@ use hcc_msgs::{
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN,
     GAIN_STIFFNESS_FULL, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS,
     MAX_NAMESPACE_LEN, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S,
-    Rejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
-    SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
-    STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
+    SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
+    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN,
+    SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer, SetpointRejection,
     TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
     TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
 };
@@ -164,7 +164,7 @@ fn main() {
         ("answer_accepted", ANSWER_ACCEPTED.to_string()),
     ]);
     // Names and reasons are plain ASCII without quotes or backslashes.
-    let rejections: Vec<String> = Rejection::ALL
+    let rejections: Vec<String> = SetpointRejection::ALL
         .iter()
         .map(|r| {
             format!(

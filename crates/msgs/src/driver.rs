@@ -109,7 +109,7 @@ pub struct DriverSettings {
 
 /// Why a received command was not applied.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Rejection {
+pub enum CommandRejection {
     /// Its sequence number repeats or goes back (already seen).
     Old,
     /// It fails validation (schema, joint count, unknown mode/flags, non-finite τ).
@@ -128,7 +128,7 @@ pub enum Offer {
     /// Applicable; `current`: it answers the latest published state.
     Applicable { current: bool },
     /// Not applicable.
-    Rejected(Rejection),
+    Rejected(CommandRejection),
 }
 
 /// What the driver does this period; `tau` of [`DriverLogic::decide`] holds
@@ -163,7 +163,7 @@ pub enum StopReason {
 
 /// Counters of rejected commands, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct RejectionCounts {
+pub struct CommandRejectionCounts {
     pub old: u64,
     pub invalid: u64,
     pub gravity_conflict: u64,
@@ -186,7 +186,7 @@ pub struct DriverLogic {
     gravity: [f64; MAX_JOINTS],
     have_last_tau: bool,
     applied: u64,
-    rejections: RejectionCounts,
+    rejections: CommandRejectionCounts,
 }
 
 impl DriverLogic {
@@ -210,7 +210,7 @@ impl DriverLogic {
             gravity: [0.0; MAX_JOINTS],
             have_last_tau: false,
             applied: 0,
-            rejections: RejectionCounts::default(),
+            rejections: CommandRejectionCounts::default(),
         }
     }
 
@@ -257,7 +257,7 @@ impl DriverLogic {
     }
 
     /// Rejected commands by reason.
-    pub fn rejections(&self) -> RejectionCounts {
+    pub fn rejections(&self) -> CommandRejectionCounts {
         self.rejections
     }
 
@@ -305,16 +305,16 @@ impl DriverLogic {
         let freshness = command_freshness(command.state_seq, latest_seq);
         if self.settings.check_sequence && self.is_old(command.header.seq, freshness) {
             self.rejections.old += 1;
-            return Offer::Rejected(Rejection::Old);
+            return Offer::Rejected(CommandRejection::Old);
         }
         if let Err(e) = command.validate(self.settings.n) {
             self.rejections.invalid += 1;
-            return Offer::Rejected(Rejection::Invalid(e));
+            return Offer::Rejected(CommandRejection::Invalid(e));
         }
         let compensates = self.settings.gravity.driver_compensates();
         if let Err(e) = gravity_agreement(compensates, command.gravity_included()) {
             self.rejections.gravity_conflict += 1;
-            return Offer::Rejected(Rejection::GravityConflict(e));
+            return Offer::Rejected(CommandRejection::GravityConflict(e));
         }
         match freshness {
             CommandFreshness::Current => Offer::Applicable { current: true },
@@ -323,11 +323,11 @@ impl DriverLogic {
             }
             CommandFreshness::Late { cycles } => {
                 self.rejections.too_late += 1;
-                Offer::Rejected(Rejection::TooLate { cycles })
+                Offer::Rejected(CommandRejection::TooLate { cycles })
             }
             CommandFreshness::Future => {
                 self.rejections.future += 1;
-                Offer::Rejected(Rejection::Future)
+                Offer::Rejected(CommandRejection::Future)
             }
         }
     }
@@ -558,21 +558,21 @@ mod tests {
         // The same command again is old.
         assert_eq!(
             logic.offer(&c, s0.header.seq),
-            Offer::Rejected(Rejection::Old)
+            Offer::Rejected(CommandRejection::Old)
         );
         // A command answering an older state is late (tolerance 0).
         let s1 = publish(&mut logic);
         let late = command(1, &s0, [0.0; N], CommandMode::Normal);
         assert_eq!(
             logic.offer(&late, s1.header.seq),
-            Offer::Rejected(Rejection::TooLate { cycles: 1 })
+            Offer::Rejected(CommandRejection::TooLate { cycles: 1 })
         );
         // A command answering a state never published is refused.
         let mut future = command(2, &s1, [0.0; N], CommandMode::Normal);
         future.state_seq = 99;
         assert_eq!(
             logic.offer(&future, s1.header.seq),
-            Offer::Rejected(Rejection::Future)
+            Offer::Rejected(CommandRejection::Future)
         );
         let r = logic.rejections();
         assert_eq!((r.old, r.too_late, r.future), (1, 1, 1));
@@ -601,25 +601,25 @@ mod tests {
         c.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
         assert!(matches!(
             logic.offer(&c, s0.header.seq),
-            Offer::Rejected(Rejection::GravityConflict(_))
+            Offer::Rejected(CommandRejection::GravityConflict(_))
         ));
         let mut c = command(1, &s0, [1.0, 2.0], CommandMode::Normal);
         c.tau[1] = f64::INFINITY;
         assert!(matches!(
             logic.offer(&c, s0.header.seq),
-            Offer::Rejected(Rejection::Invalid(_))
+            Offer::Rejected(CommandRejection::Invalid(_))
         ));
         let mut c = command(2, &s0, [1.0, 2.0], CommandMode::Normal);
         c.mode = 77;
         assert!(matches!(
             logic.offer(&c, s0.header.seq),
-            Offer::Rejected(Rejection::Invalid(_))
+            Offer::Rejected(CommandRejection::Invalid(_))
         ));
         let mut c = command(3, &s0, [1.0, 2.0], CommandMode::Normal);
         c.header.n_joints = 3;
         assert!(matches!(
             logic.offer(&c, s0.header.seq),
-            Offer::Rejected(Rejection::Invalid(_))
+            Offer::Rejected(CommandRejection::Invalid(_))
         ));
     }
 
@@ -818,7 +818,7 @@ mod tests {
         c.flags = COMMAND_FLAG_GRAVITY_INCLUDED;
         assert!(matches!(
             logic.offer(&c, s.header.seq),
-            Offer::Rejected(Rejection::GravityConflict(_))
+            Offer::Rejected(CommandRejection::GravityConflict(_))
         ));
         // The fallback torque includes g: the actuators do not add it.
         for _ in 0..2 {

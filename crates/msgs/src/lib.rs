@@ -107,7 +107,7 @@
 //! | part | version | messages and events |
 //! |------|---------|---------------------|
 //! | driver-facing | [`DRIVER_SCHEMA_VERSION`] | [`JointState`], [`TorqueCommand`], the `state_ready` and `command_ready` events ([`EVENT_STATE_PUBLISHED`], [`EVENT_COMMAND_PUBLISHED`]), the `STATE_FLAG_*` and `COMMAND_FLAG_*` bits, [`DriverStatus`], [`CommandMode`] |
-//! | client-facing | [`CLIENT_SCHEMA_VERSION`] | [`Setpoint`], [`Telemetry`] (with [`TelemetryCounters`], [`TelemetryTimings`], [`SetpointAnswer`]), [`Rejection`] codes, `TELEMETRY_FLAG_*` |
+//! | client-facing | [`CLIENT_SCHEMA_VERSION`] | [`Setpoint`], [`Telemetry`] (with [`TelemetryCounters`], [`TelemetryTimings`], [`SetpointAnswer`]), [`SetpointRejection`] codes, `TELEMETRY_FLAG_*` |
 //!
 //! **The rule.** A change of the layout or the meaning of anything in a
 //! part's row bumps that part's version, and only that part's: a new
@@ -135,7 +135,7 @@
 //! stiffness and/or damping, and a transition duration) on
 //! `hcc/<ns>/setpoint`. [`Setpoint::validate`] does the model-free checks;
 //! the controller checks the rest against its law and model. Every setpoint
-//! is answered with [`ANSWER_ACCEPTED`] or a [`Rejection`] code (stable
+//! is answered with [`ANSWER_ACCEPTED`] or a [`SetpointRejection`] code (stable
 //! numbers) in [`Telemetry::setpoint_answers`]; that extension of
 //! the telemetry layout was schema 2. Schema 3 added the setpoint's
 //! application point ([`Setpoint::apply_at_state_seq`]: the controller keeps
@@ -168,9 +168,9 @@ pub use service::{
 };
 pub use setpoint::{
     ANSWER_ACCEPTED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN, GAIN_STIFFNESS_FULL, MAX_GAIN_ENTRIES,
-    MAX_PENDING_SETPOINTS, MAX_TRANSITION_S, Rejection, SETPOINT, SETPOINT_DAMPING,
-    SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
-    SYMMETRY_TOLERANCE, Setpoint, answer_code,
+    MAX_PENDING_SETPOINTS, MAX_TRANSITION_S, SETPOINT, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN,
+    SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SYMMETRY_TOLERANCE, Setpoint,
+    SetpointRejection, answer_code,
 };
 pub use telemetry::{
     MAX_SETPOINT_CLIENTS, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_CONTACT,

@@ -19,7 +19,7 @@
 //! symmetric positive definite. The controller checks the rest (the level
 //! exists, `dim` equals m_i, the level's stiffness limit, joint limits, the
 //! workspace) and answers every setpoint with an [`ANSWER_ACCEPTED`] code or a
-//! [`Rejection`] code in its telemetry. Nothing here allocates.
+//! [`SetpointRejection`] code in its telemetry. Nothing here allocates.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -57,7 +57,7 @@ pub const MAX_GAIN_ENTRIES: usize = MAX_TASK_DIM * MAX_TASK_DIM;
 /// Setpoints the controller keeps waiting for their application point
 /// ([`Setpoint::apply_at_state_seq`] ahead of the current state), over all
 /// clients. A setpoint that finds them all taken is rejected
-/// ([`Rejection::PendingFull`]).
+/// ([`SetpointRejection::PendingFull`]).
 pub const MAX_PENDING_SETPOINTS: usize = 32;
 
 /// Longest transition a setpoint may ask for, in s (one hour). Longer ones
@@ -71,7 +71,7 @@ pub const MAX_TRANSITION_S: f64 = 3600.0;
 pub const SYMMETRY_TOLERANCE: f64 = 1e-9;
 
 /// The [`Telemetry`](crate::Telemetry) answer code of an accepted setpoint.
-/// Every other answer is a [`Rejection::code`].
+/// Every other answer is a [`SetpointRejection::code`].
 pub const ANSWER_ACCEPTED: u32 = 0;
 
 /// Why a setpoint was rejected. A rejected setpoint changes nothing. The
@@ -88,7 +88,7 @@ pub const ANSWER_ACCEPTED: u32 = 0;
 /// and by its queue of setpoints that wait for their state: `PendingFull`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
-pub enum Rejection {
+pub enum SetpointRejection {
     /// `header.schema_version` differs from [`CLIENT_SCHEMA_VERSION`].
     SchemaMismatch = 1,
     /// `fields` has bits this schema does not define.
@@ -131,9 +131,9 @@ pub enum Rejection {
     GainsAboveRate = 18,
 }
 
-impl Rejection {
+impl SetpointRejection {
     /// Every rejection, in code order.
-    pub const ALL: [Rejection; 18] = [
+    pub const ALL: [SetpointRejection; 18] = [
         Self::SchemaMismatch,
         Self::UnknownFields,
         Self::NothingSet,
@@ -223,7 +223,7 @@ impl Rejection {
     }
 }
 
-impl std::fmt::Display for Rejection {
+impl std::fmt::Display for SetpointRejection {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
@@ -235,11 +235,11 @@ impl std::fmt::Display for Rejection {
     }
 }
 
-impl std::error::Error for Rejection {}
+impl std::error::Error for SetpointRejection {}
 
 /// The answer code of a validation result: [`ANSWER_ACCEPTED`] or the
 /// rejection's code.
-pub const fn answer_code(result: Result<(), Rejection>) -> u32 {
+pub const fn answer_code(result: Result<(), SetpointRejection>) -> u32 {
     match result {
         Ok(()) => ANSWER_ACCEPTED,
         Err(r) => r.code(),
@@ -390,7 +390,7 @@ impl Setpoint {
     }
 
     /// Sets the goal (`dim` values) and [`SETPOINT_GOAL`].
-    pub fn with_goal(mut self, goal: &[f64]) -> Result<Self, Rejection> {
+    pub fn with_goal(mut self, goal: &[f64]) -> Result<Self, SetpointRejection> {
         let dim = self.dim as usize;
         copy_values(&mut self.goal, goal, dim)?;
         self.fields |= SETPOINT_GOAL;
@@ -398,7 +398,7 @@ impl Setpoint {
     }
 
     /// Sets the velocity feed-forward (`dim` values) and [`SETPOINT_VELOCITY`].
-    pub fn with_velocity(mut self, velocity: &[f64]) -> Result<Self, Rejection> {
+    pub fn with_velocity(mut self, velocity: &[f64]) -> Result<Self, SetpointRejection> {
         let dim = self.dim as usize;
         copy_values(&mut self.velocity, velocity, dim)?;
         self.fields |= SETPOINT_VELOCITY;
@@ -407,7 +407,7 @@ impl Setpoint {
 
     /// Sets K from `dim` diagonal values or `dim²` row-major values (the
     /// layout follows the length) and [`SETPOINT_STIFFNESS`].
-    pub fn with_stiffness(mut self, values: &[f64]) -> Result<Self, Rejection> {
+    pub fn with_stiffness(mut self, values: &[f64]) -> Result<Self, SetpointRejection> {
         let dim = self.dim as usize;
         let full = copy_gain(&mut self.stiffness, values, dim)?;
         self.set_layout(GAIN_STIFFNESS_FULL, full);
@@ -416,7 +416,7 @@ impl Setpoint {
     }
 
     /// Sets D like [`Setpoint::with_stiffness`] and [`SETPOINT_DAMPING`].
-    pub fn with_damping(mut self, values: &[f64]) -> Result<Self, Rejection> {
+    pub fn with_damping(mut self, values: &[f64]) -> Result<Self, SetpointRejection> {
         let dim = self.dim as usize;
         let full = copy_gain(&mut self.damping, values, dim)?;
         self.set_layout(GAIN_DAMPING_FULL, full);
@@ -445,33 +445,33 @@ impl Setpoint {
         }
     }
 
-    /// The model-free checks (see [`Rejection`]), in this order: schema,
+    /// The model-free checks (see [`SetpointRejection`]), in this order: schema,
     /// fields, layout, capacities, finiteness of everything used, duration,
     /// the symmetry of a full K and D and the positivity of a diagonal one.
     /// A full matrix's positive definiteness is the controller's to check
     /// (it factorises it; this crate holds no linear algebra).
     /// Allocation-free.
-    pub fn validate(&self) -> Result<(), Rejection> {
+    pub fn validate(&self) -> Result<(), SetpointRejection> {
         if self.header.schema_version != CLIENT_SCHEMA_VERSION {
-            return Err(Rejection::SchemaMismatch);
+            return Err(SetpointRejection::SchemaMismatch);
         }
         if self.fields & !SETPOINT_FIELDS_KNOWN != 0 {
-            return Err(Rejection::UnknownFields);
+            return Err(SetpointRejection::UnknownFields);
         }
         if self.fields == 0 {
-            return Err(Rejection::NothingSet);
+            return Err(SetpointRejection::NothingSet);
         }
         if self.sets(SETPOINT_VELOCITY) && !self.sets(SETPOINT_GOAL) {
-            return Err(Rejection::VelocityWithoutGoal);
+            return Err(SetpointRejection::VelocityWithoutGoal);
         }
         if self.gain_layout & !GAIN_LAYOUT_KNOWN != 0 {
-            return Err(Rejection::UnknownLayout);
+            return Err(SetpointRejection::UnknownLayout);
         }
         if self.level as usize >= MAX_LEVELS {
-            return Err(Rejection::LevelCapacity);
+            return Err(SetpointRejection::LevelCapacity);
         }
         if self.dim == 0 || self.dim as usize > MAX_TASK_DIM {
-            return Err(Rejection::DimensionCapacity);
+            return Err(SetpointRejection::DimensionCapacity);
         }
         let used: [(u32, &[f64]); 4] = [
             (SETPOINT_GOAL, self.goal()),
@@ -481,14 +481,14 @@ impl Setpoint {
         ];
         for (bit, values) in used {
             if self.sets(bit) && values.iter().any(|v| !v.is_finite()) {
-                return Err(Rejection::NonFinite);
+                return Err(SetpointRejection::NonFinite);
             }
         }
         if !self.duration_s.is_finite() {
-            return Err(Rejection::NonFinite);
+            return Err(SetpointRejection::NonFinite);
         }
         if !(0.0..=MAX_TRANSITION_S).contains(&self.duration_s) {
-            return Err(Rejection::BadDuration);
+            return Err(SetpointRejection::BadDuration);
         }
         let m = self.dim();
         if self.sets(SETPOINT_STIFFNESS) {
@@ -508,12 +508,12 @@ impl Default for Setpoint {
 }
 
 /// Copies `values` (length `dim`) into the front of `dst`, the rest zero.
-fn copy_values(dst: &mut [f64], values: &[f64], dim: usize) -> Result<(), Rejection> {
+fn copy_values(dst: &mut [f64], values: &[f64], dim: usize) -> Result<(), SetpointRejection> {
     if dim == 0 || dim > dst.len() || values.len() != dim {
         return Err(if dim == 0 || dim > MAX_TASK_DIM {
-            Rejection::DimensionCapacity
+            SetpointRejection::DimensionCapacity
         } else {
-            Rejection::DimensionMismatch
+            SetpointRejection::DimensionMismatch
         });
     }
     dst.fill(0.0);
@@ -522,13 +522,13 @@ fn copy_values(dst: &mut [f64], values: &[f64], dim: usize) -> Result<(), Reject
 }
 
 /// Copies a diagonal (`dim` values) or full (`dim²`) gain; true if full.
-fn copy_gain(dst: &mut [f64], values: &[f64], dim: usize) -> Result<bool, Rejection> {
+fn copy_gain(dst: &mut [f64], values: &[f64], dim: usize) -> Result<bool, SetpointRejection> {
     if dim == 0 || dim > MAX_TASK_DIM {
-        return Err(Rejection::DimensionCapacity);
+        return Err(SetpointRejection::DimensionCapacity);
     }
     let full = values.len() == dim * dim && dim > 1;
     if !full && values.len() != dim {
-        return Err(Rejection::DimensionMismatch);
+        return Err(SetpointRejection::DimensionMismatch);
     }
     dst.fill(0.0);
     dst[..values.len()].copy_from_slice(values);
@@ -550,19 +550,19 @@ fn gain_at(values: &[f64], full: bool, m: usize, j: usize, k: usize) -> f64 {
 /// positive (it is then positive definite), a full row-major matrix
 /// symmetric to [`SYMMETRY_TOLERANCE`] (its positive definiteness is checked
 /// by the controller, which factorises it).
-fn check_gain_shape(values: &[f64], full: bool, m: usize) -> Result<(), Rejection> {
+fn check_gain_shape(values: &[f64], full: bool, m: usize) -> Result<(), SetpointRejection> {
     if !full {
         return if values.iter().all(|&v| v > 0.0) {
             Ok(())
         } else {
-            Err(Rejection::NotPositiveDefinite)
+            Err(SetpointRejection::NotPositiveDefinite)
         };
     }
     let scale = values.iter().fold(0.0_f64, |s, v| s.max(v.abs()));
     for j in 0..m {
         for k in 0..j {
             if (values[j * m + k] - values[k * m + j]).abs() > SYMMETRY_TOLERANCE * scale {
-                return Err(Rejection::NotSymmetric);
+                return Err(SetpointRejection::NotSymmetric);
             }
         }
     }
@@ -593,24 +593,24 @@ mod tests {
 
     #[test]
     fn codes_are_stable_and_round_trip() {
-        for (k, r) in Rejection::ALL.iter().enumerate() {
+        for (k, r) in SetpointRejection::ALL.iter().enumerate() {
             assert_eq!(r.code() as usize, k + 1);
-            assert_eq!(Rejection::from_code(r.code()), Some(*r));
+            assert_eq!(SetpointRejection::from_code(r.code()), Some(*r));
             assert!(!r.reason().is_empty());
             assert!(r.to_string().contains(r.name()));
         }
-        assert_eq!(Rejection::from_code(ANSWER_ACCEPTED), None);
-        assert_eq!(Rejection::from_code(19), None);
-        assert_eq!(Rejection::from_code(u32::MAX), None);
+        assert_eq!(SetpointRejection::from_code(ANSWER_ACCEPTED), None);
+        assert_eq!(SetpointRejection::from_code(19), None);
+        assert_eq!(SetpointRejection::from_code(u32::MAX), None);
         // The published numbers (docs and other-language clients rely on them).
-        assert_eq!(Rejection::SchemaMismatch.code(), 1);
-        assert_eq!(Rejection::NonFinite.code(), 8);
-        assert_eq!(Rejection::NotPositiveDefinite.code(), 11);
-        assert_eq!(Rejection::OutsideWorkspace.code(), 16);
-        assert_eq!(Rejection::PendingFull.code(), 17);
-        assert_eq!(Rejection::GainsAboveRate.code(), 18);
+        assert_eq!(SetpointRejection::SchemaMismatch.code(), 1);
+        assert_eq!(SetpointRejection::NonFinite.code(), 8);
+        assert_eq!(SetpointRejection::NotPositiveDefinite.code(), 11);
+        assert_eq!(SetpointRejection::OutsideWorkspace.code(), 16);
+        assert_eq!(SetpointRejection::PendingFull.code(), 17);
+        assert_eq!(SetpointRejection::GainsAboveRate.code(), 18);
         assert_eq!(answer_code(Ok(())), 0);
-        assert_eq!(answer_code(Err(Rejection::JointLimit)), 15);
+        assert_eq!(answer_code(Err(SetpointRejection::JointLimit)), 15);
     }
 
     #[test]
@@ -626,50 +626,53 @@ mod tests {
     fn header_fields_and_capacities_are_checked() {
         let mut s = goal(0, &[1.0]);
         s.header.schema_version = CLIENT_SCHEMA_VERSION + 1;
-        assert_eq!(s.validate(), Err(Rejection::SchemaMismatch));
+        assert_eq!(s.validate(), Err(SetpointRejection::SchemaMismatch));
         let mut s = goal(0, &[1.0]);
         s.fields |= 1 << 7;
-        assert_eq!(s.validate(), Err(Rejection::UnknownFields));
+        assert_eq!(s.validate(), Err(SetpointRejection::UnknownFields));
         let mut s = goal(0, &[1.0]);
         s.fields = 0;
-        assert_eq!(s.validate(), Err(Rejection::NothingSet));
+        assert_eq!(s.validate(), Err(SetpointRejection::NothingSet));
         let mut s = goal(0, &[1.0]);
         s.fields = SETPOINT_VELOCITY;
-        assert_eq!(s.validate(), Err(Rejection::VelocityWithoutGoal));
+        assert_eq!(s.validate(), Err(SetpointRejection::VelocityWithoutGoal));
         let mut s = goal(0, &[1.0]);
         s.gain_layout = 1 << 5;
-        assert_eq!(s.validate(), Err(Rejection::UnknownLayout));
+        assert_eq!(s.validate(), Err(SetpointRejection::UnknownLayout));
         assert_eq!(
             goal(MAX_LEVELS as u32, &[1.0]).validate(),
-            Err(Rejection::LevelCapacity)
+            Err(SetpointRejection::LevelCapacity)
         );
-        assert_eq!(goal(0, &[]).validate(), Err(Rejection::DimensionCapacity));
+        assert_eq!(
+            goal(0, &[]).validate(),
+            Err(SetpointRejection::DimensionCapacity)
+        );
         let mut s = goal(0, &[1.0]);
         s.dim = MAX_TASK_DIM as u32 + 1;
-        assert_eq!(s.validate(), Err(Rejection::DimensionCapacity));
+        assert_eq!(s.validate(), Err(SetpointRejection::DimensionCapacity));
         s.dim = u32::MAX;
-        assert_eq!(s.validate(), Err(Rejection::DimensionCapacity));
+        assert_eq!(s.validate(), Err(SetpointRejection::DimensionCapacity));
         assert_eq!(s.goal().len(), MAX_TASK_DIM, "accessors clamp");
     }
 
     #[test]
     fn only_used_values_must_be_finite() {
         let mut s = goal(0, &[1.0, f64::NAN]);
-        assert_eq!(s.validate(), Err(Rejection::NonFinite));
+        assert_eq!(s.validate(), Err(SetpointRejection::NonFinite));
         s.goal[1] = 0.0;
         s.goal[5] = f64::NAN; // beyond dim: ignored
         s.velocity[0] = f64::INFINITY; // velocity not set: ignored
         s.stiffness[0] = f64::NAN; // stiffness not set: ignored
         assert_eq!(s.validate(), Ok(()));
         s.fields |= SETPOINT_VELOCITY;
-        assert_eq!(s.validate(), Err(Rejection::NonFinite));
+        assert_eq!(s.validate(), Err(SetpointRejection::NonFinite));
         let mut s = goal(0, &[1.0]);
         s.duration_s = f64::NAN;
-        assert_eq!(s.validate(), Err(Rejection::NonFinite));
+        assert_eq!(s.validate(), Err(SetpointRejection::NonFinite));
         s.duration_s = -0.1;
-        assert_eq!(s.validate(), Err(Rejection::BadDuration));
+        assert_eq!(s.validate(), Err(SetpointRejection::BadDuration));
         s.duration_s = MAX_TRANSITION_S * 2.0;
-        assert_eq!(s.validate(), Err(Rejection::BadDuration));
+        assert_eq!(s.validate(), Err(SetpointRejection::BadDuration));
         s.duration_s = MAX_TRANSITION_S;
         assert_eq!(s.validate(), Ok(()));
     }
@@ -697,25 +700,25 @@ mod tests {
         let base = Setpoint::for_level(1, 1, 0, 3);
         assert_eq!(
             base.with_goal(&[1.0]).unwrap_err(),
-            Rejection::DimensionMismatch
+            SetpointRejection::DimensionMismatch
         );
         assert_eq!(
             base.with_stiffness(&[1.0; 4]).unwrap_err(),
-            Rejection::DimensionMismatch
+            SetpointRejection::DimensionMismatch
         );
         assert_eq!(
             Setpoint::for_level(1, 1, 0, 0).with_goal(&[]).unwrap_err(),
-            Rejection::DimensionCapacity
+            SetpointRejection::DimensionCapacity
         );
         assert_eq!(
             Setpoint::for_level(1, 1, 0, 33)
                 .with_damping(&[1.0; 33])
                 .unwrap_err(),
-            Rejection::DimensionCapacity
+            SetpointRejection::DimensionCapacity
         );
         // Too many levels is left for validate to name.
         let far = Setpoint::for_level(1, 1, 99, 1).with_goal(&[0.0]).unwrap();
-        assert_eq!(far.validate(), Err(Rejection::LevelCapacity));
+        assert_eq!(far.validate(), Err(SetpointRejection::LevelCapacity));
     }
 
     #[test]
@@ -729,10 +732,10 @@ mod tests {
         assert_eq!(s.stiffness_at(2, 2), 200.0);
         assert_eq!(s.stiffness_at(0, 2), 0.0);
         s.damping[1] = 0.0;
-        assert_eq!(s.validate(), Err(Rejection::NotPositiveDefinite));
+        assert_eq!(s.validate(), Err(SetpointRejection::NotPositiveDefinite));
         s.damping[1] = 40.0;
         s.stiffness[0] = -1.0;
-        assert_eq!(s.validate(), Err(Rejection::NotPositiveDefinite));
+        assert_eq!(s.validate(), Err(SetpointRejection::NotPositiveDefinite));
     }
 
     #[test]
@@ -743,7 +746,7 @@ mod tests {
         assert_eq!(s.stiffness().len(), 4);
         // Not symmetric.
         let s = full_stiffness(2, &[4.0, 1.0, 0.0, 3.0]);
-        assert_eq!(s.validate(), Err(Rejection::NotSymmetric));
+        assert_eq!(s.validate(), Err(SetpointRejection::NotSymmetric));
         // Rounding-level asymmetry is forgiven.
         let s = full_stiffness(2, &[4.0, 1.0, 1.0 + 1e-12, 3.0]);
         assert_eq!(s.validate(), Ok(()));

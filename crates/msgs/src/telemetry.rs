@@ -167,7 +167,7 @@ pub struct SetpointAnswer {
     pub seq: u64,
     /// Setpoints answered for this client so far (0: an empty slot).
     pub answered: u64,
-    /// [`crate::ANSWER_ACCEPTED`] or a [`crate::Rejection`] code.
+    /// [`crate::ANSWER_ACCEPTED`] or a [`crate::SetpointRejection`] code.
     pub code: u32,
     /// The level it addressed (as sent).
     pub level: u32,

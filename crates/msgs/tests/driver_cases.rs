@@ -3,7 +3,7 @@
 //! `python/tests/test_driver_cases.py`): both languages agree on every branch.
 
 use hcc_msgs::driver::{
-    Action, DriverLogic, DriverSettings, Gravity, Offer, Rejection, StopMode, StopReason,
+    Action, CommandRejection, DriverLogic, DriverSettings, Gravity, Offer, StopMode, StopReason,
 };
 use hcc_msgs::{
     COMMAND_FLAG_GRAVITY_INCLUDED, DriverStatus, JointState, MAX_JOINTS, TorqueCommand,
@@ -90,11 +90,11 @@ fn offer_result(o: Offer) -> String {
     match o {
         Offer::Applicable { current: true } => "applicable_current".into(),
         Offer::Applicable { current: false } => "applicable_late".into(),
-        Offer::Rejected(Rejection::Old) => "old".into(),
-        Offer::Rejected(Rejection::Invalid(_)) => "invalid".into(),
-        Offer::Rejected(Rejection::GravityConflict(_)) => "gravity_conflict".into(),
-        Offer::Rejected(Rejection::Future) => "future".into(),
-        Offer::Rejected(Rejection::TooLate { cycles }) => format!("too_late:{cycles}"),
+        Offer::Rejected(CommandRejection::Old) => "old".into(),
+        Offer::Rejected(CommandRejection::Invalid(_)) => "invalid".into(),
+        Offer::Rejected(CommandRejection::GravityConflict(_)) => "gravity_conflict".into(),
+        Offer::Rejected(CommandRejection::Future) => "future".into(),
+        Offer::Rejected(CommandRejection::TooLate { cycles }) => format!("too_late:{cycles}"),
     }
 }
 

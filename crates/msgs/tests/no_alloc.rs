@@ -2,8 +2,8 @@
 //! allocate: a counting global allocator must see zero allocations.
 
 use hcc_msgs::{
-    GAIN_STIFFNESS_FULL, JointState, MsgError, Rejection, SETPOINT_DAMPING, SETPOINT_GOAL,
-    SETPOINT_STIFFNESS, SETPOINT_VELOCITY, SequenceChecker, Setpoint, Telemetry, TorqueCommand,
+    GAIN_STIFFNESS_FULL, JointState, MsgError, SETPOINT_DAMPING, SETPOINT_GOAL, SETPOINT_STIFFNESS,
+    SETPOINT_VELOCITY, SequenceChecker, Setpoint, SetpointRejection, Telemetry, TorqueCommand,
     answer_code, check_gravity_agreement, command_freshness, monotonic_now_ns,
 };
 
@@ -151,11 +151,12 @@ fn setpoint_validation_does_not_allocate() {
         if setpoint.validate().is_err() {
             errors += 1;
         }
-        if bad.validate() != Err(Rejection::NotSymmetric) {
+        if bad.validate() != Err(SetpointRejection::NotSymmetric) {
             errors += 1;
         }
         let code = answer_code(bad.validate());
-        if Rejection::from_code(code).map(Rejection::name) != Some("not_symmetric") {
+        if SetpointRejection::from_code(code).map(SetpointRejection::name) != Some("not_symmetric")
+        {
             errors += 1;
         }
     }

@@ -4,12 +4,14 @@
 //! positive, a full matrix symmetric). Both by a Cholesky factorisation
 //! (`hcc_linalg::cholesky_in_place_slice`) in a stack buffer: allocation-free.
 
-use hcc_msgs::{MAX_GAIN_ENTRIES, Rejection, SETPOINT_DAMPING, SETPOINT_STIFFNESS, Setpoint};
+use hcc_msgs::{
+    MAX_GAIN_ENTRIES, SETPOINT_DAMPING, SETPOINT_STIFFNESS, Setpoint, SetpointRejection,
+};
 
 /// A full K and D that the setpoint sets are positive definite
-/// ([`Rejection::NotPositiveDefinite`] otherwise; a diagonal one was checked
+/// ([`SetpointRejection::NotPositiveDefinite`] otherwise; a diagonal one was checked
 /// by [`Setpoint::validate`]).
-pub(super) fn check_positive_definite(sp: &Setpoint) -> Result<(), Rejection> {
+pub(super) fn check_positive_definite(sp: &Setpoint) -> Result<(), SetpointRejection> {
     let m = sp.dim();
     let gains = [
         (SETPOINT_STIFFNESS, sp.stiffness_full(), sp.stiffness()),
@@ -17,7 +19,7 @@ pub(super) fn check_positive_definite(sp: &Setpoint) -> Result<(), Rejection> {
     ];
     for (bit, full, values) in gains {
         if sp.sets(bit) && full && !positive_definite(|j, k| values[j * m + k], m) {
-            return Err(Rejection::NotPositiveDefinite);
+            return Err(SetpointRejection::NotPositiveDefinite);
         }
     }
     Ok(())
@@ -92,19 +94,19 @@ mod tests {
         assert_eq!(s.validate(), Ok(()));
         assert_eq!(
             check_positive_definite(&s),
-            Err(Rejection::NotPositiveDefinite)
+            Err(SetpointRejection::NotPositiveDefinite)
         );
         // Positive semi-definite is rejected too.
         let s = full_stiffness(2, &[1.0, 1.0, 1.0, 1.0]);
         assert_eq!(
             check_positive_definite(&s),
-            Err(Rejection::NotPositiveDefinite)
+            Err(SetpointRejection::NotPositiveDefinite)
         );
         // Huge values overflow to NaN in the factorisation: rejected, no panic.
         let s = full_stiffness(2, &[1e308, 1e308, 1e308, 1e308]);
         assert_eq!(
             check_positive_definite(&s),
-            Err(Rejection::NotPositiveDefinite)
+            Err(SetpointRejection::NotPositiveDefinite)
         );
         // The largest: a 32×32 SPD matrix (diagonally dominant).
         let m = MAX_TASK_DIM;
@@ -124,7 +126,7 @@ mod tests {
         assert_eq!(s.validate(), Ok(()));
         assert_eq!(
             check_positive_definite(&s),
-            Err(Rejection::NotPositiveDefinite)
+            Err(SetpointRejection::NotPositiveDefinite)
         );
     }
 }

@@ -21,7 +21,7 @@
 //! reached is taken at once; one due later waits in a preallocated queue of
 //! [`MAX_PENDING_SETPOINTS`](hcc_msgs::MAX_PENDING_SETPOINTS) (arrival order) until [`SetpointHandler::apply_due`]
 //! finds its state, and is answered then. The model-free checks reject at
-//! receipt; a full queue rejects with [`Rejection::PendingFull`]. A setpoint
+//! receipt; a full queue rejects with [`SetpointRejection::PendingFull`]. A setpoint
 //! that arrives after its state is taken at once and counted late.
 //!
 //! [`SetpointHandler::advance`] moves every transition by one period and hands
@@ -34,9 +34,9 @@ use hcc_config::setpoint_limits::SetpointLimits;
 use hcc_control::transition::{GoalKind, Target, Transition};
 use hcc_control::{Controller, TaskSpec};
 use hcc_msgs::{
-    ANSWER_ACCEPTED, MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, Rejection, SETPOINT_DAMPING,
-    SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer, Telemetry,
-    answer_code,
+    ANSWER_ACCEPTED, MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, SETPOINT_DAMPING,
+    SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer,
+    SetpointRejection, Telemetry, answer_code,
 };
 use nalgebra::DMatrix;
 
@@ -193,7 +193,7 @@ impl SetpointHandler {
         if self.pending.push(setpoint) {
             return None;
         }
-        let code = Rejection::PendingFull.code();
+        let code = SetpointRejection::PendingFull.code();
         self.record(setpoint, code, 0.0, false);
         Some(code)
     }
@@ -229,19 +229,19 @@ impl SetpointHandler {
     }
 
     /// The law-side checks (module docs), after the model-free ones.
-    fn check(&self, sp: &Setpoint) -> Result<(), Rejection> {
+    fn check(&self, sp: &Setpoint) -> Result<(), SetpointRejection> {
         sp.validate()?;
         gain_check::check_positive_definite(sp)?;
         let level = self
             .levels
             .get(sp.level as usize)
-            .ok_or(Rejection::UnknownLevel)?;
+            .ok_or(SetpointRejection::UnknownLevel)?;
         let m = level.transition.dim();
         if sp.dim() != m {
-            return Err(Rejection::DimensionMismatch);
+            return Err(SetpointRejection::DimensionMismatch);
         }
         if sp.sets(SETPOINT_STIFFNESS) && !gain_check::stiffness_within(sp, level.max_stiffness) {
-            return Err(Rejection::StiffnessAboveLimit);
+            return Err(SetpointRejection::StiffnessAboveLimit);
         }
         if !sp.sets(SETPOINT_GOAL) {
             return Ok(());
@@ -252,7 +252,7 @@ impl SetpointHandler {
                 let (lo, hi) = (self.lower[j], self.upper[j]);
                 // A joint without limits (continuous) has lower ≥ upper in the model.
                 if lo < hi && !(lo..=hi).contains(&goal[a]) {
-                    return Err(Rejection::JointLimit);
+                    return Err(SetpointRejection::JointLimit);
                 }
             }
         }
@@ -260,19 +260,19 @@ impl SetpointHandler {
         if inside {
             Ok(())
         } else {
-            Err(Rejection::OutsideWorkspace)
+            Err(SetpointRejection::OutsideWorkspace)
         }
     }
 
     /// The gains of a checked setpoint against the control rate at the
     /// state of the last cycle (hcc_control::rate): K or D more than the
-    /// period carries is refused with [`Rejection::GainsAboveRate`]. Leaves the
+    /// period carries is refused with [`SetpointRejection::GainsAboveRate`]. Leaves the
     /// symmetrised gains in the level's buffers for [`SetpointHandler::start`].
     fn check_gain_rate(
         &mut self,
         sp: &Setpoint,
         controller: &mut Controller,
-    ) -> Result<(), Rejection> {
+    ) -> Result<(), SetpointRejection> {
         let i = sp.level as usize;
         let level = &mut self.levels[i];
         let m = level.transition.dim();
@@ -292,7 +292,7 @@ impl SetpointHandler {
         }
         controller
             .check_gain_rate(i, k, d)
-            .map_err(|_| Rejection::GainsAboveRate)
+            .map_err(|_| SetpointRejection::GainsAboveRate)
     }
 
     /// Starts the accepted setpoint's transition (its gains symmetrised by

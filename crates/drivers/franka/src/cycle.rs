@@ -25,7 +25,8 @@
 
 use franka::RobotState;
 use hcc_msgs::driver::{
-    Action, DriverLogic, DriverSettings, Gravity, Offer, RejectionCounts, StopMode, StopReason,
+    Action, CommandRejectionCounts, DriverLogic, DriverSettings, Gravity, Offer, StopMode,
+    StopReason,
 };
 use hcc_msgs::ipc::{self, DriverPorts, PreLoan};
 use hcc_msgs::{
@@ -190,7 +191,7 @@ pub struct FrankaCycle<'a> {
     /// A stop is ramping down.
     stopping: bool,
     counts: CycleCounts,
-    rejections: RejectionCounts,
+    rejections: CommandRejectionCounts,
     timings: CycleTimings,
     /// Misses before this motion (the logic counts one motion).
     missed_before: u64,
@@ -223,7 +224,7 @@ impl<'a> FrankaCycle<'a> {
                 min_success_permille: 1000,
                 ..CycleCounts::default()
             },
-            rejections: RejectionCounts::default(),
+            rejections: CommandRejectionCounts::default(),
             timings: CycleTimings::new(),
             missed_before: 0,
             fallback_before: 0,
@@ -269,10 +270,10 @@ impl<'a> FrankaCycle<'a> {
     }
 
     /// Rejected commands over all motions.
-    pub fn rejections(&self) -> RejectionCounts {
+    pub fn rejections(&self) -> CommandRejectionCounts {
         let r = self.logic.rejections();
         let s = self.rejections;
-        RejectionCounts {
+        CommandRejectionCounts {
             old: s.old + r.old,
             invalid: s.invalid + r.invalid,
             gravity_conflict: s.gravity_conflict + r.gravity_conflict,
