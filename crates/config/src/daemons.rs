@@ -1,7 +1,6 @@
 //! `[controller_daemon]` and `[sim_daemon]`: the settings of the daemons.
 
 use hcc_model::Model;
-use hcc_rt::WaitStrategy;
 use nalgebra::DVector;
 
 use crate::context::Ctx;
@@ -14,7 +13,9 @@ pub struct ControllerDaemon {
     pub cpu_core: Option<usize>,
     pub sched_priority: Option<i32>,
     pub mlock: bool,
-    pub wait_strategy: WaitStrategy,
+    /// `wait_strategy` as written (none: the runtime's default); the
+    /// runtime's to check (`hcc_rt::WaitStrategy`, at the daemon's start-up).
+    pub wait_strategy: Option<String>,
     /// Per joint, Nm (URDF effort limits unless configured; may be +inf).
     pub torque_limits: DVector<f64>,
     pub stale_timeout_ms: f64,
@@ -86,7 +87,7 @@ pub(crate) fn resolve_controller_daemon(
         cpu_core: d.cpu_core,
         sched_priority: d.sched_priority,
         mlock: d.mlock,
-        wait_strategy: d.wait_strategy,
+        wait_strategy: d.wait_strategy.clone(),
         torque_limits,
         stale_timeout_ms,
         warm_up: d.warm_up.unwrap_or(true),

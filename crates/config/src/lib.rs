@@ -60,9 +60,6 @@ mod tasks;
 
 pub use daemons::{ControllerDaemon, MAX_CPU_CORE, STALE_TIMEOUT_PERIODS, SimDaemon};
 pub use error::ConfigError;
-/// How a daemon loop waits (`[controller_daemon] wait_strategy`): the one
-/// type of the runtime, re-exported.
-pub use hcc_rt::WaitStrategy;
 pub use scenario::Scenario;
 pub use schema::*;
 pub use simulation::{Simulation, Wrench};

@@ -101,6 +101,7 @@ impl Scenario {
         });
         Ok(Scenario {
             path: path.to_path_buf(),
+            text: text.to_string(),
             name,
             urdf_path,
             model,

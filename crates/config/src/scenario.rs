@@ -22,6 +22,9 @@ use crate::torque_filter;
 pub struct Scenario {
     /// The scenario file.
     pub path: PathBuf,
+    /// The file's text (to name the line of a field in a later check's
+    /// error, [`Scenario::error_at`]).
+    pub(crate) text: String,
     /// Name (from the file or its stem).
     pub name: String,
     /// Resolved URDF path.
@@ -91,12 +94,9 @@ impl Scenario {
             return Ok(());
         }
         let path = format!("{section}.cpu_core");
-        let text = std::fs::read_to_string(&self.path).unwrap_or_default();
         let mut sorted = available.to_vec();
         sorted.sort_unstable();
-        Err(invalid(
-            &self.path,
-            &text,
+        Err(self.error_at(
             &path,
             format!(
                 "CPU core {core} is not available to this process (available: {})",
@@ -111,6 +111,14 @@ impl Scenario {
                 }
             ),
         ))
+    }
+
+    /// An error of a check made after loading, by the layer whose setting it
+    /// is (the runtime's wait strategy, a daemon's CPU core): `path` is the
+    /// dotted field (`controller_daemon.wait_strategy`), named with the file
+    /// and its line as [`Scenario::load`]'s own errors are.
+    pub fn error_at(&self, path: &str, message: impl Into<String>) -> ConfigError {
+        invalid(&self.path, &self.text, path, message)
     }
 
     /// Switches the Coriolis cancellation τ_μ (eq. 22) on or off (e.g. for the ablation).

@@ -2,7 +2,6 @@
 //! unknown fields. Values are checked and resolved against the robot model in
 //! [`crate::Scenario::load`].
 
-use hcc_rt::WaitStrategy;
 use serde::Deserialize;
 
 /// Root of a scenario file.
@@ -337,9 +336,8 @@ pub struct ControllerDaemonSection {
     #[serde(default)]
     pub mlock: bool,
     /// How the control loop waits for a new joint state (`event` or
-    /// `hybrid`, the default).
-    #[serde(default)]
-    pub wait_strategy: WaitStrategy,
+    /// `hybrid`, the default): the runtime's to check (`hcc_rt::WaitStrategy`).
+    pub wait_strategy: Option<String>,
     /// Torque limits, Nm (scalar or per joint; default: the URDF effort limits).
     pub torque_limits: Option<PerJoint>,
     /// No joint state for this long: the driver is declared lost, ms

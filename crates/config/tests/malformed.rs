@@ -397,12 +397,6 @@ fn cases() -> Vec<(&'static str, String, &'static str, Option<usize>)> {
             Some(50),
         ),
         (
-            "wait strategy",
-            edit("cpu_core = 1", "cpu_core = 1\nwait_strategy = \"spin\""),
-            "controller_daemon.wait_strategy",
-            Some(50),
-        ),
-        (
             "negative torque limit",
             edit(
                 "torque_limits = 100.0",

@@ -49,6 +49,6 @@ pub use thread::{
     prepare_rt_thread, set_fifo,
 };
 pub use upkeep::{ConnectionUpkeep, UpkeepCounts};
-pub use wait::WaitStrategy;
+pub use wait::{UnknownWaitStrategy, WaitStrategy};
 
 pub use logging::init_logging;

@@ -35,6 +35,31 @@ pub enum WaitStrategy {
     Hybrid,
 }
 
+/// A wait strategy's name that is not one (`WaitStrategy::from_str`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownWaitStrategy(pub String);
+
+impl std::fmt::Display for UnknownWaitStrategy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "unknown wait strategy {:?} (event or hybrid)", self.0)
+    }
+}
+
+impl std::error::Error for UnknownWaitStrategy {}
+
+impl std::str::FromStr for WaitStrategy {
+    type Err = UnknownWaitStrategy;
+
+    /// `event` or `hybrid` (lowercase, as in the TOML and on the command line).
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        match name {
+            "event" => Ok(WaitStrategy::Event),
+            "hybrid" => Ok(WaitStrategy::Hybrid),
+            _ => Err(UnknownWaitStrategy(name.to_string())),
+        }
+    }
+}
+
 impl WaitStrategy {
     /// The name used in the TOML, on the command line and in reports.
     pub fn name(self) -> &'static str {
@@ -91,6 +116,14 @@ mod tests {
         assert_eq!(s.wait_strategy, WaitStrategy::Hybrid);
         assert!(toml::from_str::<Section>("wait_strategy = \"spin\"").is_err());
         assert!(toml::from_str::<Section>("wait_strategy = \"Event\"").is_err());
+        // The names as the scenario's [controller_daemon] holds them.
+        assert_eq!("event".parse(), Ok(WaitStrategy::Event));
+        assert_eq!("hybrid".parse(), Ok(WaitStrategy::Hybrid));
+        let e = "spin".parse::<WaitStrategy>().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "unknown wait strategy \"spin\" (event or hybrid)"
+        );
     }
 
     #[test]

@@ -22,7 +22,7 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use hcc_config::WaitStrategy;
+use hcc_config::ConfigError;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleError, CycleSettings};
 use hcc_msgs::ipc::{
@@ -36,7 +36,7 @@ use hcc_msgs::{
 
 use crate::status::LoopStatus;
 use crate::warm_up::{WarmUp, WarmUpOverlaps};
-use hcc_rt as rt;
+use hcc_rt::{self as rt, WaitStrategy};
 use hcc_timing::LatencyHistogram;
 
 /// Longest single blocking wait, so that a stop request is seen promptly.
@@ -118,18 +118,26 @@ pub struct LoopSettings {
 }
 
 impl LoopSettings {
-    /// Settings for a scenario (its cycle, `[controller_daemon]`).
-    pub fn from_scenario(scenario: &hcc_config::Scenario) -> LoopSettings {
+    /// Settings for a scenario (its cycle, `[controller_daemon]`); the
+    /// runtime checks the wait strategy's name (an error names the field and
+    /// its line).
+    pub fn from_scenario(scenario: &hcc_config::Scenario) -> Result<LoopSettings, ConfigError> {
         let d = &scenario.controller_daemon;
-        LoopSettings {
+        let wait = match &d.wait_strategy {
+            None => WaitStrategy::default(),
+            Some(name) => name.parse().map_err(|e: rt::UnknownWaitStrategy| {
+                scenario.error_at("controller_daemon.wait_strategy", e.to_string())
+            })?,
+        };
+        Ok(LoopSettings {
             cycle: CycleSettings::from_scenario(scenario),
-            wait: d.wait_strategy,
+            wait,
             stale_timeout_ns: (d.stale_timeout_ms * 1e6).round() as u64,
             hybrid_lead_ns: rt::HYBRID_LEAD_NS,
             hybrid_spin_ns: 200_000,
             telemetry_every: 1,
             warm_up: d.warm_up,
-        }
+        })
     }
 }
 

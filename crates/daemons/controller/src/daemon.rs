@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use hcc_config::{Scenario, WaitStrategy};
+use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, IpcNode, Services};
@@ -32,7 +32,7 @@ use tracing::{error, info, warn};
 use crate::control_loop::{ControlLoop, LoopSettings, Outcome, Ports};
 use crate::status::LoopStatus;
 use hcc_cycle::CycleCounters;
-use hcc_rt::{self as rt, RtReport, RtSettings};
+use hcc_rt::{self as rt, RtReport, RtSettings, WaitStrategy};
 
 /// Cycles after which the allocator counters are taken as the baseline.
 const WARM_UP_CYCLES: u64 = 1_000;
@@ -110,7 +110,7 @@ fn load(args: &Args) -> Result<Setup> {
     let names =
         ServiceNames::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("--namespace")?;
     let file_prefix = args.ipc.file_prefix();
-    let mut settings = LoopSettings::from_scenario(&scenario);
+    let mut settings = LoopSettings::from_scenario(&scenario)?;
     if let Some(w) = args.wait {
         settings.wait = w;
     }

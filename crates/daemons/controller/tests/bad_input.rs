@@ -8,7 +8,7 @@
 
 use std::path::PathBuf;
 
-use hcc_config::{Scenario, WaitStrategy};
+use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{
@@ -18,6 +18,7 @@ use hcc_msgs::{
     CommandMode, JointState, MAX_JOINTS, Namespace, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
     ServiceNames, TelemetryCounters, TorqueCommand,
 };
+use hcc_rt::WaitStrategy;
 use iceoryx2::prelude::SignalHandlingMode;
 
 fn scenario() -> Scenario {
@@ -59,7 +60,7 @@ impl Rig {
         let ports = Ports::open(&services).unwrap();
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = LoopSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario).unwrap();
         settings.wait = WaitStrategy::Event;
         if let Some(l) = limits {
             settings.cycle.torque_limits = vec![l; n];
@@ -271,7 +272,9 @@ fn a_silent_driver_is_declared_lost_after_the_timeout_not_before() {
     let prefix = format!("hcctst{}_", std::process::id());
     {
         let mut rig = Rig::new(&prefix, "stale_timing", None);
-        let timeout_ns = LoopSettings::from_scenario(&scenario()).stale_timeout_ns;
+        let timeout_ns = LoopSettings::from_scenario(&scenario())
+            .unwrap()
+            .stale_timeout_ns;
         assert_eq!(timeout_ns, 3_000_000, "three periods at 1 kHz");
         let mut waits = Vec::new();
         for _ in 0..10 {
@@ -408,6 +411,42 @@ fn random_states_never_panic_or_command_a_torque_spike() {
     cleanup(&prefix);
 }
 
+/// The wait strategy is the runtime's to check: a name it does not know is
+/// refused when the daemon's settings are made, naming the field and its
+/// line as the scenario's own errors do.
+#[test]
+fn an_unknown_wait_strategy_is_refused_with_its_field_and_line() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/panda-wall.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("wait_strategy = \"hybrid\""));
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("wait_strategy"))
+        .unwrap()
+        + 1;
+    let bad = text.replace("wait_strategy = \"hybrid\"", "wait_strategy = \"spin\"");
+    let scenario = Scenario::from_toml_str(&bad, &path).unwrap();
+    let e = LoopSettings::from_scenario(&scenario).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("controller_daemon.wait_strategy"), "{msg}");
+    assert!(msg.contains("unknown wait strategy \"spin\""), "{msg}");
+    assert!(msg.contains("panda-wall.toml"), "{msg}");
+    assert_eq!(e.line(), Some(line), "{msg}");
+    // The names the runtime knows, and none given: its default.
+    let event = text.replace("wait_strategy = \"hybrid\"", "wait_strategy = \"event\"");
+    let s = Scenario::from_toml_str(&event, &path).unwrap();
+    assert_eq!(
+        LoopSettings::from_scenario(&s).unwrap().wait,
+        WaitStrategy::Event
+    );
+    let none = text.replace("wait_strategy = \"hybrid\"\n", "");
+    let s = Scenario::from_toml_str(&none, &path).unwrap();
+    assert_eq!(
+        LoopSettings::from_scenario(&s).unwrap().wait,
+        WaitStrategy::Hybrid
+    );
+}
+
 #[test]
 fn torque_limits_default_to_the_urdf_effort_limits_and_saturation_shows_in_telemetry() {
     let path =
@@ -421,7 +460,10 @@ fn torque_limits_default_to_the_urdf_effort_limits_and_saturation_shows_in_telem
         .collect();
     assert_eq!(limits, [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]);
     assert_eq!(
-        LoopSettings::from_scenario(&panda).cycle.torque_limits,
+        LoopSettings::from_scenario(&panda)
+            .unwrap()
+            .cycle
+            .torque_limits,
         limits
     );
 

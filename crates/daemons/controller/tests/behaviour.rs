@@ -6,11 +6,12 @@
 
 use std::path::PathBuf;
 
-use hcc_config::{Scenario, WaitStrategy};
+use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{self, CommandSubscriber, Services, StatePublisher};
 use hcc_msgs::{COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, Namespace, ServiceNames};
+use hcc_rt::WaitStrategy;
 use iceoryx2::prelude::SignalHandlingMode;
 
 fn scenario() -> Scenario {
@@ -66,7 +67,7 @@ fn answers_safe_holds_detects_stale_peers_and_guards_the_torque_channel() {
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = LoopSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario).unwrap();
         settings.wait = WaitStrategy::Event;
         settings.stale_timeout_ns = 20_000_000;
         let mut cycle = ControlLoop::new(controller, settings).unwrap();
@@ -191,7 +192,7 @@ fn torque_limits_saturate_and_are_counted() {
         let commands = services.torque_command_subscriber(2).unwrap();
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = LoopSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario).unwrap();
         settings.wait = WaitStrategy::Event;
         settings.cycle.torque_limits = vec![1.0; n];
         let mut cycle = ControlLoop::new(controller, settings).unwrap();

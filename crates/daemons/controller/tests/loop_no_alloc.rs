@@ -10,11 +10,12 @@
 
 use std::path::PathBuf;
 
-use hcc_config::{Scenario, WaitStrategy};
+use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_controller::{ControlLoop, LoopSettings, Outcome, Ports};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
 use hcc_msgs::{CommandMode, JointState, MAX_JOINTS, Namespace, ServiceNames, Setpoint};
+use hcc_rt::WaitStrategy;
 use hcc_rtalloc::{LoopAudit, RtAllocator, RtSection, thread_stats};
 use iceoryx2::prelude::SignalHandlingMode;
 
@@ -78,7 +79,7 @@ fn ten_thousand_cycles_without_system_allocation_or_page_fault() {
 
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = LoopSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario).unwrap();
         settings.wait = WaitStrategy::Event;
         let mut cycle = ControlLoop::new(controller, settings).unwrap();
 
@@ -243,7 +244,7 @@ impl Rig {
         };
         let controller =
             Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
-        let mut settings = LoopSettings::from_scenario(&scenario);
+        let mut settings = LoopSettings::from_scenario(&scenario).unwrap();
         settings.wait = WaitStrategy::Event;
         let cycle = ControlLoop::new(controller, settings).unwrap();
         Rig {

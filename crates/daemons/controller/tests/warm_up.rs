@@ -62,7 +62,7 @@ fn turn(w: &mut WarmUp, c: &ControlCycle, s: &JointState, k: u64, timing: &mut L
 fn the_cache_warm_up_changes_no_command() {
     let scenario = scenario();
     assert!(
-        LoopSettings::from_scenario(&scenario).warm_up,
+        LoopSettings::from_scenario(&scenario).unwrap().warm_up,
         "on by default"
     );
     let states = states(&scenario);
