@@ -41,7 +41,6 @@ use std::collections::{BTreeMap, VecDeque};
 
 use anyhow::anyhow;
 use hcc_config::Scenario;
-use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{
     JointState, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
@@ -194,8 +193,7 @@ pub struct Replay {
 
 /// A control cycle of `scenario`, as a controller starts.
 fn fresh_cycle(scenario: &Scenario) -> anyhow::Result<ControlCycle> {
-    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
-        .map_err(|e| anyhow!("{}: controller: {e}", scenario.path.display()))?;
+    let controller = hcc_cycle::controller_for(scenario)?;
     ControlCycle::new(controller, &CycleSettings::from_scenario(scenario))
         .map_err(|e| anyhow!("the controller of {}: {e}", scenario.path.display()))
 }

@@ -672,6 +672,8 @@ fn print_results(
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut scenario = Scenario::load(&args.config)?;
+    // What the law refuses at q0, before any process starts.
+    hcc_cycle::controller_for(&scenario)?;
     if let Some(d) = args.duration {
         scenario
             .set_duration(d)

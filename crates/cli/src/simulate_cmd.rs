@@ -51,6 +51,8 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     if args.no_coriolis_cancellation {
         scenario.set_coriolis_cancellation(false)?;
     }
+    // What the law refuses at q0, named by field and line.
+    hcc_cycle::controller_for(&scenario)?;
     let recording = args.out.join(crate::capture::RECORDING_FILE);
     let mut log = SimLog::create(&recording, &scenario)?;
     let result = hcc_simulation::simulate_observed(&scenario, &mut |cycle| {

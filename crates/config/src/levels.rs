@@ -1,8 +1,8 @@
 //! `[[level]]`: the levels of the hierarchy in priority order, each stacking
 //! its tasks with their gains and goal, and the dimension rules of the hierarchy.
 
-use hcc_control::{LevelSpec, TaskSpec};
 use hcc_model::{FrameId, Model};
+use hcc_spec::{LevelSpec, TaskSpec};
 use nalgebra::{DMatrix, DVector};
 
 use crate::context::Ctx;

@@ -37,7 +37,7 @@
 //! frame, goal x, y, z, roll, pitch, yaw), or `[[level.task]]` tables (each with
 //! `kind` and the task keys) with per-task gains and goals (K_i, D_i block-diagonal)
 //! or one gain and goal for the whole level. The resolved hierarchy is
-//! [`Scenario::spec`] (`hcc_control::ControllerSpec`).
+//! [`Scenario::spec`] (`hcc_spec::ControllerSpec`).
 
 pub mod contact;
 pub mod error;
@@ -64,4 +64,4 @@ pub use scenario::Scenario;
 pub use schema::*;
 pub use simulation::{Simulation, Wrench};
 
-pub use hcc_control::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
+pub use hcc_spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};

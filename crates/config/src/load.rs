@@ -4,9 +4,8 @@
 
 use std::path::Path;
 
-use hcc_control::{ControllerSpec, Form};
 use hcc_model::Model;
-use nalgebra::DVector;
+use hcc_spec::{ControllerSpec, Form, SpecError};
 
 use crate::context::Ctx;
 use crate::daemons::{resolve_controller_daemon, resolve_sim_daemon};
@@ -82,7 +81,7 @@ impl Scenario {
             singular_ratio: ratio,
             safety: safety_spec(&cx, &file.safety, rate_hz, torque_filter.torque_rate_limit)?,
         };
-        check_with_controller(&cx, &model, &spec, &q0)?;
+        check_spec(&cx, &model, &spec)?;
 
         let controller_daemon =
             resolve_controller_daemon(&cx, &model, &file.controller_daemon, rate_hz)?;
@@ -153,28 +152,25 @@ fn check_namespace(cx: &Ctx, ns: &str) -> Result<(), ConfigError> {
     Ok(())
 }
 
-/// Lets the controller check the hierarchy as it will run it (ranks at q0).
-fn check_with_controller(
-    cx: &Ctx,
-    model: &Model,
-    spec: &ControllerSpec,
-    q0: &DVector<f64>,
-) -> Result<(), ConfigError> {
-    if let Err(e) = hcc_control::Controller::new(model, spec.clone(), q0) {
+/// The checks of the hierarchy that need no configuration
+/// (`hcc_spec::ControllerSpec::validate`), named by field; those at the
+/// initial configuration are the law's (`hcc_cycle::controller_for`).
+fn check_spec(cx: &Ctx, model: &Model, spec: &ControllerSpec) -> Result<(), ConfigError> {
+    if let Err(e) = spec.validate(model) {
         let field = match &e {
-            hcc_control::ControlError::Level { level, .. } => level
+            // "k (name)", 1-based.
+            SpecError::Level { level, .. } => level
                 .split_whitespace()
                 .next()
                 .and_then(|k| k.parse::<usize>().ok())
                 .map(|k| format!("level[{}]", k.saturating_sub(1)))
                 .unwrap_or_else(|| "level".to_string()),
-            hcc_control::ControlError::Spec(_) if spec.form == Form::KinematicProjector => {
+            SpecError::Spec(_) if spec.form == Form::KinematicProjector => {
                 "controller.form".to_string()
             }
-            hcc_control::ControlError::Spec(_) => "level".to_string(),
-            _ => "initial.q0".to_string(),
+            SpecError::Spec(_) => "level".to_string(),
         };
-        return Err(cx.err(&field, format!("rejected by the controller: {e}")));
+        return Err(cx.err(&field, e.to_string()));
     }
     Ok(())
 }

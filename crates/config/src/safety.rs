@@ -4,16 +4,16 @@ use crate::context::Ctx;
 use crate::error::ConfigError;
 use crate::schema;
 
-/// `[safety]` over the defaults of `hcc_control::SafetySpec`, the control period from
+/// `[safety]` over the defaults of `hcc_spec::SafetySpec`, the control period from
 /// the control rate, the torque rate limit from `[torque_filter]`.
 pub(crate) fn safety_spec(
     cx: &Ctx,
     s: &schema::SafetySection,
     control_rate_hz: f64,
     torque_rate_limit: Option<f64>,
-) -> Result<hcc_control::SafetySpec, ConfigError> {
-    let d = hcc_control::SafetySpec::default();
-    let spec = hcc_control::SafetySpec {
+) -> Result<hcc_spec::SafetySpec, ConfigError> {
+    let d = hcc_spec::SafetySpec::default();
+    let spec = hcc_spec::SafetySpec {
         enabled: s.enabled.unwrap_or(d.enabled),
         joint_limit_margin: s.joint_limit_margin.unwrap_or(d.joint_limit_margin),
         joint_limit_torque: s.joint_limit_torque.or(d.joint_limit_torque),

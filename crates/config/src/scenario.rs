@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
-use hcc_control::{ControllerSpec, LevelSpec};
 use hcc_model::Model;
+use hcc_spec::{ControllerSpec, LevelSpec};
 use nalgebra::DVector;
 
 use crate::daemons::{ControllerDaemon, SimDaemon};
@@ -33,7 +33,8 @@ pub struct Scenario {
     pub model: Model,
     /// The controller: the levels in priority order (`spec.levels`, each stacking its
     /// tasks) and `[controller]`, `[robot] gravity_compensation` (checked by
-    /// `hcc_control::Controller::new` at load).
+    /// `hcc_spec::ControllerSpec::validate` at load; what the law refuses at q0 by
+    /// `hcc_cycle::controller_for`).
     pub spec: ControllerSpec,
     /// `[controller] rate_hz`: the control rate (Hz) of the cycle, the
     /// drivers and the bridge.

@@ -20,8 +20,8 @@
 
 use std::path::Path;
 
-use hcc_control::LevelSpec;
 use hcc_msgs::{Setpoint, SetpointRejection};
+use hcc_spec::LevelSpec;
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};

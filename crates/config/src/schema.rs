@@ -197,7 +197,7 @@ pub struct ControllerSection {
     pub coriolis_cancellation: bool,
     /// Form of the null-space torques (`extended`, `projector`, `kinematic_projector`).
     #[serde(default)]
-    pub form: hcc_control::Form,
+    pub form: hcc_spec::Form,
     #[serde(default)]
     pub singularity: SingularitySection,
     /// The control rate (Hz): the cycle's, the drivers' and the bridge's
@@ -211,7 +211,7 @@ impl Default for ControllerSection {
         ControllerSection {
             rate_hz: default_rate(),
             coriolis_cancellation: true,
-            form: hcc_control::Form::Extended,
+            form: hcc_spec::Form::Extended,
             singularity: SingularitySection::default(),
         }
     }
@@ -377,7 +377,7 @@ pub struct SimDaemonSection {
 
 /// `[safety]`: the controller's safety layer (passive fade, null-space damping of
 /// faded levels, joint position and velocity limits from the URDF). Every field is
-/// optional; the defaults are those of `hcc_control::SafetySpec` and act only near
+/// optional; the defaults are those of `hcc_spec::SafetySpec` and act only near
 /// singularities and limits.
 #[derive(Clone, Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]

@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use hcc_control::{LevelSpec, TaskUnit};
+use hcc_spec::{LevelSpec, TaskUnit};
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};

@@ -1,8 +1,8 @@
 //! One task of a `[[level]]` (or of a `[[level.task]]` table) from the keys that
 //! select what it measures: frame, axes, joints or weights.
 
-use hcc_control::TaskSpec;
 use hcc_model::{FrameId, Model};
+use hcc_spec::TaskSpec;
 use nalgebra::DMatrix;
 
 use crate::context::Ctx;

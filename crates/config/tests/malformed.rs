@@ -789,12 +789,12 @@ fn malformed_stacked_levels_name_the_field() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// `[safety]`: every field optional, the defaults of `hcc_control::SafetySpec` (the
+/// `[safety]`: every field optional, the defaults of `hcc_spec::SafetySpec` (the
 /// control period from the control rate), bad values named.
 #[test]
 fn safety_section() {
     let s = load(BASE).unwrap();
-    let d = hcc_control::SafetySpec::default();
+    let d = hcc_spec::SafetySpec::default();
     assert_eq!(s.spec.safety, d);
     let text = format!("{BASE}\n[safety]\njoint_limit_margin = 0.05\nnull_space_damping = 10.0\n");
     let s = load(&text).unwrap();

@@ -88,7 +88,7 @@ pub use fade::FADE_RANGE;
 pub use rate::GainRate;
 pub use safety::{SafetyOutput, SafetySpec};
 pub use saturation::saturate;
-pub use spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
+pub use spec::{ControllerSpec, Form, LevelSpec, SpecError, TaskSpec, TaskUnit};
 pub use velocity_limit::{VelocityLimitOutcome, VelocityLimitWork, limit_velocity};
 
 /// Errors of construction and of a cycle.
@@ -106,4 +106,13 @@ pub enum ControlError {
     /// A numerical failure in a cycle (τ falls back to g, or 0).
     #[error("numerical failure: {0}")]
     Numerical(&'static str),
+}
+
+impl From<SpecError> for ControlError {
+    fn from(e: SpecError) -> Self {
+        match e {
+            SpecError::Level { level, why } => ControlError::Level { level, why },
+            SpecError::Spec(s) => ControlError::Spec(s),
+        }
+    }
 }

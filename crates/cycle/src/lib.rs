@@ -45,6 +45,7 @@
 mod contact;
 pub mod control_cycle;
 pub mod counters;
+mod law;
 mod output_tank;
 mod reaction;
 pub mod schedule;
@@ -58,6 +59,7 @@ mod wrench;
 
 pub use control_cycle::{Answer, ControlCycle};
 pub use counters::{CoreCounters, CycleCounters};
+pub use law::controller_for;
 pub use schedule::Schedule;
 pub use setpoints::SetpointHandler;
 pub use settings::{CycleError, CycleSettings};

@@ -1,7 +1,6 @@
 //! The in-process closed loop (see the crate docs).
 
 use hcc_config::Scenario;
-use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings, Schedule};
 use hcc_msgs::{CommandMode, JointState, TelemetryTimings};
 use hcc_plant::{SimDriver, SimError};
@@ -110,8 +109,7 @@ struct InProcess {
 impl InProcess {
     fn new(scenario: &Scenario) -> Result<InProcess, SimError> {
         let invalid = |e: String| SimError::Invalid(e);
-        let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
-            .map_err(|e| invalid(format!("controller: {e}")))?;
+        let controller = hcc_cycle::controller_for(scenario).map_err(|e| invalid(e.to_string()))?;
         let settings = CycleSettings::from_scenario(scenario);
         let cycle = ControlCycle::new(controller, &settings).map_err(|e| invalid(e.to_string()))?;
         Ok(InProcess {

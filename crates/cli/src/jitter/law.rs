@@ -3,7 +3,6 @@
 
 use anyhow::{Context, bail};
 use hcc_config::Scenario;
-use hcc_control::Controller;
 use hcc_msgs::monotonic_now_ns;
 use hcc_rt as rt;
 use hcc_timing::LatencyHistogram;
@@ -37,8 +36,7 @@ pub(super) fn measure_law(
     core: usize,
     fifo: Option<i32>,
 ) -> anyhow::Result<LawReference> {
-    let mut controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
-        .map_err(|e| anyhow::anyhow!("{}: controller: {e}", scenario.path.display()))?;
+    let mut controller = hcc_cycle::controller_for(scenario)?;
     let q0: Vec<f64> = scenario.q0.iter().copied().collect();
     let steps = std::thread::scope(|scope| {
         std::thread::Builder::new()

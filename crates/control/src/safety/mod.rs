@@ -25,7 +25,7 @@
 //!    joint driven too fast towards its velocity limit is braked.
 //!
 //! 6–8 form τ_safety ([`SafetyOutput::tau`]), added to τ where one acts; 9
-//! comes after τ = Σ τ_i + τ_μ (eq. 19). [`SafetySpec`] ([`spec`]) switches and
+//! comes after τ = Σ τ_i + τ_μ (eq. 19). [`SafetySpec`] (from `hcc-spec`) switches and
 //! tunes them; [`output`] reports what acted.
 //!
 //! Allocation-free after `Safety::new`.
@@ -38,14 +38,13 @@ pub mod output;
 pub mod passive_fade;
 pub mod passivity;
 pub mod reach;
-pub mod spec;
 pub mod spring_saturation;
 pub mod velocity_barrier;
 pub mod velocity_damping;
 
 pub(crate) use governor::spring_scale;
+pub use hcc_spec::SafetySpec;
 pub use output::SafetyOutput;
-pub use spec::SafetySpec;
 
 use crate::ControlError;
 use hcc_linalg::products::gemv;

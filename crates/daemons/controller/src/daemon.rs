@@ -23,7 +23,6 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::Scenario;
-use hcc_control::Controller;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, IpcNode, Services};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
@@ -156,8 +155,7 @@ impl Ipc {
 pub fn run(args: Args) -> Result<()> {
     let setup = load(&args)?;
     let scenario = &setup.scenario;
-    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
-        .map_err(|e| anyhow::anyhow!("{}: controller: {e}", scenario.path.display()))?;
+    let controller = hcc_cycle::controller_for(scenario)?;
     let mut control = ControlLoop::new(controller, setup.settings.clone())?;
     rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
     set_log_level_from_env_or(LogLevel::Warn);

@@ -1,8 +1,8 @@
 //! The safety layer's configuration, [`SafetySpec`], and its range checks.
 
-use crate::ControlError;
+use crate::SpecError;
 
-/// Configuration of the safety layer ([`crate::safety`]). The defaults are on and
+/// Configuration of the safety layer (`hcc_control::safety`). The defaults are on and
 /// act only near singularities and limits. One line per field: why it exists,
 /// its unit and range; the mechanism's module has the rest.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,7 +41,7 @@ pub struct SafetySpec {
     pub passivity_budget: f64,
     /// The passivity damping's largest rate (1/s), > 0, ≤ 1/T.
     pub passivity_damping_rate: f64,
-    /// The [energy tanks](crate::energy_tank) of the levels below the first: what the levels above do to a level's spring is paid from its tank, so the hierarchy is passive.
+    /// The energy tanks (`hcc_control::energy_tank`) of the levels below the first: what the levels above do to a level's spring is paid from its tank, so the hierarchy is passive.
     pub energy_tanks: bool,
     /// The energy each tank holds at the start and at least after a goal or gains change (J; plus half the storage then), ≥ 0: the sequential convergence of Sec. IV it pays for.
     pub tank_initial: f64,
@@ -87,8 +87,8 @@ impl Default for SafetySpec {
 
 impl SafetySpec {
     /// Checks the ranges (errors name the field).
-    pub fn validate(&self) -> Result<(), ControlError> {
-        let bad = |f: &str, why: &str| Err(ControlError::Spec(format!("safety.{f} {why}")));
+    pub fn validate(&self) -> Result<(), SpecError> {
+        let bad = |f: &str, why: &str| Err(SpecError::Spec(format!("safety.{f} {why}")));
         let pos = |x: f64| x > 0.0 && x.is_finite();
         let nonneg = |x: f64| x >= 0.0 && x.is_finite();
         if !pos(self.joint_limit_margin) {
@@ -114,7 +114,7 @@ impl SafetySpec {
             );
         }
         // The rates act on the joint's own inertia m_k: rate · T ≤ 1 is what the
-        // control period carries (crate::rate; b = rate · T).
+        // control period carries (hcc_control::rate; b = rate · T).
         let t = self.control_period_s;
         // A rate (1/s): ≥ 0 (> 0 where `positive`), and at most 1/T.
         let rate = |f: &str, x: f64, positive: bool| {
