@@ -1,6 +1,6 @@
 //! The results of a recorded run, derived from its MCAP file: the rows of
 //! `trajectory.csv` in exactly the column layout of `hcc simulate` (see
-//! `hcc_simulation`), the metrics and the IPC figures. `hcc run` derives its
+//! `hcc_in_process`), the metrics and the IPC figures. `hcc run` derives its
 //! outputs from its `run.mcap` with this code after the run, `hcc plot
 //! FILE.mcap` and `hcc export` do the same with any recording.
 //!
@@ -32,11 +32,11 @@
 use anyhow::{Context, anyhow, bail};
 use hcc_config::Scenario;
 use hcc_cycle::Answer;
+use hcc_in_process::describe;
 use hcc_msgs::{CommandMode, JointState, SeqEvent, SequenceChecker, Telemetry, TorqueCommand};
 use hcc_record::mcap_log::{self, Entry, META_RUN, META_SCENARIO, ReadSummary};
 use hcc_record::{Cycle, LawTerms, Recorder, RowSink, WithWrench};
 use hcc_report::{RunDescription, RunWriter};
-use hcc_simulation::describe;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -71,7 +71,7 @@ impl<'a> RowBuilder<'a> {
             period: scenario.period_s(),
             rows: 0,
             rows_without_law: 0,
-            recorder: hcc_simulation::recorder(scenario)?,
+            recorder: hcc_in_process::recorder(scenario)?,
             replay_tau_diff: 0.0,
             last_state: None,
             seq_offset: 0,
@@ -328,7 +328,7 @@ pub fn results_writer(
 ) -> anyhow::Result<RunWriter> {
     Ok(RunWriter::new(
         out,
-        hcc_simulation::column_names(scenario, true),
+        hcc_in_process::column_names(scenario, true),
         &describe(scenario),
         !no_plots,
     )?)

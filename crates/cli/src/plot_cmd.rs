@@ -94,7 +94,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     if let Some(dir) = args.csv.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    let columns = hcc_simulation::column_names(&scenario, true);
+    let columns = hcc_in_process::column_names(&scenario, true);
     let mut window = TimeWindow {
         csv: CsvWriter::create(&args.csv, &columns)?,
         from: args.from.unwrap_or(f64::NEG_INFINITY),

@@ -1,6 +1,6 @@
 //! `hcc simulate CONFIG --out DIR`: hcc in one process — the simulated
 //! robot's driver and the control cycle the controller daemon runs,
-//! exchanging their messages by function call (`hcc_simulation`): the same
+//! exchanging their messages by function call (`hcc_in_process`): the same
 //! torques as a lockstep `hcc run` of the scenario, by construction. Then
 //! trajectory.csv, metrics.json and plots in DIR and a short summary on
 //! stdout. The scenario's `[[setpoint]]` entries reach the cycle with the
@@ -14,9 +14,9 @@
 
 use anyhow::Context;
 use hcc_config::Scenario;
+use hcc_in_process::{CycleView, SimError};
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
 use hcc_report::{Metrics, RunDescription, RunWriter, Trajectory};
-use hcc_simulation::{CycleView, SimError};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -55,7 +55,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     hcc_cycle::controller_for(&scenario)?;
     let recording = args.out.join(crate::capture::RECORDING_FILE);
     let mut log = SimLog::create(&recording, &scenario)?;
-    let result = hcc_simulation::simulate_observed(&scenario, &mut |cycle| {
+    let result = hcc_in_process::simulate_observed(&scenario, &mut |cycle| {
         log.cycle(cycle)
             .map_err(|e| SimError::Invalid(format!("{}: {e:#}", recording.display())))
     });

@@ -22,7 +22,7 @@
 //! the power κ̇ Σ V_i: ≤ 0 while softening (κ falls: the springs' energy
 //! drops), ≥ 0 while restoring, at most (1 − κ_min) Σ V_i over a whole
 //! restore — the spring energy taken away while softening, at most, as the
-//! potentials of a stationary arm. `crates/simulation/tests/contact_reaction.rs`
+//! potentials of a stationary arm. `crates/in-process/tests/contact_reaction.rs`
 //! checks the balance E_k − E_0 ≤ Σ Δκ Σ V_i/κ + external work along a push.
 //!
 //! **hold.** A contact's onset latches the hold (target h = 1); a client's

@@ -3,7 +3,7 @@
 //! zero-order-hold period step ([`PeriodStep`], [`run_zoh`]) and the
 //! simulated driver ([`SimDriver`]: the plant behind the driver side of the
 //! message contract). The `hcc-sim` daemon runs the driver over iceoryx2;
-//! `hcc simulate` (crate `hcc-simulation`) runs it in process against the
+//! `hcc simulate` (crate `hcc-in-process`) runs it in process against the
 //! control cycle.
 
 pub mod driver;

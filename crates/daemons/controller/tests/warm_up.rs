@@ -37,7 +37,7 @@ fn states(scenario: &Scenario) -> Vec<JointState> {
     let mut short = scenario.clone();
     short.set_duration(0.3).unwrap();
     let mut states = Vec::new();
-    hcc_simulation::simulate_observed(&short, &mut |v| {
+    hcc_in_process::simulate_observed(&short, &mut |v| {
         states.push(*v.state);
         Ok(())
     })

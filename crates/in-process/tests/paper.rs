@@ -3,7 +3,7 @@
 //! power of τ_μ, and the compliance of level 1 under an external force.
 
 use hcc_config::Scenario;
-use hcc_simulation::simulate;
+use hcc_in_process::simulate;
 use std::path::PathBuf;
 
 fn config(name: &str) -> PathBuf {

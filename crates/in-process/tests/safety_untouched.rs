@@ -35,7 +35,7 @@ fn torques(scenario: &Scenario) -> (Vec<Vec<u64>>, f64) {
         .map(|j| j.velocity_limit)
         .collect();
     let (mut out, mut speed) = (Vec::new(), 0.0_f64);
-    hcc_simulation::simulate_observed(scenario, &mut |v| {
+    hcc_in_process::simulate_observed(scenario, &mut |v| {
         out.push(
             v.cycle
                 .command()

@@ -45,7 +45,7 @@ struct Sample {
 
 fn run(scenario: &Scenario) -> Vec<Sample> {
     let mut out = Vec::new();
-    hcc_simulation::run_observed(scenario, &mut |v| {
+    hcc_in_process::run_observed(scenario, &mut |v| {
         out.push(sample(v));
         Ok(())
     })
@@ -53,7 +53,7 @@ fn run(scenario: &Scenario) -> Vec<Sample> {
     out
 }
 
-fn sample(v: &hcc_simulation::CycleView<'_>) -> Sample {
+fn sample(v: &hcc_in_process::CycleView<'_>) -> Sample {
     Sample {
         t: v.t,
         q: v.state.q().to_vec(),
@@ -66,7 +66,7 @@ fn sample(v: &hcc_simulation::CycleView<'_>) -> Sample {
 /// [`run`], with the trajectory `hcc simulate` writes.
 fn simulate(scenario: &Scenario) -> (Vec<Sample>, hcc_report::Trajectory) {
     let mut out = Vec::new();
-    let run = hcc_simulation::simulate_observed(scenario, &mut |v| {
+    let run = hcc_in_process::simulate_observed(scenario, &mut |v| {
         out.push(sample(v));
         Ok(())
     })
@@ -435,7 +435,7 @@ fn free_motion_of_the_shipped_scenarios_flags_no_contact() {
 /// Every command's torque as bits, and the cycles flagged in contact.
 fn torques(scenario: &Scenario) -> (Vec<Vec<u64>>, usize) {
     let (mut out, mut flagged) = (Vec::new(), 0);
-    hcc_simulation::run_observed(scenario, &mut |v| {
+    hcc_in_process::run_observed(scenario, &mut |v| {
         let tau = v.cycle.command().tau();
         out.push(tau.iter().map(|t| t.to_bits()).collect());
         flagged += usize::from(v.cycle.in_contact());

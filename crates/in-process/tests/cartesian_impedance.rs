@@ -7,8 +7,8 @@
 //! the elbow (the simulator's external wrench).
 
 use hcc_config::{Form, Scenario};
+use hcc_in_process::simulate;
 use hcc_report::columns;
-use hcc_simulation::simulate;
 use std::path::PathBuf;
 
 fn load(name: &str) -> Scenario {

@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_simulation::CycleView;
+use hcc_in_process::CycleView;
 use nalgebra::{DMatrix, DVector, Vector6};
 
 const PUSH_START: f64 = 1.5;
@@ -68,7 +68,7 @@ fn run(scenario: &Scenario) -> Vec<Sample> {
     let mut jac = DMatrix::zeros(6, model.nq());
     let force = Vector6::new(0.0, 15.0, 0.0, 0.0, 0.0, 0.0);
     let mut out = Vec::new();
-    hcc_simulation::run_observed(scenario, &mut |v: &CycleView<'_>| {
+    hcc_in_process::run_observed(scenario, &mut |v: &CycleView<'_>| {
         let q = DVector::from_column_slice(v.state.q());
         let qd = DVector::from_column_slice(v.state.qd());
         let law = v.cycle.controller();
@@ -324,7 +324,7 @@ fn hold_takes_gravity_and_damping_until_a_setpoint_releases_it() {
 /// Every command's torque as bits.
 fn torques(scenario: &Scenario) -> Vec<Vec<u64>> {
     let mut out = Vec::new();
-    hcc_simulation::run_observed(scenario, &mut |v| {
+    hcc_in_process::run_observed(scenario, &mut |v| {
         let tau = v.cycle.command().tau();
         out.push(tau.iter().map(|t| t.to_bits()).collect());
         Ok(())

@@ -3,8 +3,8 @@
 //! `trajectory.csv` has the bytes of the table's CSV.
 
 use hcc_config::Scenario;
+use hcc_in_process::{Run, simulate};
 use hcc_report::{Metrics, MetricsAccumulator, RunWriter};
-use hcc_simulation::{Run, simulate};
 use std::path::PathBuf;
 
 fn run(name: &str, duration: f64) -> Run {

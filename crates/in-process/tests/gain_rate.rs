@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use hcc_config::Scenario;
-use hcc_simulation::run_observed;
+use hcc_in_process::run_observed;
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

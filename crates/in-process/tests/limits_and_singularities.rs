@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 use hcc_config::Scenario;
 use hcc_config::schedule::{SCHEDULE_CLIENT_ID, ScheduledSetpoint};
-use hcc_simulation::{CycleView, run_observed};
+use hcc_in_process::{CycleView, run_observed};
 use nalgebra::DVector;
 
 fn load(name: &str) -> Scenario {
@@ -636,7 +636,7 @@ struct GoalRun {
 /// goals from 0.3 m to 1.4 m from the shoulder (within and beyond reach),
 /// posture goals up to 0.5 rad beyond the limits of every joint.
 /// `SWEEP_GOALS` goals (default 40) of `SWEEP_SECONDS` each (default 30 s);
-/// `SWEEP_GOALS=500 cargo test --release -p hcc-simulation --test
+/// `SWEEP_GOALS=500 cargo test --release -p hcc-in-process --test
 /// limits_and_singularities sweep -- --nocapture` runs the full sweep of
 /// docs/limits-and-singularities.md. `SWEEP_DETAIL` prints every goal not
 /// settled by 12 s and every one above 0.9 of a velocity limit; `SWEEP_ONLY=g`
@@ -1101,7 +1101,7 @@ fn the_shipped_regular_scenarios_are_untouched_by_the_safety_layer() {
         } else {
             assert_eq!(vel + sat, 0, "{name}: the velocity limits acted");
         }
-        let run = hcc_simulation::simulate(&scenario).unwrap();
+        let run = hcc_in_process::simulate(&scenario).unwrap();
         for key in [
             "end_stop_contacts",
             "joint_limit_guard_cycles",

@@ -3,10 +3,10 @@
 //! layout, determinism, convergence, and the disturbing-acceleration columns.
 
 use hcc_config::Scenario;
+use hcc_in_process::{PlantEnergyModel, column_names};
 use hcc_plant::{LoopTiming, SimError, run_zoh};
 use hcc_record::{Cycle, CycleOutput, LawTerms, Recorder};
 use hcc_report::Trajectory;
-use hcc_simulation::{PlantEnergyModel, column_names};
 use nalgebra::{DMatrix, DVector};
 use std::path::PathBuf;
 

@@ -23,7 +23,7 @@ use seeded::Rng;
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_simulation::run_observed;
+use hcc_in_process::run_observed;
 use nalgebra::{DVector, UnitQuaternion};
 
 fn load(name: &str) -> Scenario {

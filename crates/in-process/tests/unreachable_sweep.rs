@@ -25,7 +25,7 @@
 //! rest by 4, 12 and 30 s; the largest |q̇_k|/q̇_max,k and the deepest beyond a
 //! position limit. `UNREACHABLE_GOALS` goals (default 24) of
 //! `UNREACHABLE_SECONDS` each (default 30 s); `UNREACHABLE_GOALS=200 cargo
-//! test --release -p hcc-simulation --test unreachable_sweep -- --nocapture`
+//! test --release -p hcc-in-process --test unreachable_sweep -- --nocapture`
 //! is the full sweep of docs/limits-and-singularities.md.
 //! `UNREACHABLE_SHARD=i/n` runs the goals g with g mod n = i (one process per
 //! core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
@@ -55,7 +55,7 @@ use std::collections::VecDeque;
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_simulation::run_observed;
+use hcc_in_process::run_observed;
 use nalgebra::DVector;
 
 fn load(name: &str) -> Scenario {
