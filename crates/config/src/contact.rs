@@ -49,34 +49,10 @@ use serde::Deserialize;
 use crate::context::Ctx;
 use crate::error::ConfigError;
 use crate::values::PerJoint;
+use hcc_spec::contact::{Contact, Reaction};
 
-/// Default K_O, 1/s (module docs).
-pub const DEFAULT_OBSERVER_GAIN: f64 = 100.0;
-/// Default detection threshold on |r_j|, N·m (module docs).
-pub const DEFAULT_THRESHOLD: f64 = 2.0;
-/// Default release fraction of the threshold (module docs).
-pub const DEFAULT_RELEASE: f64 = 0.5;
-/// Default stiffness fraction of `soften` (module docs).
-pub const DEFAULT_SOFTEN_FRACTION: f64 = 0.2;
-/// Default time of a reaction's ramp, s (module docs).
-pub const DEFAULT_RAMP_S: f64 = 0.1;
-/// Default joint damping of `hold`, N·m·s/rad (module docs).
-pub const DEFAULT_HOLD_DAMPING: f64 = 1.0;
 /// Largest T (M⁻¹)_jj D_h,j accepted for `hold` (`hcc_control::rate::B_MAX`).
 const HOLD_B_MAX: f64 = 1.5;
-
-/// What a contact does to the torque (module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Reaction {
-    /// Nothing: the flag and the estimate are reported only.
-    #[default]
-    Report,
-    /// The levels' stiffness ramped down while in contact, back after.
-    Soften,
-    /// Gravity and joint damping until a client's setpoint is accepted.
-    Hold,
-}
 
 /// `[contact]` as written.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -89,40 +65,6 @@ pub struct ContactSection {
     pub soften_fraction: Option<f64>,
     pub ramp_s: Option<f64>,
     pub hold_damping: Option<PerJoint>,
-}
-
-/// Resolved `[contact]`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Contact {
-    /// K_O per joint, 1/s (positive, at most the control rate).
-    pub observer_gain: DVector<f64>,
-    /// Detection threshold on |r_j| per joint, N·m (positive).
-    pub threshold: DVector<f64>,
-    /// Contact is cleared when every |r_j| < release × threshold_j; in (0, 1].
-    pub release: f64,
-    /// What a contact does to the torque.
-    pub reaction: Reaction,
-    /// `soften`: the stiffness fraction κ in contact, in (0, 1].
-    pub soften_fraction: f64,
-    /// `soften`, `hold`: the time of a full ramp, s (positive, finite).
-    pub ramp_s: f64,
-    /// `hold`: the joint damping D_h per joint, N·m·s/rad (positive).
-    pub hold_damping: DVector<f64>,
-}
-
-impl Contact {
-    /// The defaults for `n` joints.
-    pub fn defaults(n: usize) -> Contact {
-        Contact {
-            observer_gain: DVector::from_element(n, DEFAULT_OBSERVER_GAIN),
-            threshold: DVector::from_element(n, DEFAULT_THRESHOLD),
-            release: DEFAULT_RELEASE,
-            reaction: Reaction::Report,
-            soften_fraction: DEFAULT_SOFTEN_FRACTION,
-            ramp_s: DEFAULT_RAMP_S,
-            hold_damping: DVector::from_element(n, DEFAULT_HOLD_DAMPING),
-        }
-    }
 }
 
 /// Checks `[contact]` against the model's joint count, the control rate and

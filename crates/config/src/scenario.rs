@@ -11,9 +11,7 @@ use crate::error::{ConfigError, invalid};
 use crate::franka;
 use crate::schedule;
 use crate::schema::IpcSection;
-use crate::setpoint_limits;
 use crate::simulation::Simulation;
-use crate::torque_filter;
 
 /// A loaded and checked scenario. Every setting lives in one place: the hierarchy
 /// and the controller options (gravity compensation, τ_μ, form, singular ratio) in
@@ -46,15 +44,15 @@ pub struct Scenario {
     pub controller_daemon: ControllerDaemon,
     pub sim_daemon: SimDaemon,
     /// Resolved `[setpoint_limits]`.
-    pub setpoint_limits: setpoint_limits::SetpointLimits,
+    pub setpoint_limits: hcc_spec::setpoint_limits::SetpointLimits,
     /// Resolved `[torque_filter]`.
-    pub torque_filter: torque_filter::TorqueFilterSpec,
+    pub torque_filter: hcc_spec::torque_filter::TorqueFilterSpec,
     /// The `[[setpoint]]` entries, checked and sorted by time.
     pub setpoints: Vec<schedule::ScheduledSetpoint>,
     /// Resolved `[franka]` (libfranka's defaults where not given).
     pub franka: franka::Franka,
     /// Resolved `[contact]` (the defaults where not given).
-    pub contact: crate::contact::Contact,
+    pub contact: hcc_spec::contact::Contact,
 }
 
 impl Scenario {

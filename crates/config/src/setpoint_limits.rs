@@ -23,13 +23,10 @@ use hcc_spec::{LevelSpec, TaskUnit};
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
-
-/// Default peak equilibrium speed of a position task, m/s.
-pub const DEFAULT_MAX_LINEAR_SPEED: f64 = 0.25;
-/// Default peak equilibrium speed of an angular or joint task, rad/s.
-pub const DEFAULT_MAX_ANGULAR_SPEED: f64 = 1.0;
-/// Default `max_stiffness`: this factor × the largest eigenvalue of the file's K_i.
-pub const DEFAULT_STIFFNESS_FACTOR: f64 = 4.0;
+use hcc_spec::setpoint_limits::{
+    DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED, DEFAULT_STIFFNESS_FACTOR,
+    LevelSetpointLimits, SetpointLimits,
+};
 
 /// `[setpoint_limits]` as written.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -50,27 +47,6 @@ pub struct LevelSetpointLimitsSection {
     pub max_speed: Option<f64>,
     pub workspace_min: Option<Vec<f64>>,
     pub workspace_max: Option<Vec<f64>>,
-}
-
-/// Resolved limits of one level.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LevelSetpointLimits {
-    /// Largest eigenvalue of K_i a setpoint may ask for.
-    pub max_stiffness: f64,
-    /// Peak speed of the equilibrium (m/s or rad/s): a transition is
-    /// stretched so that 15/8 · |Δx| / T stays below it.
-    pub max_speed: f64,
-    /// Box (min, max) on the task's coordinates, position tasks only.
-    pub workspace: Option<(Vec<f64>, Vec<f64>)>,
-}
-
-/// Resolved `[setpoint_limits]`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SetpointLimits {
-    /// Damp ẋ_i − ẋ_{i,d} while a goal moves.
-    pub relative_damping: bool,
-    /// One per level.
-    pub levels: Vec<LevelSetpointLimits>,
 }
 
 fn positive(file: &Path, text: &str, path: &str, v: f64) -> Result<f64, ConfigError> {

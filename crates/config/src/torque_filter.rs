@@ -16,18 +16,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
-
-/// How the torque-rate limit acts.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RateLimitMode {
-    /// Δτ scaled as a whole so that no joint exceeds the limit (keeps the
-    /// direction of the change, like the saturation).
-    #[default]
-    Whole,
-    /// Each joint's Δτ clipped on its own.
-    PerJoint,
-}
+use hcc_spec::torque_filter::{RateLimitMode, TorqueFilterSpec};
 
 /// `[torque_filter]` as written.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -36,17 +25,6 @@ pub struct TorqueFilterSection {
     pub torque_rate_limit: Option<f64>,
     #[serde(default)]
     pub rate_limit_mode: RateLimitMode,
-    pub low_pass_hz: Option<f64>,
-}
-
-/// Resolved `[torque_filter]`.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TorqueFilterSpec {
-    /// Largest |dτ/dt| per joint, N·m/s (`None`: off).
-    pub torque_rate_limit: Option<f64>,
-    /// How the limit acts.
-    pub rate_limit_mode: RateLimitMode,
-    /// Cut-off of the first-order low-pass, Hz (`None`: off).
     pub low_pass_hz: Option<f64>,
 }
 

@@ -2,7 +2,7 @@
 //! with an error that names the field.
 
 use hcc_config::Scenario;
-use hcc_config::contact::{
+use hcc_spec::contact::{
     DEFAULT_HOLD_DAMPING, DEFAULT_OBSERVER_GAIN, DEFAULT_RAMP_S, DEFAULT_RELEASE,
     DEFAULT_SOFTEN_FRACTION, DEFAULT_THRESHOLD, Reaction,
 };

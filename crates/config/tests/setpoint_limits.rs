@@ -2,7 +2,7 @@
 //! name the field.
 
 use hcc_config::Scenario;
-use hcc_config::setpoint_limits::{DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED};
+use hcc_spec::setpoint_limits::{DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED};
 use std::path::PathBuf;
 
 fn load(extra: &str) -> Result<Scenario, hcc_config::ConfigError> {
@@ -78,7 +78,7 @@ fn bad_limits_name_the_field() {
 
 #[test]
 fn the_torque_filter_is_off_by_default_and_checked() {
-    use hcc_config::torque_filter::RateLimitMode;
+    use hcc_spec::torque_filter::RateLimitMode;
     let s = load("").unwrap();
     assert_eq!(s.torque_filter.torque_rate_limit, None);
     assert_eq!(s.torque_filter.low_pass_hz, None);

@@ -18,10 +18,10 @@
 //! The period of the balance is the nominal control period (deterministic:
 //! a lockstep run over IPC and the in-process run estimate the same r).
 
-use hcc_config::contact::Contact;
 use hcc_control::{ContactChange, ContactDetector, MomentumObserver, ObserverInput, observe};
 use hcc_model::Data;
 use hcc_msgs::{DriverStatus, JointState, TorqueCommand};
+use hcc_spec::contact::Contact;
 
 use crate::counters::CoreCounters;
 

@@ -1,5 +1,5 @@
 //! What a contact does to the torque (`[contact] reaction`,
-//! `hcc_config::contact::Reaction`), smoothly.
+//! `hcc_spec::contact::Reaction`), smoothly.
 //!
 //! A reaction moves one value h ∈ [0, 1] (0: the law as configured, 1: the
 //! reaction in full) along the quintic minimum-jerk profile
@@ -43,10 +43,10 @@
 //!
 //! Allocation-free after [`ContactReaction::new`].
 
-use hcc_config::contact::{Contact, Reaction};
 use hcc_control::Controller;
 use hcc_control::transition::quintic;
 use hcc_msgs::MAX_JOINTS;
+use hcc_spec::contact::{Contact, Reaction};
 
 /// h's ramp: from `from` to `to` over `duration` s.
 #[derive(Clone, Copy, Debug)]

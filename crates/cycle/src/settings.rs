@@ -1,10 +1,10 @@
 //! What a [`crate::ControlCycle`] is built with, and what can refuse it.
 
 use hcc_config::Scenario;
-use hcc_config::contact::Contact;
-use hcc_config::setpoint_limits::SetpointLimits;
-use hcc_config::torque_filter::TorqueFilterSpec;
 use hcc_msgs::{MAX_JOINTS, MAX_LEVELS};
+use hcc_spec::contact::Contact;
+use hcc_spec::setpoint_limits::SetpointLimits;
+use hcc_spec::torque_filter::TorqueFilterSpec;
 
 /// Settings of the control cycle (everything but the law itself, which is
 /// the `hcc_control::Controller` it is built around).

@@ -28,8 +28,8 @@
 //! faster to reach a new torque but bends the increment out of the levels'
 //! subspaces. The default is `whole`.
 
-use hcc_config::torque_filter::{RateLimitMode, TorqueFilterSpec};
 use hcc_msgs::MAX_JOINTS;
+use hcc_spec::torque_filter::{RateLimitMode, TorqueFilterSpec};
 
 /// The rate limit in force for the stages after the filter: the command the
 /// last [`TorqueFilter::apply`] stepped from and the largest step per period

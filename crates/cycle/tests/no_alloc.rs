@@ -11,11 +11,11 @@
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_config::contact::Reaction;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{CommandMode, JointState, Setpoint};
 use hcc_rtalloc::{RtAllocator, RtSection, thread_stats};
+use hcc_spec::contact::Reaction;
 
 #[global_allocator]
 static ALLOCATOR: RtAllocator = RtAllocator::new();

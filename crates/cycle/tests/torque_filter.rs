@@ -7,11 +7,11 @@
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
-use hcc_config::torque_filter::RateLimitMode;
 use hcc_control::Controller;
 use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::JointState;
 use hcc_plant::zoh::{LoopTiming, run_zoh};
+use hcc_spec::torque_filter::RateLimitMode;
 
 struct Figures {
     rate_limited: u64,

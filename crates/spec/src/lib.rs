@@ -4,7 +4,9 @@
 //! stacking its tasks with stiffness K_i, damping D_i and equilibrium x_{i,d}
 //! (eqs. 20–21) ([`ControllerSpec`], [`LevelSpec`], [`TaskSpec`]), the law's
 //! options ([`Form`], the Coriolis cancellation τ_μ of eq. 22, the singular
-//! ratio) and the safety layer's settings ([`SafetySpec`]).
+//! ratio) and the safety layer's settings ([`SafetySpec`]); and the control
+//! cycle's settings around the law ([`contact`], [`setpoint_limits`],
+//! [`torque_filter`]).
 //!
 //! Plain data with the checks that need no configuration
 //! ([`ControllerSpec::validate`], [`SafetySpec::validate`]); the checks at a
@@ -12,8 +14,11 @@
 //! carries) are the law's. This crate sits beside the robot model so that
 //! the scenario reader (`hcc-config`) fills it without depending on the law.
 
+pub mod contact;
 mod hierarchy;
 mod safety;
+pub mod setpoint_limits;
+pub mod torque_filter;
 
 pub use hierarchy::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 pub use safety::SafetySpec;

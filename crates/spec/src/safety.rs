@@ -9,33 +9,33 @@ use crate::SpecError;
 pub struct SafetySpec {
     /// Master switch: off, the paper's law alone with the plain fade (no mechanism below).
     pub enabled: bool,
-    /// Where the [joint-limit guard](super::joint_limit_guard) starts, before a URDF position limit (rad or m), > 0.
+    /// Where the joint-limit guard (`hcc_control::safety::joint_limit_guard`) starts, before a URDF position limit (rad or m), > 0.
     pub joint_limit_margin: f64,
     /// The guard's spring torque at half the margin (N·m or N), > 0; `None`: the URDF effort limit (100 without one).
     pub joint_limit_torque: Option<f64>,
     /// The guard's damping ratio ζ against its spring's local stiffness, so it stops without bouncing, ≥ 0.
     pub joint_limit_damping_ratio: f64,
-    /// f_on: the share of a URDF velocity limit where the [velocity band](super::reach) starts (governor, damping, barrier), in (0, 1).
+    /// f_on: the share of a URDF velocity limit where the velocity band (`hcc_control::safety::reach`) starts (governor, damping, barrier), in (0, 1).
     pub velocity_limit_fraction: f64,
     /// f_full: the share of a URDF velocity limit where the velocity band ends (all fully on), in (f_on, 1].
     pub velocity_limit_full_fraction: f64,
-    /// The [spring saturation](super::spring_saturation): a large error's spring settles its damper below f_on of the velocity limits.
+    /// The spring saturation (`hcc_control::safety::spring_saturation`): a large error's spring settles its damper below f_on of the velocity limits.
     pub spring_saturation: bool,
-    /// The [velocity governor](super::governor): in the velocity band, the springs that drive the motion stop pushing.
+    /// The velocity governor (`hcc_control::safety::governor`): in the velocity band, the springs that drive the motion stop pushing.
     pub velocity_governor: bool,
-    /// The [velocity damping](super::velocity_damping)'s rate (1/s; m_k q̇_k times it at f_full), ≥ 0, 0 off, ≤ 1/T.
+    /// The velocity damping (`hcc_control::safety::velocity_damping`)'s rate (1/s; m_k q̇_k times it at f_full), ≥ 0, 0 off, ≤ 1/T.
     pub velocity_damping: f64,
-    /// The [velocity barrier](super::velocity_barrier): a joint the torque drives too fast towards its limit is braked first.
+    /// The velocity barrier (`hcc_control::safety::velocity_barrier`): a joint the torque drives too fast towards its limit is braked first.
     pub velocity_barrier: bool,
     /// The barrier's rate α (1/s): the acceleration it allows is α × the speed left to f_full, > 0, ≤ 1/T.
     pub velocity_barrier_rate: f64,
-    /// The [null-space damping](super::null_space_damping)'s rate (1/s): damps what a faded level no longer controls, ≥ 0, ≤ 1/T.
+    /// The null-space damping (`hcc_control::safety::null_space_damping`)'s rate (1/s): damps what a faded level no longer controls, ≥ 0, ≤ 1/T.
     pub null_space_damping: f64,
-    /// ε_c of the [conflict fade](super::conflict_fade): a level in conflict with those above fades below it, in [0, 0.01), 0 off.
+    /// ε_c of the conflict fade (`hcc_control::safety::conflict_fade`): a level in conflict with those above fades below it, in [0, 0.01), 0 off.
     pub conflict_fade_ratio: f64,
-    /// The capacity of the [passive fade](super::passive_fade)'s energy tank, which pays fade-ins (J), ≥ 0.
+    /// The capacity of the passive fade (`hcc_control::safety::passive_fade`)'s energy tank, which pays fade-ins (J), ≥ 0.
     pub fade_tank_max: f64,
-    /// The [passivity damping](super::passivity): what the hierarchy feeds in beyond its budget is damped out.
+    /// The passivity damping (`hcc_control::safety::passivity`): what the hierarchy feeds in beyond its budget is damped out.
     pub passivity_damping: bool,
     /// The energy the hierarchy may feed in after a goal or gains change before the passivity damping acts (J), ≥ 0.
     pub passivity_budget: f64,

@@ -30,7 +30,6 @@
 //! for a level that never received a setpoint, so a run without setpoints is
 //! bit-identical to one without this module.
 
-use hcc_config::setpoint_limits::SetpointLimits;
 use hcc_control::transition::{GoalKind, Target, Transition};
 use hcc_control::{Controller, TaskSpec};
 use hcc_msgs::{
@@ -38,6 +37,7 @@ use hcc_msgs::{
     SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer,
     SetpointRejection, Telemetry, answer_code,
 };
+use hcc_spec::setpoint_limits::SetpointLimits;
 use nalgebra::DMatrix;
 
 use crate::settings::CycleError;

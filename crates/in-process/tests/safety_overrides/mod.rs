@@ -50,9 +50,9 @@ pub fn sweep_safety_overrides(s: &mut Scenario) -> (bool, bool) {
             }
             "per_joint" => {
                 s.torque_filter.rate_limit_mode = if x != 0.0 {
-                    hcc_config::torque_filter::RateLimitMode::PerJoint
+                    hcc_spec::torque_filter::RateLimitMode::PerJoint
                 } else {
-                    hcc_config::torque_filter::RateLimitMode::Whole
+                    hcc_spec::torque_filter::RateLimitMode::Whole
                 }
             }
             "low_pass_hz" => s.torque_filter.low_pass_hz = (x > 0.0).then_some(x),

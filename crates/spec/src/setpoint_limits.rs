@@ -1,0 +1,31 @@
+//! The limits of setpoints (`[setpoint_limits]`, read by `hcc-config`,
+//! checked by the control cycle when it takes a setpoint): per level the
+//! largest stiffness, the equilibrium's peak speed and the workspace box.
+
+/// Default peak equilibrium speed of a position task, m/s.
+pub const DEFAULT_MAX_LINEAR_SPEED: f64 = 0.25;
+/// Default peak equilibrium speed of an angular or joint task, rad/s.
+pub const DEFAULT_MAX_ANGULAR_SPEED: f64 = 1.0;
+/// Default `max_stiffness`: this factor × the largest eigenvalue of the file's K_i.
+pub const DEFAULT_STIFFNESS_FACTOR: f64 = 4.0;
+
+/// Resolved limits of one level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelSetpointLimits {
+    /// Largest eigenvalue of K_i a setpoint may ask for.
+    pub max_stiffness: f64,
+    /// Peak speed of the equilibrium (m/s or rad/s): a transition is
+    /// stretched so that 15/8 · |Δx| / T stays below it.
+    pub max_speed: f64,
+    /// Box (min, max) on the task's coordinates, position tasks only.
+    pub workspace: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+/// Resolved `[setpoint_limits]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SetpointLimits {
+    /// Damp ẋ_i − ẋ_{i,d} while a goal moves.
+    pub relative_damping: bool,
+    /// One per level.
+    pub levels: Vec<LevelSetpointLimits>,
+}
