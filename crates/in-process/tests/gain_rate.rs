@@ -38,7 +38,9 @@ fn with_posture_damping(d: f64, dir: &Path) -> PathBuf {
 
 #[test]
 fn a_damping_the_rate_cannot_carry_is_refused_and_the_one_it_names_converges() {
-    let Err(err) = Scenario::load(data("fr3-position-posture.toml")) else {
+    // The file's shape is right; the law refuses the gain at q0.
+    let refused = Scenario::load(data("fr3-position-posture.toml")).expect("the file loads");
+    let Err(err) = hcc_cycle::controller_for(&refused) else {
         panic!("a posture damping of 2 on a bare FR3 is refused");
     };
     let err = err.to_string();
@@ -59,7 +61,11 @@ fn a_damping_the_rate_cannot_carry_is_refused_and_the_one_it_names_converges() {
     let path = with_posture_damping(carried, &dir);
     let scenario = Scenario::load(&path);
     std::fs::remove_dir_all(&dir).ok();
-    let scenario = scenario.expect("the damping the refusal names is carried");
+    let scenario = scenario.expect("the file loads");
+    assert!(
+        hcc_cycle::controller_for(&scenario).is_ok(),
+        "the damping the refusal names is carried"
+    );
     let limits: Vec<f64> = scenario
         .model
         .joints
