@@ -60,15 +60,11 @@ fn positive_definite(a: impl Fn(usize, usize) -> f64, m: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hcc_msgs::{GAIN_DAMPING_FULL, GAIN_STIFFNESS_FULL, MAX_TASK_DIM};
+    use hcc_msgs::MAX_TASK_DIM;
 
+    /// A setpoint of the m×m row-major K `a` (the message's own builder).
     fn full_stiffness(m: usize, a: &[f64]) -> Setpoint {
-        let mut s = Setpoint::zeroed();
-        s.fields = SETPOINT_STIFFNESS;
-        s.gain_layout = GAIN_STIFFNESS_FULL;
-        s.dim = m as u32;
-        s.stiffness[..m * m].copy_from_slice(a);
-        s
+        Setpoint::for_level(1, 1, 0, m).with_stiffness(a).unwrap()
     }
 
     #[test]
@@ -116,13 +112,11 @@ mod tests {
                 a[j * m + k] = if j == k { 2.0 * m as f64 } else { 1.0 };
             }
         }
-        let mut s = full_stiffness(m, &a);
+        let s = full_stiffness(m, &a);
         assert_eq!(check_positive_definite(&s), Ok(()));
         // The same for damping, with an indefinite damping matrix.
-        s.fields = SETPOINT_DAMPING;
-        s.gain_layout = GAIN_DAMPING_FULL;
-        s.damping = a;
-        s.damping[0] = -1.0;
+        a[0] = -1.0;
+        let s = Setpoint::for_level(1, 1, 0, m).with_damping(&a).unwrap();
         assert_eq!(s.validate(), Ok(()));
         assert_eq!(
             check_positive_definite(&s),
