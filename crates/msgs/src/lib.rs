@@ -154,6 +154,7 @@
 pub mod driver;
 mod error;
 pub mod ipc;
+pub mod scenario;
 mod sequence;
 mod service;
 mod setpoint;

@@ -99,6 +99,7 @@ pub struct ServiceNames {
     setpoint: String,
     state_ready: String,
     command_ready: String,
+    scenario: String,
 }
 
 impl ServiceNames {
@@ -117,6 +118,7 @@ impl ServiceNames {
             setpoint: format!("{base}/setpoint"),
             state_ready: format!("{base}/state_ready"),
             command_ready: format!("{base}/command_ready"),
+            scenario: format!("{base}/scenario"),
             namespace,
         }
     }
@@ -156,8 +158,14 @@ impl ServiceNames {
         &self.command_ready
     }
 
+    /// Publish-subscribe service of the controller's [`crate::scenario::ScenarioDoc`]
+    /// (a JSON byte slice, the last one kept for tools that connect later).
+    pub fn scenario(&self) -> &str {
+        &self.scenario
+    }
+
     /// All names, for listing/cleanup.
-    pub fn all(&self) -> [&str; 6] {
+    pub fn all(&self) -> [&str; 7] {
         [
             &self.joint_state,
             &self.torque_command,
@@ -165,6 +173,7 @@ impl ServiceNames {
             &self.setpoint,
             &self.state_ready,
             &self.command_ready,
+            &self.scenario,
         ]
     }
 }
@@ -182,6 +191,7 @@ mod tests {
         assert_eq!(s.setpoint(), "hcc/panda_left/setpoint");
         assert_eq!(s.state_ready(), "hcc/panda_left/state_ready");
         assert_eq!(s.command_ready(), "hcc/panda_left/command_ready");
+        assert_eq!(s.scenario(), "hcc/panda_left/scenario");
         let other = ServiceNames::new("panda_right").unwrap();
         for (a, b) in s.all().iter().zip(other.all()) {
             assert_ne!(*a, b);

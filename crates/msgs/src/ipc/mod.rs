@@ -72,6 +72,7 @@ mod events;
 mod node;
 mod preloan;
 mod pubsub;
+mod scenario;
 mod services;
 mod settings;
 #[cfg(test)]
@@ -87,6 +88,7 @@ pub use pubsub::{
     CommandPublisher, CommandSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher,
     StateSample, StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
 };
+pub use scenario::{MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario};
 pub use services::Services;
 pub use settings::{
     EVENT_ID_MAX, LATEST_BUFFER, MAX_BORROWED_SAMPLES, MAX_COMMAND_SUBSCRIBERS, MAX_LISTENERS,
