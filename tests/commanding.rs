@@ -108,11 +108,17 @@ fn goals_gains_rejections_and_the_monitor() {
             }
         }
 
-        // Without --config the levels are "level N"; with the scenario they
-        // have its names; a scenario of other levels is refused.
+        // Without --config the levels have the names the controller's
+        // scenario service gives; with the scenario file the same; a
+        // scenario of other levels is refused.
+        let from_service = sample(&ns, &prefix, dir.path());
+        let names: Vec<&str> = (0..3)
+            .map(|i| from_service["levels"][i]["name"].as_str().unwrap())
+            .collect();
         assert_eq!(
-            sample(&ns, &prefix, dir.path())["levels"][2]["name"],
-            "level 3"
+            names,
+            ["TCP position", "TCP orientation", "posture"],
+            "{from_service}"
         );
         let cfg = config();
         let named = hcc(

@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use hcc_msgs::{Telemetry, TelemetryCounters};
 use hcc_record::mcap_log::mode_name;
 
-use crate::setpoint_cmd::{Target, connect, timeout};
+use crate::setpoint_cmd::{Target, connect, scenario_of, timeout};
 
 /// `hcc monitor`.
 #[derive(clap::Args, Debug)]
@@ -27,7 +27,8 @@ pub struct MonitorArgs {
     #[arg(long, default_value_t = 4.0)]
     pub rate: f64,
     /// The controller's scenario TOML: names the levels as its `[[level]]`
-    /// tables do (telemetry carries numbers only; default "level N").
+    /// tables do (telemetry carries numbers only). By default the names come
+    /// from the controller's scenario service; "level N" when it has none.
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
 }
@@ -40,11 +41,22 @@ fn level_name(names: &[String], i: usize) -> String {
         .unwrap_or_else(|| format!("level {}", i + 1))
 }
 
-/// The level names and task dimensions of `--config` (the dimensions are
-/// checked against the telemetry's, see [`check_names`]).
-fn config_levels(config: Option<&std::path::Path>) -> anyhow::Result<(Vec<String>, Vec<usize>)> {
+/// The level names and task dimensions of `--config`, else of the
+/// controller's scenario service (the dimensions are checked against the
+/// telemetry's, see [`check_names`]). A controller without the service (not
+/// running, or older) is said on stderr and its levels are "level N".
+fn config_levels(
+    config: Option<&std::path::Path>,
+    target: &Target,
+) -> anyhow::Result<(Vec<String>, Vec<usize>)> {
     let Some(path) = config else {
-        return Ok((Vec::new(), Vec::new()));
+        return Ok(match scenario_of(target) {
+            Ok(doc) => doc.levels.into_iter().map(|l| (l.name, l.dim)).unzip(),
+            Err(e) => {
+                eprintln!("hcc monitor: {e:#}; the levels are shown as \"level N\"");
+                (Vec::new(), Vec::new())
+            }
+        });
     };
     let scenario = hcc_config::Scenario::load(path).context("--config")?;
     let names = scenario.levels().iter().map(|l| l.name.clone()).collect();
@@ -56,7 +68,7 @@ fn check_names(names: &[String], dims: &[usize], t: &Telemetry) -> anyhow::Resul
     let got: Vec<usize> = (0..t.levels()).map(|i| t.task_dims[i] as usize).collect();
     if !names.is_empty() && got != dims {
         bail!(
-            "--config: the controller runs levels of dimensions {got:?}, the scenario has {dims:?}"
+            "the controller runs levels of dimensions {got:?}, the scenario (--config, or its scenario service) has {dims:?}"
         );
     }
     Ok(())
@@ -195,7 +207,7 @@ pub fn monitor(args: MonitorArgs) -> anyhow::Result<()> {
     if !(args.rate.is_finite() && args.rate > 0.0) {
         bail!("--rate must be positive");
     }
-    let (names, dims) = config_levels(args.config.as_deref())?;
+    let (names, dims) = config_levels(args.config.as_deref(), &args.target)?;
     let mut client = connect(&args.target)?;
     let wait = timeout(&args.target)?;
     let every = Duration::from_secs_f64(1.0 / args.rate);

@@ -73,6 +73,22 @@ pub(crate) fn connect(t: &Target) -> anyhow::Result<Client> {
         .with_context(|| format!("cannot connect to namespace {:?}", t.namespace))
 }
 
+/// The scenario the controller of `t` runs, from its scenario service
+/// (`hcc_msgs::ipc::read_scenario`, waiting up to `--timeout`).
+pub(crate) fn scenario_of(t: &Target) -> anyhow::Result<hcc_msgs::scenario::ScenarioDoc> {
+    let prefix = t
+        .file_prefix
+        .clone()
+        .or_else(hcc_msgs::ipc::file_prefix_from_env);
+    let names = hcc_msgs::ServiceNames::new(&t.namespace).context("--namespace")?;
+    let node = hcc_msgs::ipc::create_node(
+        "hcc-tool",
+        iceoryx2::prelude::SignalHandlingMode::Disabled,
+        prefix.as_deref(),
+    )?;
+    Ok(hcc_msgs::ipc::read_scenario(&node, &names, timeout(t)?)?)
+}
+
 fn level_index(level: usize) -> anyhow::Result<usize> {
     if level == 0 {
         bail!("--level is 1-based (the first [[level]] is 1)");

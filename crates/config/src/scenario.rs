@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use hcc_model::Model;
+use hcc_msgs::scenario::{JointInfo, LevelInfo, SCENARIO_SCHEMA_VERSION, ScenarioDoc};
 use hcc_spec::{ControllerSpec, LevelSpec};
 use nalgebra::DVector;
 
@@ -129,6 +130,45 @@ impl Scenario {
     /// The levels in priority order (those of [`Scenario::spec`]).
     pub fn levels(&self) -> &[LevelSpec] {
         &self.spec.levels
+    }
+
+    /// What the controller publishes on its scenario service for the tools
+    /// that know only `namespace` (`hcc_msgs::ipc::ScenarioPublisher`): the
+    /// file's text as loaded, the URDF's text (empty when it cannot be read
+    /// again), the levels, the joints with their limits, the control rate.
+    pub fn document(&self, namespace: &str) -> ScenarioDoc {
+        let n = self.model.nq();
+        let dims = self.task_dims();
+        ScenarioDoc {
+            version: SCENARIO_SCHEMA_VERSION,
+            name: self.name.clone(),
+            namespace: namespace.to_string(),
+            rate_hz: self.rate_hz,
+            path: self.path.display().to_string(),
+            toml: self.text.clone(),
+            urdf_path: self.urdf_path.display().to_string(),
+            urdf: std::fs::read_to_string(&self.urdf_path).unwrap_or_default(),
+            levels: self
+                .spec
+                .levels
+                .iter()
+                .zip(&dims)
+                .map(|(l, &dim)| LevelInfo {
+                    name: l.name.clone(),
+                    tasks: l.tasks.iter().map(|t| t.kind().to_string()).collect(),
+                    dim,
+                })
+                .collect(),
+            joints: self
+                .model
+                .joints
+                .iter()
+                .take(n)
+                .map(|j| {
+                    JointInfo::new(&j.name, j.lower, j.upper, j.velocity_limit, j.effort_limit)
+                })
+                .collect(),
+        }
     }
 
     /// Task dimension m_i of every level.

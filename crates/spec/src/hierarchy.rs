@@ -41,6 +41,19 @@ pub enum TaskSpec {
 }
 
 impl TaskSpec {
+    /// The task's kind, as the scenario service names it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TaskSpec::Position { .. } => "position",
+            TaskSpec::Orientation { .. } => "orientation",
+            TaskSpec::Pose { .. } => "pose",
+            TaskSpec::PlanarOrientation { .. } => "planar_orientation",
+            TaskSpec::Joints { .. } => "joint",
+            TaskSpec::JointCombination { .. } => "joint_combination",
+            TaskSpec::Posture => "posture",
+        }
+    }
+
     /// Task dimension m for a robot with `n` joints.
     pub fn dim(&self, n: usize) -> usize {
         match self {

@@ -26,9 +26,9 @@ use hcc_config::ConfigError;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleError, CycleSettings};
 use hcc_msgs::ipc::{
-    self, CommandPublisher, EventListener, EventNotifier, IpcError, LATEST_BUFFER, PreLoan,
-    SETPOINT_BUFFER, Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher,
-    UpdateConnections,
+    self, CommandPublisher, ConnectionFailure, EventListener, EventNotifier, IpcError,
+    LATEST_BUFFER, PreLoan, SETPOINT_BUFFER, ScenarioPublisher, Services, SetpointSubscriber,
+    StateSubscriber, TelemetryPublisher, UpdateConnections,
 };
 use hcc_msgs::{
     CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryTimings, monotonic_now_ns,
@@ -56,6 +56,18 @@ pub struct Ports {
     pub telemetry: TelemetryPublisher,
     /// Setpoints from clients (buffer [`SETPOINT_BUFFER`]; all taken each cycle).
     pub setpoints: SetpointSubscriber,
+    /// The scenario the controller runs, for tools that know only the
+    /// namespace (none in a test rig that does not publish one).
+    pub scenario: Option<ScenarioPublisher>,
+}
+
+/// A port with no connections (the scenario's place when none is published).
+struct NoPort;
+
+impl UpdateConnections for NoPort {
+    fn update_connections(&self) -> Result<(), ConnectionFailure> {
+        Ok(())
+    }
 }
 
 impl Ports {
@@ -77,19 +89,25 @@ impl Ports {
             command_ready,
             states,
             state_ready,
+            scenario: None,
         })
     }
 
     /// The ports whose connections to new or departed peers the loop updates
     /// while it waits ([`rt::ConnectionUpkeep`]): the publishers, the
-    /// notifier and the subscribers (a listener has no connections).
-    pub fn connections(&self) -> [&dyn UpdateConnections; 5] {
+    /// notifier and the subscribers (a listener has no connections), and the
+    /// scenario's publisher, which hands its document to tools that connect.
+    pub fn connections(&self) -> [&dyn UpdateConnections; 6] {
         [
             &self.commands,
             &self.telemetry,
             &self.command_ready,
             &self.states,
             &self.setpoints,
+            match &self.scenario {
+                Some(p) => p,
+                None => &NoPort,
+            },
         ]
     }
 }

@@ -24,7 +24,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use hcc_config::Scenario;
 use hcc_msgs::ServiceNames;
-use hcc_msgs::ipc::{self, IpcNode, Services};
+use hcc_msgs::ipc::{self, IpcNode, ScenarioPublisher, Services};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 use tracing::{error, info, warn};
 
@@ -142,7 +142,9 @@ impl Ipc {
             setup.file_prefix.as_deref(),
         )?;
         let services = Services::open(&node, &setup.names)?;
-        let ports = Ports::open(&services)?;
+        let mut ports = Ports::open(&services)?;
+        let doc = setup.scenario.document(setup.names.namespace().as_str());
+        ports.scenario = Some(ScenarioPublisher::publish(&node, &setup.names, &doc)?);
         Ok(Ipc {
             ports,
             _services: services,

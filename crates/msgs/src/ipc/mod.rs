@@ -98,4 +98,4 @@ pub use settings::{
 };
 
 /// `update_connections` of iceoryx2's ports (see `hcc_rt::ConnectionUpkeep`).
-pub use iceoryx2::port::update_connections::UpdateConnections;
+pub use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
