@@ -105,6 +105,7 @@ class Client:
         self._last_state: JointState | None = None
         self._client_id = new_client_id() if client_id is None else client_id
         self._seq = 0
+        self._scenario: dict[str, Any] | None = None
 
     def __enter__(self) -> "Client":
         return self
@@ -120,6 +121,26 @@ class Client:
         self._telemetry = self._states = self._publisher = None
         self._services = None
         self._node = None
+
+    def scenario(self, timeout: float = 2.0) -> dict[str, Any]:
+        """The scenario the controller runs, from its scenario service
+        (:func:`hcc.ipc.read_scenario`: the file's text, the URDF, the levels
+        and joints, the control rate); read once and kept."""
+        if self._scenario is None:
+            self._scenario = ipc.read_scenario(self._node, self.names, timeout)
+        return self._scenario
+
+    def level_names(self, timeout: float = 2.0) -> list[str]:
+        """The controller's levels by name, in priority order (index = the
+        0-based level of :meth:`set_goal`)."""
+        return [str(level["name"]) for level in self.scenario(timeout)["levels"]]
+
+    def level(self, name: str, timeout: float = 2.0) -> int:
+        """The 0-based index of the level called ``name`` (ValueError if none is)."""
+        names = self.level_names(timeout)
+        if name not in names:
+            raise ValueError(f"the controller has no level {name!r} (its levels: {names})")
+        return names.index(name)
 
     def _iterate(self, port: Any, payload: type, timeout: float | None) -> Iterator[Any]:
         deadline = None if timeout is None else time.monotonic() + timeout

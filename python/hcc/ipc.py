@@ -13,9 +13,12 @@ telemetry         Telemetry        1            MAX_TELEMETRY_SUBSCRIBERS    128
 setpoint          Setpoint         4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
 state_ready       event            2 notifiers  4 listeners
 command_ready     event            2 notifiers  4 listeners
+scenario          bytes (JSON)     1            MAX_SCENARIO_SUBSCRIBERS     1
 ================  ===============  ===========  ===========================  ======
 
-History 0, safe overflow (the newest sample wins), publishers discard data
+``scenario`` keeps its one sample (history 1): the controller publishes the
+scenario it runs once, and a tool that connects later reads it
+(:func:`read_scenario`). The others: history 0, safe overflow (the newest sample wins), publishers discard data
 instead of blocking. ``setpoint`` is the one service with several
 publishers: up to :data:`MAX_SETPOINT_PUBLISHERS` clients may command one
 controller at once; the controller reads every queued setpoint each cycle.
@@ -23,8 +26,11 @@ controller at once; the controller reads every queued setpoint each cycle.
 
 from __future__ import annotations
 
+import ctypes
+import json
 import os
 import re
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,6 +74,10 @@ EVENT_ID_MAX: int = 4
 EVENT_STATE_PUBLISHED: int = 1
 #: Event id the controller notifies on command_ready after publishing a command.
 EVENT_COMMAND_PUBLISHED: int = 2
+#: Tools that may read the scenario service at once.
+MAX_SCENARIO_SUBSCRIBERS: int = 8
+#: Version of the scenario document (``hcc_msgs::scenario::SCENARIO_SCHEMA_VERSION``).
+SCENARIO_SCHEMA_VERSION: int = 1
 #: Environment variable carrying the shared-memory file prefix to peers.
 FILE_PREFIX_ENV: str = "HCC_IPC_FILE_PREFIX"
 
@@ -129,6 +139,11 @@ class ServiceNames:
         """Event service the controller notifies with EVENT_COMMAND_PUBLISHED."""
         return self._name("command_ready")
 
+    @property
+    def scenario(self) -> str:
+        """Publish-subscribe service of the controller's scenario document (JSON bytes)."""
+        return self._name("scenario")
+
 
 def create_node(name: str, file_prefix: str | None = None) -> Any:
     """Creates an iceoryx2 node; ``file_prefix`` defaults to $HCC_IPC_FILE_PREFIX.
@@ -173,6 +188,70 @@ def _pubsub(
         )
     except Exception as e:
         raise IpcError(f"service {name!r}: {e!r}") from e
+
+
+class ScenarioUnavailable(IpcError):
+    """No scenario could be read from the namespace (the text says why)."""
+
+
+def read_scenario(node: Any, names: ServiceNames, timeout: float = 2.0) -> dict[str, Any]:
+    """The scenario the controller of ``names`` runs, from its scenario service
+    (``hcc_msgs::ipc::read_scenario``): a dict with ``version``, ``name``,
+    ``namespace``, ``rate_hz``, ``path``, ``toml``, ``urdf_path``, ``urdf``,
+    ``levels`` (each ``name``, ``tasks``, ``dim``) and ``joints`` (each
+    ``name``, ``lower``, ``upper``, ``velocity``, ``effort``; None where the
+    URDF sets no limit). Raises :class:`ScenarioUnavailable` when no
+    controller publishes one (not running, or older than this client), when
+    none comes within ``timeout`` s, or for another document version."""
+    ns = names.namespace
+    deadline = time.monotonic() + timeout
+    # A controller that is starting may not have created the service yet.
+    while True:
+        try:
+            service = (
+                node.service_builder(iox2.ServiceName.new(names.scenario))
+                .publish_subscribe(iox2.Slice[ctypes.c_uint8])
+                .max_publishers(1)
+                .max_subscribers(MAX_SCENARIO_SUBSCRIBERS)
+                .max_nodes(MAX_NODES)
+                .history_size(1)
+                .subscriber_max_buffer_size(1)
+                .open()
+            )
+            break
+        except Exception as e:
+            if time.monotonic() < deadline and "DoesNotExist" in repr(e):
+                time.sleep(0.01)
+                continue
+            raise ScenarioUnavailable(
+                f"no controller publishes its scenario in namespace {ns!r}: it is not running "
+                "there, or it is older than this client (a controller without the scenario "
+                f"service); pass the scenario file instead ({e!r})"
+            ) from e
+    subscriber = service.subscriber_builder().create()
+    try:
+        while True:
+            sample = subscriber.receive()
+            if sample is not None:
+                data = bytes(sample.payload().as_memory_view())
+                sample.delete()
+                break
+            if time.monotonic() >= deadline:
+                raise ScenarioUnavailable(
+                    f"the controller in namespace {ns!r} did not hand over its scenario "
+                    f"within {timeout} s"
+                )
+            time.sleep(0.002)
+    finally:
+        subscriber.delete()
+    doc: dict[str, Any] = json.loads(data)
+    if doc.get("version") != SCENARIO_SCHEMA_VERSION:
+        raise ScenarioUnavailable(
+            f"the controller publishes scenario document version {doc.get('version')}, "
+            f"this client reads version {SCENARIO_SCHEMA_VERSION}: use the client of the "
+            "controller's release, or pass the scenario file"
+        )
+    return doc
 
 
 def _event(node: Any, name: str) -> Any:

@@ -28,6 +28,15 @@ def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Pat
         sim_pair(SCENARIO, tmp_path) as (ns, prefix, ctl, plant),
         Client(ns, file_prefix=prefix) as client,
     ):
+        # The controller's scenario, from its service: the levels by name.
+        assert client.level_names() == ["TCP position", "TCP orientation", "posture"]
+        assert client.level("posture") == 2
+        doc = client.scenario()
+        assert doc["rate_hz"] == 1000.0 and doc["toml"] == SCENARIO.read_text()
+        assert [j["name"] for j in doc["joints"]][0] == "panda_joint1" and len(doc["joints"]) == 7
+        assert doc["levels"][0]["tasks"] == ["position"] and doc["levels"][0]["dim"] == 3
+        with pytest.raises(ValueError, match="no level 'elbow'"):
+            client.level("elbow")
         # The arm settles at the scenario's goal first.
         client.wait_until_converged(0, 1e-3, timeout=30.0)
         start = client.latest_telemetry()

@@ -127,7 +127,8 @@ pub enum ScenarioReadError {
 }
 
 /// Reads the scenario the controller of `names` publishes, waiting up to
-/// `timeout` for the controller to hand it over (at start-up; allocates).
+/// `timeout` for a starting controller to create the service and hand the
+/// document over (at start-up; allocates).
 pub fn read_scenario(
     node: &IpcNode,
     names: &ServiceNames,
@@ -136,23 +137,29 @@ pub fn read_scenario(
     let namespace = names.namespace().to_string();
     let name =
         ServiceName::new(names.scenario()).map_err(|e| ScenarioReadError::Ipc(format!("{e:?}")))?;
-    let factory = match builder(node, &name).open() {
-        Ok(f) => f,
-        Err(PublishSubscribeOpenError::DoesNotExist) => {
-            return Err(ScenarioReadError::NoController { namespace });
-        }
-        Err(e) => {
-            return Err(ScenarioReadError::Ipc(format!(
-                "{}: {e:?}",
-                names.scenario()
-            )));
+    let deadline = Instant::now() + timeout;
+    // A controller that is starting may not have created the service yet.
+    let factory = loop {
+        match builder(node, &name).open() {
+            Ok(f) => break f,
+            Err(PublishSubscribeOpenError::DoesNotExist) if Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Err(PublishSubscribeOpenError::DoesNotExist) => {
+                return Err(ScenarioReadError::NoController { namespace });
+            }
+            Err(e) => {
+                return Err(ScenarioReadError::Ipc(format!(
+                    "{}: {e:?}",
+                    names.scenario()
+                )));
+            }
         }
     };
     let subscriber = factory
         .subscriber_builder()
         .create()
         .map_err(|e| ScenarioReadError::Ipc(format!("{}: {e:?}", names.scenario())))?;
-    let deadline = Instant::now() + timeout;
     loop {
         match subscriber.receive() {
             Ok(Some(sample)) => return Ok(ScenarioDoc::from_json(sample.payload())?),
