@@ -2,7 +2,8 @@
 //! on their own (by hand, as a user runs a robot), not by `hcc run`:
 //!
 //! * it records all four streams from the moment it attaches, nothing lost,
-//!   and `hcc plot` derives the results from the file;
+//!   and the scenario the controller publishes on its scenario service (no
+//!   `--config`); `hcc plot` derives the results from the file alone;
 //! * `hcc replay` of a recording that starts mid-run: a fresh controller
 //!   takes over at the first recorded state; with the paper's arm at rest,
 //!   no setpoint and a one-dimensional null space (its basis unique up to a
@@ -85,7 +86,6 @@ fn hcc_record_attached_to_daemons_started_by_hand() {
     let dir = TempDir::new("record_attach");
     let ns = unique_namespace("record_attach");
     let prefix = unique_file_prefix();
-    let config = repo_root().join("config/paper-sim1.toml");
     let file = dir.path().join("attached.mcap");
     {
         let mut mon = Monitor::new(&ns, &prefix);
@@ -99,11 +99,13 @@ fn hcc_record_attached_to_daemons_started_by_hand() {
         // The logging thread reports every 100 ms.
         std::thread::sleep(Duration::from_millis(300));
         let before = upkeep_count(&ctl.log());
+        // No --config: the recorder stores the scenario the controller
+        // publishes on its scenario service, and hcc plot and hcc replay
+        // below need nothing else.
         let rec = run_with_timeout(
             Command::new(bin("hcc"))
                 .args(["record", "--namespace", &ns, "--file-prefix", &prefix])
-                .args(["--duration", "2", "--quiet", "--config"])
-                .arg(&config)
+                .args(["--duration", "2", "--quiet"])
                 .arg("--out")
                 .arg(&file),
             dir.path(),

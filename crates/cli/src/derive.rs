@@ -287,17 +287,27 @@ pub struct Derived<'a> {
 pub fn scenario_of(path: &Path, config: Option<&Path>) -> anyhow::Result<Scenario> {
     let meta = mcap_log::read_metadata(path)?;
     let recorded = meta.get(META_SCENARIO);
-    let config: PathBuf = match (config, recorded.and_then(|m| m.get("path"))) {
+    let field = |k: &str| recorded.and_then(|m| m.get(k)).filter(|v| !v.is_empty());
+    let from_recording = config.is_none() && field("toml").is_some();
+    let config: PathBuf = match (config, field("path")) {
         (Some(c), _) => c.to_path_buf(),
         (None, Some(p)) => PathBuf::from(p),
         (None, None) => bail!(
-            "{} names no scenario (recorded without --config?): give it with --config",
+            "{} names no scenario (recorded without --config, from a controller without the scenario service?): give it with --config",
             path.display()
         ),
     };
-    let mut scenario =
-        Scenario::load(&config).with_context(|| format!("the scenario of {}", path.display()))?;
-    if let Some(hash) = recorded.and_then(|m| m.get("urdf_sha256"))
+    let what = || format!("the scenario of {}", path.display());
+    let mut scenario = if from_recording {
+        // The texts the recording carries: the scenario as it ran, whatever
+        // the files say now (the URDF from the file when not recorded).
+        let toml = field("toml").map(String::as_str).unwrap_or_default();
+        Scenario::from_texts(toml, &config, field("urdf").map(String::as_str)).with_context(what)?
+    } else {
+        Scenario::load(&config).with_context(what)?
+    };
+    if field("urdf").is_none()
+        && let Some(hash) = recorded.and_then(|m| m.get("urdf_sha256"))
         && let Ok(urdf) = std::fs::read(&scenario.urdf_path)
         && &mcap_log::sha256_hex(&urdf) != hash
     {

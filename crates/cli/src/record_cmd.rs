@@ -35,8 +35,9 @@ pub struct RecordArgs {
     /// The recording (default: hcc-<namespace>-<start time>.mcap).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// The scenario the controller runs: stored in the file (TOML text, URDF
-    /// hash), so that `hcc plot` and `hcc replay` find it.
+    /// The scenario the controller runs (default: the one it publishes on
+    /// its scenario service): stored in the file (the TOML's and the URDF's
+    /// texts), so that `hcc plot` and `hcc replay` need nothing else.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// iceoryx2 file prefix of the daemons (default: HCC_IPC_FILE_PREFIX, else iceoryx2's).
@@ -80,6 +81,34 @@ fn run_info(namespace: &str, scenario: Option<&Scenario>, clock: (u64, u64)) -> 
     }
 }
 
+/// The scenario the controller of `names` publishes (waiting up to `wait`
+/// for it); none — said on stderr — from a controller without the service
+/// (then `hcc plot` and `hcc replay` need `--config`).
+fn scenario_from_service(
+    names: &ServiceNames,
+    file_prefix: Option<&str>,
+    wait: Duration,
+) -> Option<Scenario> {
+    let read = || -> anyhow::Result<Scenario> {
+        let node = ipc::create_node(
+            "hcc-record-scenario",
+            iceoryx2::prelude::SignalHandlingMode::Disabled,
+            file_prefix,
+        )?;
+        let doc = ipc::read_scenario(&node, names, wait)?;
+        Ok(Scenario::from_document(&doc)?)
+    };
+    match read() {
+        Ok(s) => Some(s),
+        Err(e) => {
+            eprintln!(
+                "hcc record: {e:#}; the recording names no scenario (give it to hcc plot and hcc replay with --config)"
+            );
+            None
+        }
+    }
+}
+
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let names = ServiceNames::new(&args.namespace).context("--namespace")?;
     let duration = args
@@ -90,12 +119,10 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let wait = positive("--wait", args.wait)?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let scenario = args
-        .config
-        .as_ref()
-        .map(Scenario::load)
-        .transpose()
-        .context("--config")?;
+    let scenario = match &args.config {
+        Some(c) => Some(Scenario::load(c).context("--config")?),
+        None => scenario_from_service(&names, file_prefix.as_deref(), wait),
+    };
     let clock = mcap_log::clock_pair();
     let out = args.out.clone().unwrap_or_else(|| {
         let stamp: String = capture::rfc3339(clock.0)

@@ -32,13 +32,33 @@ impl Scenario {
     /// Like [`Scenario::load`] for TOML text; `path` names the file in errors and is
     /// the base for the relative URDF path.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Scenario, ConfigError> {
+        Self::from_texts(text, path, None)
+    }
+
+    /// The scenario a controller publishes on its scenario service
+    /// (`hcc_msgs::ipc::read_scenario`): its file's text as the controller
+    /// loaded it, the robot from the URDF's text it sent (the file on disk
+    /// when the document has none). Errors name the controller's file.
+    pub fn from_document(doc: &hcc_msgs::scenario::ScenarioDoc) -> Result<Scenario, ConfigError> {
+        let urdf = (!doc.urdf.is_empty()).then_some(doc.urdf.as_str());
+        Self::from_texts(&doc.toml, Path::new(&doc.path), urdf)
+    }
+
+    /// Like [`Scenario::from_toml_str`], the robot from `urdf` (the URDF's
+    /// text) when given, else from the file `[robot] urdf` names (a
+    /// recording or a controller's document carries both texts).
+    pub fn from_texts(
+        text: &str,
+        path: &Path,
+        urdf: Option<&str>,
+    ) -> Result<Scenario, ConfigError> {
         let file: ScenarioFile = toml::from_str(text).map_err(|e| from_toml(path, text, &e))?;
         let cx = Ctx {
             file: path,
             text,
             stacked: false,
         };
-        let (model, urdf_path) = load_model(&cx, &file.robot)?;
+        let (model, urdf_path) = load_model(&cx, &file.robot, urdf)?;
         let n = model.nq();
 
         // [[level]]

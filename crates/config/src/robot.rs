@@ -9,8 +9,13 @@ use crate::context::Ctx;
 use crate::error::{self, ConfigError};
 use crate::schema::{InitialSection, RobotSection};
 
-/// `[robot]`: the model from the URDF (path relative to the scenario file).
-pub(crate) fn load_model(cx: &Ctx, robot: &RobotSection) -> Result<(Model, PathBuf), ConfigError> {
+/// `[robot]`: the model from the URDF (path relative to the scenario file),
+/// or from its text `urdf` when given (the path is then only named).
+pub(crate) fn load_model(
+    cx: &Ctx,
+    robot: &RobotSection,
+    urdf: Option<&str>,
+) -> Result<(Model, PathBuf), ConfigError> {
     let gravity = match &robot.gravity {
         Some(g) => {
             let v = cx.vector("robot.gravity", g, 3, "x, y, z")?;
@@ -20,12 +25,11 @@ pub(crate) fn load_model(cx: &Ctx, robot: &RobotSection) -> Result<(Model, PathB
     };
     let base = cx.file.parent().unwrap_or(Path::new("."));
     let urdf_path = base.join(&robot.urdf);
-    let model = Model::from_urdf_file(
-        &urdf_path,
-        robot.root_link.as_deref(),
-        &robot.tip_link,
-        gravity,
-    )
+    let (root, tip) = (robot.root_link.as_deref(), robot.tip_link.as_str());
+    let model = match urdf {
+        Some(text) => Model::from_urdf_str(text, root, tip, gravity),
+        None => Model::from_urdf_file(&urdf_path, root, tip, gravity),
+    }
     .map_err(|error| {
         let field = match &error {
             hcc_model::ModelError::UnknownLink { what, .. } if what == "root" => "robot.root_link",

@@ -132,6 +132,11 @@ impl Scenario {
         &self.spec.levels
     }
 
+    /// The scenario file's text as loaded.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
     /// What the controller publishes on its scenario service for the tools
     /// that know only `namespace` (`hcc_msgs::ipc::ScenarioPublisher`): the
     /// file's text as loaded, the URDF's text (empty when it cannot be read

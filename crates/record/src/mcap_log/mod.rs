@@ -137,22 +137,23 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 impl RunInfo {
-    /// The scenario record of `scenario`: its TOML text, path, name, the
-    /// URDF's path, robot name and SHA-256.
+    /// The scenario record of `scenario`: its TOML text as loaded, path,
+    /// name, the URDF's path, text, robot name and SHA-256 — what a replay
+    /// or a plot needs to build the scenario again without the files.
     pub fn describe_scenario(scenario: &hcc_config::Scenario) -> BTreeMap<String, String> {
         let mut m = BTreeMap::new();
         m.insert("name".into(), scenario.name.clone());
         let path = std::fs::canonicalize(&scenario.path).unwrap_or_else(|_| scenario.path.clone());
         m.insert("path".into(), path.display().to_string());
-        m.insert(
-            "toml".into(),
-            std::fs::read_to_string(&scenario.path).unwrap_or_default(),
-        );
+        m.insert("toml".into(), scenario.text().to_string());
         m.insert("urdf_path".into(), scenario.urdf_path.display().to_string());
         if let Ok(urdf) = std::fs::read(&scenario.urdf_path) {
             m.insert("urdf_sha256".into(), sha256_hex(&urdf));
             m.insert("urdf_bytes".into(), urdf.len().to_string());
             m.insert("urdf_name".into(), robot_name(&urdf).unwrap_or_default());
+            if let Ok(text) = String::from_utf8(urdf) {
+                m.insert("urdf".into(), text);
+            }
         }
         m.insert("n_joints".into(), scenario.model.nq().to_string());
         m.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
