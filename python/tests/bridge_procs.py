@@ -41,14 +41,18 @@ def zenoh_config(tmp: pathlib.Path, port: int) -> pathlib.Path:
     return path
 
 
-def bridge_cmd(ns: str, scenario: pathlib.Path, config: pathlib.Path, *extra: str) -> list[str]:
-    """The command line of ``hcc bridge``."""
-    return [str(binary("hcc")), "bridge", "--namespace", ns, "--config", str(scenario),
+def bridge_cmd(
+    ns: str, scenario: pathlib.Path | None, config: pathlib.Path, *extra: str
+) -> list[str]:
+    """The command line of ``hcc bridge`` (``scenario`` None: the namespace
+    alone, the scenario from the controller's scenario service)."""
+    given = ["--config", str(scenario)] if scenario is not None else []
+    return [str(binary("hcc")), "bridge", "--namespace", ns, *given,
             "--zenoh-config", str(config), *extra]
 
 
 @contextlib.contextmanager
-def bridge(ns: str, prefix: str, scenario: pathlib.Path, config: pathlib.Path,
+def bridge(ns: str, prefix: str, scenario: pathlib.Path | None, config: pathlib.Path,
            log: pathlib.Path, *extra: str) -> Iterator[subprocess.Popen]:
     """``hcc bridge`` on ``ns``; stopped with SIGTERM (then SIGKILL) on exit."""
     env = dict(os.environ, HCC_IPC_FILE_PREFIX=prefix)

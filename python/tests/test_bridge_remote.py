@@ -5,8 +5,9 @@ beside hcc-controller + hcc-sim (the Panda's Cartesian impedance, real
 time) as one Zenoh session, and ``hcc.remote.Client`` as the other (the
 operator station). Checked:
 
-* read-only by default: a remote goal is refused (code 100) and changes
-  nothing;
+* given the namespace alone (the scenario from the controller's scenario
+  service), read-only by default: a remote goal is refused (code 100) and
+  changes nothing;
 * with ``--allow-setpoints``: a remote pose goal is accepted and the arm
   reaches it; one outside the workspace is rejected by the controller with
   its reason; a flood of remote goals is capped (counted) while a local
@@ -48,7 +49,9 @@ def test_read_only_bridge_refuses_remote_goals(tmp_path: pathlib.Path) -> None:
     with (
         router(tmp_path) as port,
         sim_pair(SCENARIO, tmp_path) as (ns, prefix, ctl, plant),
-        bridge(ns, prefix, SCENARIO, zenoh_config(tmp_path, port), tmp_path / "bridge.log"),
+        # The namespace alone: the bridge reads the scenario from the
+        # controller's scenario service.
+        bridge(ns, prefix, None, zenoh_config(tmp_path, port), tmp_path / "bridge.log"),
         Client(ns, file_prefix=prefix) as local,
         remote(port, ns) as arm,
     ):

@@ -245,3 +245,30 @@ def value_at(msg: object, fields: list[str]) -> object:
 def max_index(path: str) -> int:
     """The largest index in a message path (-1 without one)."""
     return max((int(k.split("]")[0]) for k in path.split("[")[1:]), default=-1)
+
+
+def test_the_view_needs_only_the_namespace(tmp_path: pathlib.Path) -> None:
+    """``hcc view --namespace NS`` without ``--config``: the scenario comes from
+    the controller's scenario service, so the view serves the robot (its
+    URDF as an asset) and the joint states."""
+    ns = unique("pyviewns")
+    prefix = f"{unique('hccvn')}_"[:32]
+    env = fx.env_with_prefix(prefix)
+    try:
+        with daemons(ns, env, tmp_path, "1"):
+            with fx.view_process(
+                ["--namespace", ns, "--rate", "50"], env, tmp_path / "view.log", binary("hcc"),
+            ) as (view, port):
+                states = joint_states(port, 1.0)
+                assert len(states) > 20, (tmp_path / "view.log").read_text()
+                with fx.client(port) as c:
+                    c.wait_for_channels(["/joint_state"])
+                    status, urdf = c.fetch_asset("package://hcc/robot.urdf", 1)
+                    assert (status, urdf) == (0, URDF.read_bytes()), (
+                        tmp_path / "view.log"
+                    ).read_text()
+                assert view.poll() is None
+        log = (tmp_path / "view.log").read_text()
+        assert "no transform tree" not in log, log
+    finally:
+        remove_ipc_files(prefix)

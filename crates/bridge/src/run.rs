@@ -44,9 +44,10 @@ pub struct Args {
     #[arg(long)]
     pub namespace: String,
     /// The scenario the controller runs: joint names (URDF), level names
-    /// and kinds (the goal topics' types), the frame of Cartesian goals.
+    /// and kinds (the goal topics' types), the frame of Cartesian goals
+    /// (default: the one the controller publishes on its scenario service).
     #[arg(long)]
-    pub config: PathBuf,
+    pub config: Option<PathBuf>,
     /// ROS domain id (default: ROS_DOMAIN_ID, else 0).
     #[arg(long)]
     pub domain: Option<u32>,
@@ -161,9 +162,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     args.check()?;
     let names = ServiceNames::new(&args.namespace).context("--namespace")?;
     let domain = args.domain()?;
-    let scenario = Scenario::load(&args.config).context("--config")?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
+    let scenario = match &args.config {
+        Some(c) => Scenario::load(c).context("--config")?,
+        None => {
+            let doc = ipc::read_scenario_as(
+                &format!("hcc-bridge-scenario-{}", std::process::id()),
+                &names,
+                file_prefix.as_deref(),
+                std::time::Duration::from_secs(5),
+            )?;
+            Scenario::from_document(&doc).context("the controller's scenario")?
+        }
+    };
     let ros_ns = names::ros_name(&args.namespace, "hcc_");
     let counters = Arc::new(Counters::default());
     hcc_rt::install_stop_handler().context("cannot install the SIGINT/SIGTERM handlers")?;

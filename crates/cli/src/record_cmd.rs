@@ -90,12 +90,7 @@ fn scenario_from_service(
     wait: Duration,
 ) -> Option<Scenario> {
     let read = || -> anyhow::Result<Scenario> {
-        let node = ipc::create_node(
-            "hcc-record-scenario",
-            iceoryx2::prelude::SignalHandlingMode::Disabled,
-            file_prefix,
-        )?;
-        let doc = ipc::read_scenario(&node, names, wait)?;
+        let doc = ipc::read_scenario_as("hcc-record-scenario", names, file_prefix, wait)?;
         Ok(Scenario::from_document(&doc)?)
     };
     match read() {

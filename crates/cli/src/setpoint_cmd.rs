@@ -81,12 +81,12 @@ pub(crate) fn scenario_of(t: &Target) -> anyhow::Result<hcc_msgs::scenario::Scen
         .clone()
         .or_else(hcc_msgs::ipc::file_prefix_from_env);
     let names = hcc_msgs::ServiceNames::new(&t.namespace).context("--namespace")?;
-    let node = hcc_msgs::ipc::create_node(
+    Ok(hcc_msgs::ipc::read_scenario_as(
         "hcc-tool",
-        iceoryx2::prelude::SignalHandlingMode::Disabled,
+        &names,
         prefix.as_deref(),
-    )?;
-    Ok(hcc_msgs::ipc::read_scenario(&node, &names, timeout(t)?)?)
+        timeout(t)?,
+    )?)
 }
 
 fn level_index(level: usize) -> anyhow::Result<usize> {

@@ -114,15 +114,27 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
     let names = ServiceNames::new(namespace).context("--namespace")?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let scenario = args
-        .config
-        .as_ref()
-        .map(Scenario::load)
-        .transpose()
-        .context("--config")?;
-    if scenario.is_none() && !args.quiet {
-        eprintln!("hcc view: no --config: no transform tree, stick figure or joint limits");
-    }
+    let scenario = match &args.config {
+        Some(c) => Some(Scenario::load(c).context("--config")?),
+        // The scenario the controller publishes on its scenario service.
+        None => match ipc::read_scenario_as(
+            &format!("hcc-view-scenario-{}", std::process::id()),
+            &names,
+            file_prefix.as_deref(),
+            std::time::Duration::from_secs(5),
+        )
+        .map_err(anyhow::Error::from)
+        .and_then(|doc| Ok(Scenario::from_document(&doc)?))
+        {
+            Ok(s) => Some(s),
+            Err(e) => {
+                if !args.quiet {
+                    eprintln!("hcc view: {e:#}: no transform tree, stick figure or joint limits");
+                }
+                None
+            }
+        },
+    };
     let node = ipc::create_node(
         &format!("hcc-view-{}", std::process::id()),
         SignalHandlingMode::Disabled,

@@ -88,7 +88,9 @@ pub use pubsub::{
     CommandPublisher, CommandSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher,
     StateSample, StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
 };
-pub use scenario::{MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario};
+pub use scenario::{
+    MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario, read_scenario_as,
+};
 pub use services::Services;
 pub use settings::{
     EVENT_ID_MAX, LATEST_BUFFER, MAX_BORROWED_SAMPLES, MAX_COMMAND_SUBSCRIBERS, MAX_LISTENERS,

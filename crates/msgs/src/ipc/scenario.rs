@@ -172,3 +172,16 @@ pub fn read_scenario(
         std::thread::sleep(Duration::from_millis(2));
     }
 }
+
+/// [`read_scenario`] through a node of its own (named `tool`, with the
+/// peers' `file_prefix`), for a tool that has none.
+pub fn read_scenario_as(
+    tool: &str,
+    names: &ServiceNames,
+    file_prefix: Option<&str>,
+    timeout: Duration,
+) -> Result<ScenarioDoc, ScenarioReadError> {
+    let node = super::node::create_node(tool, SignalHandlingMode::Disabled, file_prefix)
+        .map_err(|e| ScenarioReadError::Ipc(e.to_string()))?;
+    read_scenario(&node, names, timeout)
+}
