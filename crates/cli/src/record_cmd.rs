@@ -115,7 +115,19 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
     let scenario = match &args.config {
-        Some(c) => Some(Scenario::load(c).context("--config")?),
+        Some(c) => {
+            let s = Scenario::load(c).context("--config")?;
+            // A file that is not what the controller runs is reported (its
+            // replay would not be bit for bit).
+            let quick = Duration::from_millis(500);
+            if let Ok(doc) =
+                ipc::read_scenario_as("hcc-record-scenario", &names, file_prefix.as_deref(), quick)
+                && let Some(d) = s.differs_from(&doc)
+            {
+                eprintln!("hcc record: warning: --config: {d}");
+            }
+            Some(s)
+        }
         None => scenario_from_service(&names, file_prefix.as_deref(), wait),
     };
     let clock = mcap_log::clock_pair();

@@ -176,6 +176,49 @@ impl Scenario {
         }
     }
 
+    /// How this scenario differs from what a controller runs (its published
+    /// document): the levels' names and dimensions, the joints' names, the
+    /// control rate. `None` when they agree (a tool given `--config` says
+    /// the difference).
+    pub fn differs_from(&self, running: &ScenarioDoc) -> Option<String> {
+        let mine = self.document(&running.namespace);
+        let levels = |d: &ScenarioDoc| -> Vec<(String, usize)> {
+            d.levels.iter().map(|l| (l.name.clone(), l.dim)).collect()
+        };
+        let joints =
+            |d: &ScenarioDoc| -> Vec<String> { d.joints.iter().map(|j| j.name.clone()).collect() };
+        let mut diffs = Vec::new();
+        if levels(&mine) != levels(running) {
+            diffs.push(format!(
+                "levels (name, dimension) {:?}, the controller runs {:?}",
+                levels(&mine),
+                levels(running)
+            ));
+        }
+        if joints(&mine) != joints(running) {
+            diffs.push(format!(
+                "joints {:?}, the controller's {:?}",
+                joints(&mine),
+                joints(running)
+            ));
+        }
+        if mine.rate_hz != running.rate_hz {
+            diffs.push(format!(
+                "control rate {} Hz, the controller's {} Hz",
+                mine.rate_hz, running.rate_hz
+            ));
+        }
+        (!diffs.is_empty()).then(|| {
+            format!(
+                "{} is not what the controller in namespace {:?} runs ({}): {}",
+                self.path.display(),
+                running.namespace,
+                running.path,
+                diffs.join("; ")
+            )
+        })
+    }
+
     /// Task dimension m_i of every level.
     pub fn task_dims(&self) -> Vec<usize> {
         self.spec.task_dims(self.model.nq())

@@ -114,17 +114,29 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
     let names = ServiceNames::new(namespace).context("--namespace")?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let scenario = match &args.config {
-        Some(c) => Some(Scenario::load(c).context("--config")?),
-        // The scenario the controller publishes on its scenario service.
-        None => match ipc::read_scenario_as(
+    let running = |timeout| {
+        ipc::read_scenario_as(
             &format!("hcc-view-scenario-{}", std::process::id()),
             &names,
             file_prefix.as_deref(),
-            std::time::Duration::from_secs(5),
+            timeout,
         )
-        .map_err(anyhow::Error::from)
-        .and_then(|doc| Ok(Scenario::from_document(&doc)?))
+    };
+    let scenario = match &args.config {
+        Some(c) => {
+            let s = Scenario::load(c).context("--config")?;
+            // A file that is not what the controller runs is reported.
+            if let Ok(doc) = running(std::time::Duration::from_millis(500))
+                && let Some(d) = s.differs_from(&doc)
+            {
+                eprintln!("hcc view: warning: --config: {d}");
+            }
+            Some(s)
+        }
+        // The scenario the controller publishes on its scenario service.
+        None => match running(std::time::Duration::from_secs(5))
+            .map_err(anyhow::Error::from)
+            .and_then(|doc| Ok(Scenario::from_document(&doc)?))
         {
             Ok(s) => Some(s),
             Err(e) => {
