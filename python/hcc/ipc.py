@@ -190,6 +190,30 @@ def _pubsub(
         raise IpcError(f"service {name!r}: {e!r}") from e
 
 
+#: The node name of the controller daemon (``hcc_msgs::ipc::CONTROLLER_NODE``).
+CONTROLLER_NODE: str = "hcc-controller"
+
+
+def _controller_attached(node: Any, names: ServiceNames) -> bool:
+    """Whether a live node named ``hcc-controller`` is attached to the
+    namespace's telemetry service (a controller runs there; a client that
+    opened the services itself is not one)."""
+    details = iox2.Service.details(
+        iox2.ServiceName.new(names.telemetry),
+        node.config,
+        iox2.MessagingPattern.PublishSubscribe,
+        iox2.ServiceType.Ipc,
+    )
+    if details is None:
+        return False
+    for state in details.nodes():
+        if isinstance(state, iox2.NodeState.Alive):
+            view = state[0]
+            if view.details is not None and view.details.name.as_str() == CONTROLLER_NODE:
+                return True
+    return False
+
+
 class ScenarioUnavailable(IpcError):
     """No scenario could be read from the namespace (the text says why)."""
 
@@ -220,13 +244,19 @@ def read_scenario(node: Any, names: ServiceNames, timeout: float = 2.0) -> dict[
             )
             break
         except Exception as e:
-            if time.monotonic() < deadline and "DoesNotExist" in repr(e):
+            if "DoesNotExist" not in repr(e):
+                raise ScenarioUnavailable(f"scenario service of {ns!r}: {e!r}") from e
+            if time.monotonic() < deadline:
                 time.sleep(0.01)
                 continue
+            if _controller_attached(node, names):
+                raise ScenarioUnavailable(
+                    f"the controller in namespace {ns!r} publishes no scenario: it is older "
+                    "than this client (it has no scenario service); pass the scenario file"
+                ) from e
             raise ScenarioUnavailable(
-                f"no controller publishes its scenario in namespace {ns!r}: it is not running "
-                "there, or it is older than this client (a controller without the scenario "
-                f"service); pass the scenario file instead ({e!r})"
+                f"no controller runs in namespace {ns!r} (no telemetry service, no scenario "
+                "service): start hcc run or hcc-controller there, or pass the scenario file"
             ) from e
     subscriber = service.subscriber_builder().create()
     try:

@@ -16,8 +16,9 @@ import pytest
 
 from hcc import Client, SetpointError, SetpointRejected, SetpointRejection
 
-from conftest import ROOT
-from procs import sim_pair
+from hcc import ipc
+from conftest import ROOT, unique
+from procs import remove_ipc_files, sim_pair
 
 SCENARIO = ROOT / "config" / "panda-pose-posture.toml"
 GOAL = [0.55, 0.10, 0.30]
@@ -95,3 +96,23 @@ def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Pat
         assert t.damping_diag_list(0) == pytest.approx([40.0, 40.0, 35.0])
         assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12), "targets kept"
         assert ctl.poll() is None and plant.poll() is None, "the pair keeps running"
+
+
+def test_the_scenario_of_a_namespace_without_a_controller_says_which(tmp_path: pathlib.Path) -> None:
+    """No controller: the client says none runs; a controller's node without
+    the scenario service (an older one): the client says it is older. Both
+    name the scenario file as the way out."""
+    ns = unique("pyscn")
+    prefix = f"{unique('hccscn')}_"[:32]
+    try:
+        with Client(ns, file_prefix=prefix) as client:
+            with pytest.raises(ipc.ScenarioUnavailable, match="no controller runs") as e:
+                client.scenario(timeout=0.05)
+            assert "scenario file" in str(e.value)
+            older = ipc.create_node(ipc.CONTROLLER_NODE, prefix)
+            services = ipc.Services(older, ipc.ServiceNames(ns))
+            with pytest.raises(ipc.ScenarioUnavailable, match="older than this client"):
+                client.scenario(timeout=0.05)
+            del services, older
+    finally:
+        remove_ipc_files(prefix)

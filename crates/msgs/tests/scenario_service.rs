@@ -1,7 +1,8 @@
 //! The scenario service: a tool that connects after the controller published
 //! its document reads it whole (the service keeps the last sample and the
-//! publisher's connection upkeep hands it over); with no controller the tool
-//! is told so, with the `--config` hint. Own file prefix and namespace; the
+//! publisher's connection upkeep hands it over); with no controller, or an
+//! older one without the service, the tool is told which, with the
+//! `--config` hint. Own file prefix and namespace; the
 //! files are removed after.
 
 use std::time::Duration;
@@ -46,11 +47,30 @@ fn a_tool_that_connects_later_reads_the_whole_document_and_none_without_a_contro
     let names = ServiceNames::for_namespace(Namespace::unique("scenario_svc").unwrap());
     let sent = doc(names.namespace().as_str());
     {
-        let node =
-            ipc::create_node("controller", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
-        let e = read_scenario(&node, &names, Duration::from_millis(20)).unwrap_err();
+        // A tool that opened the namespace's services itself is no controller.
+        let tool = ipc::create_node("tool", SignalHandlingMode::Disabled, Some(&prefix)).unwrap();
+        let tool_services = ipc::Services::open(&tool, &names).unwrap();
+        let e = read_scenario(&tool, &names, Duration::from_millis(20)).unwrap_err();
         assert!(matches!(e, ScenarioReadError::NoController { .. }), "{e}");
         assert!(e.to_string().contains("--config"), "{e}");
+        // A controller older than the scenario service: attached to its
+        // services, no scenario.
+        let node = ipc::create_node(
+            ipc::CONTROLLER_NODE,
+            SignalHandlingMode::Disabled,
+            Some(&prefix),
+        )
+        .unwrap();
+        let services = ipc::Services::open(&node, &names).unwrap();
+        let e = read_scenario(&node, &names, Duration::from_millis(20)).unwrap_err();
+        assert!(
+            matches!(e, ScenarioReadError::OlderController { .. }),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("older") && e.to_string().contains("--config"),
+            "{e}"
+        );
 
         let publisher = ScenarioPublisher::publish(&node, &names, &sent).unwrap();
         let reader = std::thread::spawn({
@@ -69,6 +89,7 @@ fn a_tool_that_connects_later_reads_the_whole_document_and_none_without_a_contro
         let got = reader.join().unwrap().unwrap();
         assert_eq!(got, sent);
         assert_eq!(got.joints[0].effort, None);
+        drop((services, tool_services));
     }
     let files = ipc::leftover_files(&prefix).unwrap();
     for f in files.iter().filter(|f| f.global_mgmt) {

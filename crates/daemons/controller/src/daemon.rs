@@ -137,7 +137,7 @@ impl Ipc {
             info!("{line}");
         }
         let node = ipc::create_node(
-            "hcc-controller",
+            ipc::CONTROLLER_NODE,
             SignalHandlingMode::Disabled,
             setup.file_prefix.as_deref(),
         )?;

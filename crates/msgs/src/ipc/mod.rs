@@ -89,7 +89,8 @@ pub use pubsub::{
     StateSample, StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
 };
 pub use scenario::{
-    MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario, read_scenario_as,
+    CONTROLLER_NODE, MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario,
+    read_scenario_as,
 };
 pub use services::Services;
 pub use settings::{

@@ -105,11 +105,17 @@ impl UpdateConnections for ScenarioPublisher {
 /// Why the scenario of a namespace could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioReadError {
-    /// No controller publishes one: not running, or older than the service.
+    /// No controller runs in the namespace (none publishes telemetry).
     #[error(
-        "no controller publishes its scenario in namespace {namespace:?}: it is not running there, or it is older than this tool (a controller without the scenario service); start `hcc run` or `hcc-controller`, or pass --config"
+        "no controller runs in namespace {namespace:?} (no telemetry service, no scenario service): start `hcc run` or `hcc-controller` there, or pass --config"
     )]
     NoController { namespace: String },
+    /// A controller runs (its telemetry service exists) but publishes no
+    /// scenario: one older than the service.
+    #[error(
+        "the controller in namespace {namespace:?} publishes no scenario: it is older than this tool (it has no scenario service); pass --config"
+    )]
+    OlderController { namespace: String },
     /// The service exists but nothing came within the timeout.
     #[error(
         "the controller in namespace {namespace:?} did not hand over its scenario within {timeout:?}; pass --config"
@@ -146,7 +152,11 @@ pub fn read_scenario(
                 std::thread::sleep(Duration::from_millis(10));
             }
             Err(PublishSubscribeOpenError::DoesNotExist) => {
-                return Err(ScenarioReadError::NoController { namespace });
+                return Err(if controller_attached(node, names) {
+                    ScenarioReadError::OlderController { namespace }
+                } else {
+                    ScenarioReadError::NoController { namespace }
+                });
             }
             Err(e) => {
                 return Err(ScenarioReadError::Ipc(format!(
@@ -172,6 +182,35 @@ pub fn read_scenario(
         std::thread::sleep(Duration::from_millis(2));
     }
 }
+
+/// Whether a live node named `hcc-controller` is attached to the
+/// namespace's telemetry service (a controller runs there; a tool that
+/// opened the services itself is not one).
+fn controller_attached(node: &IpcNode, names: &ServiceNames) -> bool {
+    use iceoryx2::node::{NodeState, NodeView};
+    let Ok(telemetry) = ServiceName::new(names.telemetry()) else {
+        return false;
+    };
+    let Ok(Some(details)) = <Ipc as iceoryx2::service::Service>::details(
+        &telemetry,
+        node.config(),
+        MessagingPattern::PublishSubscribe,
+    ) else {
+        return false;
+    };
+    details.dynamic_details.is_some_and(|d| {
+        d.nodes.iter().any(|n| match n {
+            NodeState::Alive(view) => view
+                .details()
+                .as_ref()
+                .is_some_and(|d| d.name().as_str() == CONTROLLER_NODE),
+            _ => false,
+        })
+    })
+}
+
+/// The node name of the controller daemon (`hcc-controller`).
+pub const CONTROLLER_NODE: &str = "hcc-controller";
 
 /// [`read_scenario`] through a node of its own (named `tool`, with the
 /// peers' `file_prefix`), for a tool that has none.
