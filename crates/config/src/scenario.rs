@@ -149,6 +149,9 @@ impl Scenario {
             name: self.name.clone(),
             namespace: namespace.to_string(),
             rate_hz: self.rate_hz,
+            form: self.spec.form.name().to_string(),
+            coriolis_cancellation: self.spec.coriolis_cancellation,
+            gravity_compensation: self.spec.gravity_compensation,
             path: self.path.display().to_string(),
             toml: self.text.clone(),
             urdf_path: self.urdf_path.display().to_string(),
@@ -162,6 +165,10 @@ impl Scenario {
                     name: l.name.clone(),
                     tasks: l.tasks.iter().map(|t| t.kind().to_string()).collect(),
                     dim,
+                    goal: l.goal.iter().copied().collect(),
+                    // Row-major (nalgebra stores by column; K and D are symmetric).
+                    stiffness: l.stiffness.transpose().iter().copied().collect(),
+                    damping: l.damping.transpose().iter().copied().collect(),
                 })
                 .collect(),
             joints: self

@@ -30,6 +30,14 @@ fn the_document_builds_the_same_scenario_and_names_its_levels_and_joints() {
         [("TCP position", 3), ("TCP orientation", 3), ("posture", 7)]
     );
     assert_eq!(doc.levels[0].tasks, ["position"]);
+    // The resolved values: goal, K and D (row-major), the law's options.
+    let l = &s.spec.levels[0];
+    assert_eq!(doc.levels[0].goal, l.goal.as_slice());
+    assert_eq!(doc.levels[0].stiffness.len(), 9);
+    assert_eq!(doc.levels[0].stiffness[4], l.stiffness[(1, 1)]);
+    assert_eq!(doc.levels[2].damping.len(), 49);
+    assert_eq!(doc.form, "extended");
+    assert!(doc.coriolis_cancellation);
     assert_eq!(doc.joints.len(), 7);
     assert_eq!(doc.joints[0].name, "panda_joint1");
     assert!(doc.joints[3].upper.unwrap() < 0.0, "joint 4's upper limit");

@@ -26,6 +26,13 @@ pub struct LevelInfo {
     pub tasks: Vec<String>,
     /// Its task dimension m_i.
     pub dim: usize,
+    /// x_{i,d} as resolved at load (m, rad; orientation goals as the file
+    /// gives them, roll-pitch-yaw).
+    pub goal: Vec<f64>,
+    /// K_i, m_i × m_i row-major, as resolved at load.
+    pub stiffness: Vec<f64>,
+    /// D_i, m_i × m_i row-major, as resolved at load.
+    pub damping: Vec<f64>,
 }
 
 /// One joint of the chain, root to tip, with its URDF limits (rad or m,
@@ -64,6 +71,12 @@ pub struct ScenarioDoc {
     pub namespace: String,
     /// The control rate (Hz).
     pub rate_hz: f64,
+    /// The law's form (`extended`, `projector`, `kinematic_projector`).
+    pub form: String,
+    /// Whether τ_μ (eq. 22) is added.
+    pub coriolis_cancellation: bool,
+    /// Whether the controller adds g(q) (else the driver does).
+    pub gravity_compensation: bool,
     /// The scenario file's path as the controller loaded it (informative:
     /// the tools need [`ScenarioDoc::toml`], not the file).
     pub path: String,
@@ -131,10 +144,16 @@ mod tests {
             toml: "[robot]\n".into(),
             urdf_path: "planar4.urdf".into(),
             urdf: "<robot/>".into(),
+            form: "extended".into(),
+            coriolis_cancellation: true,
+            gravity_compensation: true,
             levels: vec![LevelInfo {
                 name: "TCP position".into(),
                 tasks: vec!["position".into()],
                 dim: 2,
+                goal: vec![0.9, 0.8],
+                stiffness: vec![1000.0, 0.0, 0.0, 1000.0],
+                damping: vec![40.0, 0.0, 0.0, 40.0],
             }],
             joints: vec![JointInfo::new("joint1", -2.9, 2.9, f64::INFINITY, 87.0)],
         }

@@ -18,6 +18,9 @@ fn doc(namespace: &str) -> ScenarioDoc {
         name: "paper-sim1".into(),
         namespace: namespace.into(),
         rate_hz: 1000.0,
+        form: "extended".into(),
+        coriolis_cancellation: true,
+        gravity_compensation: true,
         path: "config/paper-sim1.toml".into(),
         // A document of some size: a long scenario text.
         toml: "# a comment line of the scenario\n".repeat(4000),
@@ -28,11 +31,17 @@ fn doc(namespace: &str) -> ScenarioDoc {
                 name: "TCP position".into(),
                 tasks: vec!["position".into()],
                 dim: 2,
+                goal: vec![0.9, 0.8],
+                stiffness: vec![1000.0, 0.0, 0.0, 1000.0],
+                damping: vec![40.0, 0.0, 0.0, 40.0],
             },
             LevelInfo {
                 name: "joint 1".into(),
                 tasks: vec!["joint".into()],
                 dim: 1,
+                goal: vec![0.35],
+                stiffness: vec![2400.0],
+                damping: vec![15.0],
             },
         ],
         joints: (1..=4)
