@@ -206,6 +206,10 @@ fn goals_gains_rejections_and_the_monitor() {
                 "outside_workspace",
             ),
             (
+                vec!["goal", "--level", "elbow", "0.5", "0.0", "0.3"],
+                "no level \"elbow\"",
+            ),
+            (
                 vec!["goal", "--level", "7", "0.5", "0.0", "0.3"],
                 "unknown_level",
             ),
@@ -255,14 +259,13 @@ fn goals_gains_rejections_and_the_monitor() {
         let goal: Vec<f64> = serde_json::from_value(s["levels"][0]["goal"].clone()).unwrap();
         assert_eq!(goal, [0.55, 0.10, 0.30], "targets unchanged");
 
-        // A stiffness change shows in the monitor.
+        // A stiffness change shows in the monitor. The level by its name and
+        // no --dim: both from the controller's scenario service.
         let out = hcc(
             &[
                 "gains",
                 "--level",
-                "1",
-                "--dim",
-                "3",
+                "TCP position",
                 "--stiffness",
                 "500",
                 "500",

@@ -31,9 +31,10 @@ pub struct Target {
 pub struct GoalArgs {
     #[command(flatten)]
     pub target: Target,
-    /// Level (1-based, the order of the scenario's [[level]]s).
+    /// Level: 1-based (the order of the scenario's [[level]]s), or its name
+    /// (from the controller's scenario service).
     #[arg(long)]
-    pub level: usize,
+    pub level: String,
     /// Transition duration, s (0: as fast as the level's speed limit allows).
     #[arg(long, default_value_t = 0.0)]
     pub duration: f64,
@@ -47,12 +48,13 @@ pub struct GoalArgs {
 pub struct GainsArgs {
     #[command(flatten)]
     pub target: Target,
-    /// Level (1-based).
+    /// Level: 1-based, or its name (from the controller's scenario service).
     #[arg(long)]
-    pub level: usize,
-    /// Task dimension m of the level.
+    pub level: String,
+    /// Task dimension m of the level (default: the level's, from the
+    /// controller's scenario service).
     #[arg(long)]
-    pub dim: usize,
+    pub dim: Option<usize>,
     /// Stiffness: m diagonal values or m² row-major.
     #[arg(long, num_args = 1.., allow_negative_numbers = true)]
     pub stiffness: Vec<f64>,
@@ -89,11 +91,23 @@ pub(crate) fn scenario_of(t: &Target) -> anyhow::Result<hcc_msgs::scenario::Scen
     )?)
 }
 
-fn level_index(level: usize) -> anyhow::Result<usize> {
-    if level == 0 {
-        bail!("--level is 1-based (the first [[level]] is 1)");
+/// The 0-based level `--level` names: a 1-based number, or a level's name
+/// looked up in the controller's scenario (which also gives its dimension).
+fn level_index(t: &Target, level: &str) -> anyhow::Result<(usize, Option<usize>)> {
+    if let Ok(k) = level.parse::<usize>() {
+        if k == 0 {
+            bail!("--level is 1-based (the first [[level]] is 1)");
+        }
+        return Ok((k - 1, None));
     }
-    Ok(level - 1)
+    let doc = scenario_of(t).context("--level by name needs the controller's scenario")?;
+    match doc.levels.iter().position(|l| l.name == level) {
+        Some(i) => Ok((i, Some(doc.levels[i].dim))),
+        None => {
+            let names: Vec<&str> = doc.levels.iter().map(|l| l.name.as_str()).collect();
+            bail!("the controller has no level {level:?} (its levels: {names:?})")
+        }
+    }
 }
 
 pub(crate) fn timeout(t: &Target) -> anyhow::Result<Duration> {
@@ -102,7 +116,7 @@ pub(crate) fn timeout(t: &Target) -> anyhow::Result<Duration> {
 
 /// `hcc goal`: exit 0 once the controller accepted the goal.
 pub fn goal(args: GoalArgs) -> anyhow::Result<()> {
-    let level = level_index(args.level)?;
+    let (level, _) = level_index(&args.target, &args.level)?;
     let mut client = connect(&args.target)?;
     let seq = client.set_goal(level, &args.value, args.duration)?;
     let answer = client.wait_until_accepted(seq, timeout(&args.target)?)?;
@@ -115,18 +129,22 @@ pub fn goal(args: GoalArgs) -> anyhow::Result<()> {
 
 /// `hcc gains`: exit 0 once the controller accepted the gains.
 pub fn gains(args: GainsArgs) -> anyhow::Result<()> {
-    let level = level_index(args.level)?;
     if args.stiffness.is_empty() && args.damping.is_empty() {
         bail!("give --stiffness and/or --damping");
     }
+    let (level, known) = level_index(&args.target, &args.level)?;
+    let dim = match (args.dim, known) {
+        (Some(d), _) => d,
+        (None, Some(d)) => d,
+        (None, None) => scenario_of(&args.target)
+            .context("--dim not given")?
+            .levels
+            .get(level)
+            .map(|l| l.dim)
+            .with_context(|| format!("the controller has no level {}", args.level))?,
+    };
     let mut client = connect(&args.target)?;
-    let seq = client.set_gains(
-        level,
-        args.dim,
-        &args.stiffness,
-        &args.damping,
-        args.duration,
-    )?;
+    let seq = client.set_gains(level, dim, &args.stiffness, &args.damping, args.duration)?;
     let answer = client.wait_until_accepted(seq, timeout(&args.target)?)?;
     println!(
         "level {} gains accepted; transition {:.3} s",
