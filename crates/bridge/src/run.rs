@@ -164,30 +164,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let domain = args.domain()?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let running = |timeout| {
-        ipc::read_scenario_as(
-            &format!("hcc-bridge-scenario-{}", std::process::id()),
-            &names,
-            file_prefix.as_deref(),
-            timeout,
-        )
-    };
-    let scenario = match &args.config {
-        Some(c) => {
-            let s = Scenario::load(c).context("--config")?;
-            // A file that is not what the controller runs is reported.
-            if let Ok(doc) = running(std::time::Duration::from_millis(500))
-                && let Some(d) = s.differs_from(&doc)
-            {
-                tracing::warn!("--config: {d}");
-            }
-            s
-        }
-        None => {
-            let doc = running(std::time::Duration::from_secs(5))?;
-            Scenario::from_document(&doc).context("the controller's scenario")?
-        }
-    };
+    let (scenario, differs) = hcc_config::scenario_for_tool(
+        "hcc-bridge-scenario",
+        args.config.as_deref(),
+        &names,
+        file_prefix.as_deref(),
+        std::time::Duration::from_secs(5),
+    )
+    .context("the scenario (--config, or the controller's scenario service)")?;
+    if let Some(d) = differs {
+        tracing::warn!("--config: {d}");
+    }
     let ros_ns = names::ros_name(&args.namespace, "hcc_");
     let counters = Arc::new(Counters::default());
     hcc_rt::install_stop_handler().context("cannot install the SIGINT/SIGTERM handlers")?;

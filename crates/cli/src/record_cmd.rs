@@ -11,7 +11,7 @@
 //! chunk (at most a second old).
 
 use anyhow::{Context, bail};
-use hcc_config::Scenario;
+use hcc_config::{Scenario, ToolScenarioError};
 use hcc_msgs::{ServiceNames, ipc};
 use hcc_record::mcap_log::{self, RunInfo};
 use std::collections::BTreeMap;
@@ -81,29 +81,6 @@ fn run_info(namespace: &str, scenario: Option<&Scenario>, clock: (u64, u64)) -> 
     }
 }
 
-/// The scenario the controller of `names` publishes (waiting up to `wait`
-/// for it); none — said on stderr — from a controller without the service
-/// (then `hcc plot` and `hcc replay` need `--config`).
-fn scenario_from_service(
-    names: &ServiceNames,
-    file_prefix: Option<&str>,
-    wait: Duration,
-) -> Option<Scenario> {
-    let read = || -> anyhow::Result<Scenario> {
-        let doc = ipc::read_scenario_as("hcc-record-scenario", names, file_prefix, wait)?;
-        Ok(Scenario::from_document(&doc)?)
-    };
-    match read() {
-        Ok(s) => Some(s),
-        Err(e) => {
-            eprintln!(
-                "hcc record: {e:#}; the recording names no scenario (give it to hcc plot and hcc replay with --config)"
-            );
-            None
-        }
-    }
-}
-
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let names = ServiceNames::new(&args.namespace).context("--namespace")?;
     let duration = args
@@ -114,21 +91,28 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let wait = positive("--wait", args.wait)?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let scenario = match &args.config {
-        Some(c) => {
-            let s = Scenario::load(c).context("--config")?;
-            // A file that is not what the controller runs is reported (its
-            // replay would not be bit for bit).
-            let quick = Duration::from_millis(500);
-            if let Ok(doc) =
-                ipc::read_scenario_as("hcc-record-scenario", &names, file_prefix.as_deref(), quick)
-                && let Some(d) = s.differs_from(&doc)
-            {
+    let scenario = match hcc_config::scenario_for_tool(
+        "hcc-record-scenario",
+        args.config.as_deref(),
+        &names,
+        file_prefix.as_deref(),
+        wait,
+    ) {
+        Ok((s, differs)) => {
+            // Its replay would not be bit for bit.
+            if let Some(d) = differs {
                 eprintln!("hcc record: warning: --config: {d}");
             }
             Some(s)
         }
-        None => scenario_from_service(&names, file_prefix.as_deref(), wait),
+        Err(ToolScenarioError::Config(e)) => return Err(e).context("--config"),
+        // A controller without the service: recorded without a scenario.
+        Err(e) => {
+            eprintln!(
+                "hcc record: {e}; the recording names no scenario (give it to hcc plot and hcc replay with --config)"
+            );
+            None
+        }
     };
     let clock = mcap_log::clock_pair();
     let out = args.out.clone().unwrap_or_else(|| {

@@ -52,6 +52,7 @@ mod context;
 mod daemons;
 mod levels;
 mod load;
+mod published;
 mod robot;
 mod safety;
 mod scenario;
@@ -60,6 +61,7 @@ mod tasks;
 
 pub use daemons::{ControllerDaemon, MAX_CPU_CORE, STALE_TIMEOUT_PERIODS, SimDaemon};
 pub use error::ConfigError;
+pub use published::{COMPARE_WAIT, ToolScenarioError, scenario_for_tool};
 pub use scenario::Scenario;
 pub use schema::*;
 pub use simulation::{Simulation, Wrench};

@@ -7,7 +7,7 @@
 //! sequence numbers start again) is counted and followed.
 
 use anyhow::Context as _;
-use hcc_config::Scenario;
+use hcc_config::ToolScenarioError;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
 use hcc_record::mcap_log::{self, JointStateMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
@@ -114,38 +114,27 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
     let names = ServiceNames::new(namespace).context("--namespace")?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let running = |timeout| {
-        ipc::read_scenario_as(
-            &format!("hcc-view-scenario-{}", std::process::id()),
-            &names,
-            file_prefix.as_deref(),
-            timeout,
-        )
-    };
-    let scenario = match &args.config {
-        Some(c) => {
-            let s = Scenario::load(c).context("--config")?;
-            // A file that is not what the controller runs is reported.
-            if let Ok(doc) = running(std::time::Duration::from_millis(500))
-                && let Some(d) = s.differs_from(&doc)
-            {
+    let scenario = match hcc_config::scenario_for_tool(
+        "hcc-view-scenario",
+        args.config.as_deref(),
+        &names,
+        file_prefix.as_deref(),
+        std::time::Duration::from_secs(5),
+    ) {
+        Ok((s, differs)) => {
+            if let Some(d) = differs {
                 eprintln!("hcc view: warning: --config: {d}");
             }
             Some(s)
         }
-        // The scenario the controller publishes on its scenario service.
-        None => match running(std::time::Duration::from_secs(5))
-            .map_err(anyhow::Error::from)
-            .and_then(|doc| Ok(Scenario::from_document(&doc)?))
-        {
-            Ok(s) => Some(s),
-            Err(e) => {
-                if !args.quiet {
-                    eprintln!("hcc view: {e:#}: no transform tree, stick figure or joint limits");
-                }
-                None
+        Err(ToolScenarioError::Config(e)) => return Err(e).context("--config"),
+        // No controller's scenario: the view serves without the robot.
+        Err(e) => {
+            if !args.quiet {
+                eprintln!("hcc view: {e}: no transform tree, stick figure or joint limits");
             }
-        },
+            None
+        }
     };
     let node = ipc::create_node(
         &format!("hcc-view-{}", std::process::id()),
