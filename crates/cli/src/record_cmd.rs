@@ -81,6 +81,34 @@ fn run_info(namespace: &str, scenario: Option<&Scenario>, clock: (u64, u64)) -> 
     }
 }
 
+/// The scenario the recording stores: `--config` (a warning when it is not
+/// what the controller runs: its replay would not be bit for bit), else the
+/// one the controller publishes; none — said on stderr — from a controller
+/// without the scenario service.
+fn recorded_scenario(
+    args: &RecordArgs,
+    names: &ServiceNames,
+    file_prefix: Option<&str>,
+    wait: Duration,
+) -> anyhow::Result<Option<Scenario>> {
+    let tool = "hcc-record-scenario";
+    match hcc_config::scenario_for_tool(tool, args.config.as_deref(), names, file_prefix, wait) {
+        Ok((s, differs)) => {
+            if let Some(d) = differs {
+                eprintln!("hcc record: warning: --config: {d}");
+            }
+            Ok(Some(s))
+        }
+        Err(ToolScenarioError::Config(e)) => Err(e).context("--config"),
+        Err(e) => {
+            eprintln!(
+                "hcc record: {e}; the recording names no scenario (give it to hcc plot and hcc replay with --config)"
+            );
+            Ok(None)
+        }
+    }
+}
+
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let names = ServiceNames::new(&args.namespace).context("--namespace")?;
     let duration = args
@@ -91,29 +119,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let wait = positive("--wait", args.wait)?;
     let file_prefix = args.file_prefix.clone().or_else(ipc::file_prefix_from_env);
     ipc::config(file_prefix.as_deref()).context("--file-prefix")?;
-    let scenario = match hcc_config::scenario_for_tool(
-        "hcc-record-scenario",
-        args.config.as_deref(),
-        &names,
-        file_prefix.as_deref(),
-        wait,
-    ) {
-        Ok((s, differs)) => {
-            // Its replay would not be bit for bit.
-            if let Some(d) = differs {
-                eprintln!("hcc record: warning: --config: {d}");
-            }
-            Some(s)
-        }
-        Err(ToolScenarioError::Config(e)) => return Err(e).context("--config"),
-        // A controller without the service: recorded without a scenario.
-        Err(e) => {
-            eprintln!(
-                "hcc record: {e}; the recording names no scenario (give it to hcc plot and hcc replay with --config)"
-            );
-            None
-        }
-    };
+    let scenario = recorded_scenario(&args, &names, file_prefix.as_deref(), wait)?;
     let clock = mcap_log::clock_pair();
     let out = args.out.clone().unwrap_or_else(|| {
         let stamp: String = capture::rfc3339(clock.0)

@@ -178,13 +178,7 @@ fn check_namespace(cx: &Ctx, ns: &str) -> Result<(), ConfigError> {
 fn check_spec(cx: &Ctx, model: &Model, spec: &ControllerSpec) -> Result<(), ConfigError> {
     if let Err(e) = spec.validate(model) {
         let field = match &e {
-            // "k (name)", 1-based.
-            SpecError::Level { level, .. } => level
-                .split_whitespace()
-                .next()
-                .and_then(|k| k.parse::<usize>().ok())
-                .map(|k| format!("level[{}]", k.saturating_sub(1)))
-                .unwrap_or_else(|| "level".to_string()),
+            SpecError::Level { level, .. } => hcc_spec::level_field(level),
             SpecError::Spec(_) if spec.form == Form::KinematicProjector => {
                 "controller.form".to_string()
             }

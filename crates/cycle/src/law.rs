@@ -16,13 +16,7 @@ use hcc_control::{ControlError, Controller};
 pub fn controller_for(scenario: &Scenario) -> Result<Controller, ConfigError> {
     Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).map_err(|e| {
         let field = match &e {
-            // "k (name)", 1-based.
-            ControlError::Level { level, .. } => level
-                .split_whitespace()
-                .next()
-                .and_then(|k| k.parse::<usize>().ok())
-                .map(|k| format!("level[{}]", k.saturating_sub(1)))
-                .unwrap_or_else(|| "level".to_string()),
+            ControlError::Level { level, .. } => hcc_spec::level_field(level),
             _ => "initial.q0".to_string(),
         };
         scenario.error_at(&field, format!("rejected by the controller: {e}"))

@@ -23,6 +23,18 @@ pub mod torque_filter;
 pub use hierarchy::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 pub use safety::SafetySpec;
 
+/// The scenario file's field of the level an error names (`level` as
+/// [`SpecError::Level`] and the law's level errors give it: "k (name)",
+/// 1-based): `level[k−1]`, or `level` when it names none.
+pub fn level_field(level: &str) -> String {
+    level
+        .split_whitespace()
+        .next()
+        .and_then(|k| k.parse::<usize>().ok())
+        .map(|k| format!("level[{}]", k.saturating_sub(1)))
+        .unwrap_or_else(|| "level".to_string())
+}
+
 /// A specification the checks refuse.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SpecError {
