@@ -19,6 +19,13 @@
 //!   τ_i = −J̄_iᵀ Z_i J_iᵀ F_i (eq. 21), F_i = ∂V_i/∂x_iᵀ + D_i ẋ_i, and the
 //!   power-conserving τ_μ = Σ_i J̄_iᵀ Σ_{j≠i} μ_ij v_j (eq. 22).
 //!
+//! **Tracking.** A level may track a desired x_{i,d}(t) with ẋ_{i,d}, ẍ_{i,d}
+//! ([`Controller::set_goal_acceleration`]): the desired local velocities
+//! v_{i,d} = J̄_i q̇_d are formed level by level and the feed-forward
+//! J̄_iᵀ (Λ_i v̇_{i,d} + μ_ii v_{i,d}) makes each level's error follow
+//! Λ_i ṽ̇_i + μ_ii ṽ_i + Z_i J_iᵀ F_i = 0 (docs/tracking.md); with no moving goal
+//! it is the law above, bit for bit.
+//!
 //! **Levels of several tasks.** A level stacks the rows of its tasks ([`TaskSpec`],
 //! e.g. the 6-D [`TaskSpec::Pose`] or a position and an orientation): x_i, J_i and
 //! J̇_i are stacked, V_i = ½ eᵀ K_i e over the stacked errors (e = 2ε on quaternion

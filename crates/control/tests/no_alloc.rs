@@ -40,6 +40,16 @@ fn ten_thousand_panda_steps_allocate_nothing() {
                 .expect("velocity");
             c.set_gains(1, Some(&k_new), Some(&d_new)).expect("gains");
         }
+        if k == 5000 {
+            // The tracking form (docs/tracking.md) from here on: every
+            // level tracks, level 1's goal moves.
+            c.set_goal_acceleration(0, Some(&[0.02, 0.0, 0.01]))
+                .expect("acceleration");
+            c.set_goal_acceleration(1, Some(&[0.0; 3]))
+                .expect("acceleration");
+            c.set_goal_acceleration(2, Some(&[0.0; 7]))
+                .expect("acceleration");
+        }
     }
     let after = hcc_rtalloc::thread_stats().allocs;
     assert!(sum.is_finite());

@@ -2,6 +2,7 @@
 //! (Z_i, J̄_i of eq. 5, Λ_i of eq. 18, v_i = J̄_i q̇ of eq. 3) and, for a level
 //! between the first and the lowest, the blocks of the projector of eq. (8).
 
+use super::tracking::TrackLevel;
 use crate::energy_tank::EnergyTank;
 use crate::rate::RateWork;
 use crate::spec::{ControllerSpec, LevelSpec};
@@ -24,6 +25,8 @@ pub(super) struct Level {
     /// [`Controller::set_goal_velocity`]); the damping acts on ẋ_i − ẋ_{i,d}.
     pub(super) goal_velocity: DVector<f64>,
     pub(super) goal_moving: bool,
+    /// The tracking form's buffers and desired local velocities (`tracking.rs`).
+    pub(super) track: TrackLevel,
     // task
     pub(super) j: DMatrix<f64>,
     pub(super) jdot: DMatrix<f64>,
@@ -160,6 +163,7 @@ impl Level {
             pot: PotentialWork::new(&spec.tasks, &spec.goal, n),
             goal_velocity: DVector::zeros(m),
             goal_moving: false,
+            track: TrackLevel::new(m, d),
             j: DMatrix::zeros(m, n),
             jdot: DMatrix::zeros(m, n),
             err: DVector::zeros(m),

@@ -27,6 +27,7 @@ mod safety_terms;
 mod setters;
 mod tanks;
 mod task_force;
+mod tracking;
 
 pub use diagnostics::Diagnostics;
 pub use output::{LevelTarget, StepOutput};
@@ -43,6 +44,7 @@ use hcc_model::{Data, Model};
 use level::Level;
 use nalgebra::{DMatrix, DVector};
 use null_space::NullSpace;
+use tracking::TrackWork;
 
 /// Smallest eigenvalue that counts as "not vanished" for a Gram matrix.
 const GRAM_FLOOR: f64 = 1e-12;
@@ -107,6 +109,8 @@ pub struct Controller {
     /// The energy tanks are to be refilled in the next cycle (start, reset, a
     /// goal or gains change; crate::energy_tank).
     tank_refill: bool,
+    /// The tracking form's joint-space parts (`tracking.rs`).
+    track: TrackWork,
     out: StepOutput,
 }
 
@@ -169,6 +173,7 @@ impl Controller {
             stiffness_scale: 1.0,
             law_share: 1.0,
             tank_refill: true,
+            track: TrackWork::new(n, dims[0]),
             out,
         };
         c.check_initial(q0)?;
@@ -295,6 +300,9 @@ impl Controller {
         self.decompose()?;
         // v_i = J̄_i q̇ (eq. 3).
         self.local_velocities(qd);
+        // The tracking form's desired v_{i,d}, v̇_{i,d} and feed-forward
+        // (`tracking.rs`; nothing while no level tracks a moving goal).
+        self.tracking_feed_forward()?;
         // Safety layer: a fade-in is paid from the energy tank (crate::safety).
         self.passive_fade();
         // The energy tanks (crate::energy_tank): what the levels above do to a
@@ -330,13 +338,16 @@ impl Controller {
         Ok(())
     }
 
-    /// τ = Σ τ_i + τ_μ + g (eq. 19) (+ τ_safety where it acts, the comparison
+    /// τ = Σ τ_i + τ_μ + g (eq. 19) (+ the tracking feed-forward, τ_safety where it acts, the comparison
     /// law's C q̇, the velocity barrier on the acceleration this τ gives);
     /// an error for a non-finite torque.
     fn assemble_torque(&mut self, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), ControlError> {
         copy(&mut self.out.tau, &self.out.tau_mu);
         for t in &self.out.tau_level {
             self.out.tau += t;
+        }
+        if self.track.active {
+            self.out.tau += &self.out.tau_feed_forward;
         }
         if self.out.safety.active {
             self.out.tau += &self.out.safety.tau;

@@ -14,6 +14,9 @@ pub struct StepOutput {
     pub tau_level: Vec<DVector<f64>>,
     /// τ_μ (eq. 22); zero when the cancellation is off.
     pub tau_mu: DVector<f64>,
+    /// The tracking form's feed-forward Σ_i J̄_iᵀ (Λ_i v̇_{i,d} + μ_ii v_{i,d})
+    /// (`controller/tracking.rs`; zero, and not added, while no level tracks).
+    pub tau_feed_forward: DVector<f64>,
     /// g(q) (also when it is not added to τ).
     pub gravity: DVector<f64>,
     /// x_i − x_{i,d} per level (orientation: 2·R_d·ε ≈ the rotation vector, world axes).
@@ -58,6 +61,7 @@ impl StepOutput {
             tau: DVector::zeros(n),
             tau_level: (0..r).map(|_| DVector::zeros(n)).collect(),
             tau_mu: DVector::zeros(n),
+            tau_feed_forward: DVector::zeros(n),
             gravity: DVector::zeros(n),
             task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
             v: v_dims.iter().map(|&d| DVector::zeros(d)).collect(),

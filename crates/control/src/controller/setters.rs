@@ -176,6 +176,41 @@ impl Controller {
         Ok(())
     }
 
+    /// Makes level `i` track (docs/tracking.md): `Some(ẍ_{i,d})` (m_i values,
+    /// the derivative of [`Controller::set_goal_velocity`]'s ẋ_{i,d}: m/s²,
+    /// world-frame angular acceleration in rad/s², joint rad/s²) gives the
+    /// level the feed-forward J̄_iᵀ (Λ_i v̇_{i,d} + μ_ii v_{i,d}) from the next
+    /// cycle on, its desired local velocity formed level by level from every
+    /// level's ẋ_{j,d} above it; `None` ends it (the goal is then pulled along
+    /// as before). Only in the paper's form ([`Form::Extended`]); while no
+    /// tracking level's goal moves, nothing is added (the regulation law bit
+    /// for bit). Allocation-free.
+    pub fn set_goal_acceleration(
+        &mut self,
+        i: usize,
+        acceleration: Option<&[f64]>,
+    ) -> Result<(), ControlError> {
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        match acceleration {
+            None => {
+                l.track.on = false;
+                l.track.xdd.fill(0.0);
+            }
+            Some(a) => {
+                if a.len() != l.m || a.iter().any(|x| !x.is_finite()) {
+                    return Err(ControlError::BadInput(
+                        "goal acceleration has the wrong length or a non-finite value",
+                    ));
+                }
+                l.track.xdd.as_mut_slice().copy_from_slice(a);
+                l.track.on = true;
+            }
+        }
+        Ok(())
+    }
+
     /// Level `i`'s current goal x_{i,d}, velocity ẋ_{i,d}, K_i and D_i.
     pub fn level_target(&self, i: usize) -> Option<LevelTarget<'_>> {
         self.levels.get(i).map(|l| LevelTarget {

@@ -49,6 +49,11 @@ impl Controller {
                 l.w_up += &l.goal_velocity;
             }
             l.w_up -= &l.kappa;
+            if self.track.active && l.track.on {
+                // Tracking: the drag relative to what the levels above are
+                // meant to induce, w̃_i = w_i − J_i q̇_d^{(i−1)} (docs/tracking.md).
+                l.w_up -= &l.track.w_d;
+            }
             let terms = TankTerms {
                 w: &l.w_up,
                 damping: &l.damping,
