@@ -15,6 +15,8 @@ pub(crate) struct Ctx<'a> {
     pub(crate) text: &'a str,
     /// Resolving a level of `[[level.task]]` tables (errors name the table).
     pub(crate) stacked: bool,
+    /// Resolving a level that follows a path (`trajectory`: no goal).
+    pub(crate) trajectory: bool,
 }
 
 impl Ctx<'_> {

@@ -54,6 +54,25 @@ fn level_goal(
     tasks: &[(Option<&Vec<f64>>, usize)],
 ) -> Result<DVector<f64>, ConfigError> {
     let m: usize = tasks.iter().map(|t| t.1).sum();
+    if cx.trajectory {
+        // The path's first row is the goal (crate::trajectories).
+        let given = if level.is_some() {
+            Some(format!("{p}.goal"))
+        } else {
+            let k = tasks.iter().position(|t| t.0.is_some());
+            k.map(|k| match tasks.len() == 1 && !cx.stacked {
+                true => format!("{p}.goal"),
+                false => format!("{p}.task[{k}].goal"),
+            })
+        };
+        if let Some(field) = given {
+            return Err(cx.err(
+                &field,
+                "is given with a trajectory: give the level one of them",
+            ));
+        }
+        return Ok(DVector::zeros(m));
+    }
     if let Some(g) = level {
         if let Some(k) = tasks.iter().position(|t| t.0.is_some()) {
             return Err(cx.err(
@@ -86,6 +105,10 @@ pub(crate) fn resolve_level(
     l: &LevelSection,
 ) -> Result<LevelSpec, ConfigError> {
     let p = format!("level[{i}]");
+    let cx = &Ctx {
+        trajectory: l.trajectory.is_some(),
+        ..*cx
+    };
     let Stacked {
         tasks,
         stiffness,

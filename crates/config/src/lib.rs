@@ -58,6 +58,7 @@ mod safety;
 mod scenario;
 mod simulation;
 mod tasks;
+mod trajectories;
 
 pub use daemons::{ControllerDaemon, MAX_CPU_CORE, STALE_TIMEOUT_PERIODS, SimDaemon};
 pub use error::ConfigError;

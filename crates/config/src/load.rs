@@ -16,6 +16,7 @@ use crate::safety::safety_spec;
 use crate::scenario::Scenario;
 use crate::schema::{self, ScenarioFile};
 use crate::simulation::resolve_simulation;
+use crate::trajectories::resolve_tracking;
 use crate::{contact, franka, schedule, setpoint_limits, torque_filter};
 
 impl Scenario {
@@ -57,6 +58,7 @@ impl Scenario {
             file: path,
             text,
             stacked: false,
+            trajectory: false,
         };
         let (model, urdf_path) = load_model(&cx, &file.robot, urdf)?;
         let n = model.nq();
@@ -93,6 +95,7 @@ impl Scenario {
         check_namespace(&cx, &file.ipc.namespace)?;
 
         let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
+        let tracking = resolve_tracking(&cx, &file.levels, &mut levels, n, file.controller.form)?;
         let spec = ControllerSpec {
             levels,
             gravity_compensation: file.robot.gravity_compensation,
@@ -137,6 +140,7 @@ impl Scenario {
             setpoints,
             franka,
             contact,
+            tracking,
         })
     }
 }

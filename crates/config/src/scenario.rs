@@ -54,6 +54,9 @@ pub struct Scenario {
     pub franka: franka::Franka,
     /// Resolved `[contact]` (the defaults where not given).
     pub contact: hcc_spec::contact::Contact,
+    /// The levels' paths (`trajectory`) and feed-forward flags
+    /// (docs/tracking.md).
+    pub tracking: hcc_spec::tracking::Tracking,
 }
 
 impl Scenario {

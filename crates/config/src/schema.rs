@@ -186,6 +186,12 @@ pub struct LevelSection {
     pub damping: Option<GainValue>,
     /// Virtual equilibrium x_{i,d} (task dimension; roll-pitch-yaw for 3-D orientation).
     pub goal: Option<Vec<f64>>,
+    /// A desired path in place of `goal`: a CSV file relative to the scenario
+    /// (docs/tracking.md).
+    pub trajectory: Option<String>,
+    /// Whether the level gets the tracking feed-forward while a level follows a
+    /// path (default true; false: its goal is pulled along).
+    pub feed_forward: Option<bool>,
 }
 
 /// `[controller]`

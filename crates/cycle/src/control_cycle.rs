@@ -39,7 +39,7 @@
 //!
 //! [`ControlCycle::take_setpoints`] (the setpoints waiting for this state,
 //! then those that arrived with it, in arrival order), then
-//! [`ControlCycle::decide`] (stream checks → transitions advance one period →
+//! [`ControlCycle::decide`] (stream checks → transitions and paths advance one period →
 //! law → saturation → torque filter → the output stages' energy tank (module
 //! `output_tank`) → velocity limit → command, then telemetry).
 //! [`ControlCycle::step`] is both. The controller daemon calls the parts
@@ -57,6 +57,7 @@ use hcc_msgs::{
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
 use crate::output_tank::OutputTank;
+use crate::paths::Paths;
 use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
 use crate::settings::{CycleError, CycleSettings};
@@ -88,6 +89,8 @@ pub struct ControlCycle {
     period_s: f64,
     stream: StreamCheck,
     setpoints: SetpointHandler,
+    /// The levels' desired paths (module `paths`).
+    paths: Paths,
     filter: TorqueFilter,
     /// The discrete-time velocity limit on the torque sent (module
     /// `velocity_limit`; behind a rate limit, the brake certificate).
@@ -127,7 +130,7 @@ impl ControlCycle {
     /// robot); checks the sizes and torque limits of `settings`. Allocates
     /// every buffer.
     pub fn new(
-        controller: Controller,
+        mut controller: Controller,
         settings: &CycleSettings,
     ) -> Result<ControlCycle, CycleError> {
         let n = controller.nq();
@@ -148,6 +151,17 @@ impl ControlCycle {
         let mut limits = [f64::INFINITY; MAX_JOINTS];
         limits[..n].copy_from_slice(&settings.torque_limits);
         let setpoints = SetpointHandler::new(&controller, &settings.setpoint_limits)?;
+        if settings.tracking.paths.len() > r || settings.tracking.feed_forward.len() > r {
+            return Err(CycleError::Shape(format!(
+                "paths for {} levels, the controller has {r}",
+                settings.tracking.paths.len()
+            )));
+        }
+        let paths = Paths::new(
+            &settings.tracking,
+            settings.setpoint_limits.relative_damping,
+            &mut controller,
+        );
         let spec = controller.spec();
         let wrench_level = spec.wrench_level();
         let wrench = WrenchEstimate::new(
@@ -159,6 +173,7 @@ impl ControlCycle {
         Ok(ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
             setpoints,
+            paths,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
             velocity_limit: VelocityLimit::new(&controller, &limits, settings.period_s()),
             velocity_limit_largest: 0.0,
@@ -587,6 +602,10 @@ impl ControlCycle {
         let n = self.n;
         // Transitions move by one nominal period per used state (deterministic).
         self.setpoints.advance(self.period_s, &mut self.controller);
+        // The levels' paths, after the transitions: a path drives its level
+        // until a goal setpoint takes it (module `paths`).
+        self.paths
+            .advance(self.period_s, &mut self.controller, &mut self.setpoints);
         // The contact reaction, from the flag of the previous state (module `reaction`).
         self.reaction.before_law(
             self.contact.in_contact(),

@@ -4,21 +4,69 @@
 //! refuses at the initial configuration (Sec. II: a Jacobian or an augmented
 //! Jacobian singular at q0, an algorithmic singularity, a lowest level that
 //! does not fill the remaining null space, gains the control rate cannot
-//! carry). The scenario reader checks what needs no configuration
-//! (`hcc_spec::ControllerSpec::validate`); these checks are the law's.
+//! carry, a path that does not start at the arm). The scenario reader checks
+//! what needs no configuration (`hcc_spec::ControllerSpec::validate`); these
+//! checks are the law's.
 
 use hcc_config::{ConfigError, Scenario};
 use hcc_control::{ControlError, Controller};
+use hcc_spec::TaskUnit;
+
+/// How far a level's path may start from the arm at q0, per coordinate: a
+/// path is followed from where the arm is, not jumped to.
+pub const MAX_PATH_START_OFFSET_M: f64 = 0.05;
+/// The same for angles (rad).
+pub const MAX_PATH_START_OFFSET_RAD: f64 = 0.2;
 
 /// The controller of `scenario` (its model, hierarchy and q0). An error of
 /// the law names the level it refuses (`level[k]`, 0-based as in the file)
 /// or the initial configuration (`initial.q0`), with the line.
 pub fn controller_for(scenario: &Scenario) -> Result<Controller, ConfigError> {
-    Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).map_err(|e| {
-        let field = match &e {
-            ControlError::Level { level, .. } => hcc_spec::level_field(level),
-            _ => "initial.q0".to_string(),
-        };
-        scenario.error_at(&field, format!("rejected by the controller: {e}"))
-    })
+    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0)
+        .map_err(|e| {
+            let field = match &e {
+                ControlError::Level { level, .. } => hcc_spec::level_field(level),
+                _ => "initial.q0".to_string(),
+            };
+            scenario.error_at(&field, format!("rejected by the controller: {e}"))
+        })?;
+    check_path_starts(scenario, &controller)?;
+    Ok(controller)
+}
+
+/// Every path starts within [`MAX_PATH_START_OFFSET_M`] /
+/// [`MAX_PATH_START_OFFSET_RAD`] of the arm at q0 (its first row is the
+/// level's goal there: the task error of one step at rest).
+fn check_path_starts(scenario: &Scenario, controller: &Controller) -> Result<(), ConfigError> {
+    if !scenario.tracking.any() {
+        return Ok(());
+    }
+    let n = scenario.model.nq();
+    let mut probe = controller.clone();
+    let Ok(out) = probe.step(scenario.q0.as_slice(), &vec![0.0; n]) else {
+        return Ok(());
+    };
+    for (i, path) in scenario.tracking.paths.iter().enumerate() {
+        let Some(path) = path else { continue };
+        let units = scenario.spec.levels[i].units(n);
+        for (a, (e, unit)) in out.task_error[i].iter().zip(&units).enumerate() {
+            let (limit, what) = match unit {
+                TaskUnit::Length => (MAX_PATH_START_OFFSET_M, "m"),
+                TaskUnit::Angle => (MAX_PATH_START_OFFSET_RAD, "rad"),
+            };
+            if e.abs() > limit {
+                return Err(scenario.error_at(
+                    &format!("level[{i}].trajectory"),
+                    format!(
+                        "{}: its first row starts {:.4} {what} from the arm at initial.q0 in \
+                         coordinate {} (at most {limit} {what}): start the path where the arm is",
+                        path.file,
+                        e.abs(),
+                        a + 1
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }

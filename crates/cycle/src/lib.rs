@@ -22,6 +22,9 @@
 //! * [`setpoints`]: [`SetpointHandler`] — checks a client's setpoint against
 //!   the law and the `[setpoint_limits]`, queues it until its state, moves
 //!   the level's equilibrium and gains through a transition.
+//! * `paths`: the levels' desired paths (a scenario level's `trajectory`),
+//!   sampled every used state and handed to the law with the tracking
+//!   feed-forward's ẍ_{i,d} (docs/tracking.md).
 //! * [`torque_filter`]: [`TorqueFilter`] — the `[torque_filter]` rate limit
 //!   and low-pass on the saturated torque, against the previous command.
 //! * `output_tank`: the energy tank of the stages after the law — what the
@@ -47,6 +50,7 @@ pub mod control_cycle;
 pub mod counters;
 mod law;
 mod output_tank;
+mod paths;
 mod reaction;
 pub mod schedule;
 pub mod setpoints;

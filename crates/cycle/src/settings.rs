@@ -5,6 +5,7 @@ use hcc_msgs::{MAX_JOINTS, MAX_LEVELS};
 use hcc_spec::contact::Contact;
 use hcc_spec::setpoint_limits::SetpointLimits;
 use hcc_spec::torque_filter::TorqueFilterSpec;
+use hcc_spec::tracking::Tracking;
 
 /// Settings of the control cycle (everything but the law itself, which is
 /// the `hcc_control::Controller` it is built around).
@@ -24,12 +25,14 @@ pub struct CycleSettings {
     pub torque_filter: TorqueFilterSpec,
     /// The external-torque observer and contact detection (`[contact]`).
     pub contact: Contact,
+    /// The levels' desired paths and feed-forward flags (docs/tracking.md).
+    pub tracking: Tracking,
 }
 
 impl CycleSettings {
     /// The settings of `scenario`: its control rate, `[controller_daemon]
     /// torque_limits`, `[robot] gravity_compensation`, `[setpoint_limits]`,
-    /// `[torque_filter]` and `[contact]`.
+    /// `[torque_filter]`, `[contact]` and the levels' paths.
     pub fn from_scenario(scenario: &Scenario) -> CycleSettings {
         CycleSettings {
             period_ns: scenario.period_ns(),
@@ -43,6 +46,7 @@ impl CycleSettings {
             setpoint_limits: scenario.setpoint_limits.clone(),
             torque_filter: scenario.torque_filter.clone(),
             contact: scenario.contact.clone(),
+            tracking: scenario.tracking.clone(),
         }
     }
 

@@ -39,6 +39,10 @@ impl CycleOutput for Telemetry {
     fn tank(&self, i: usize) -> Option<(f64, f64)> {
         Some((self.tank[i], self.tank_valve[i]))
     }
+    fn desired(&self, i: usize) -> Option<&[f64]> {
+        let m = Telemetry::task_error(self, i).len();
+        Some(&self.goal[i][..m])
+    }
     fn external_torque(&self) -> Option<&[f64]> {
         Some(Telemetry::tau_ext(self))
     }
@@ -82,6 +86,9 @@ impl CycleOutput for WithWrench<'_> {
     }
     fn tank(&self, i: usize) -> Option<(f64, f64)> {
         self.output.tank(i)
+    }
+    fn desired(&self, i: usize) -> Option<&[f64]> {
+        self.output.desired(i)
     }
     fn external_torque(&self) -> Option<&[f64]> {
         self.output.external_torque()

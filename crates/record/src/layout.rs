@@ -120,6 +120,9 @@ pub fn column_names(scenario: &Scenario, with_v: bool) -> Vec<String> {
     c.extend((1..=n).map(columns::external_torque));
     c.push(columns::CONTACT.to_string());
     c.extend((1..=wrench_rows(scenario)).map(columns::external_wrench));
+    for (i, &m) in dims.iter().enumerate() {
+        c.extend((1..=m).map(|k| columns::desired(i + 1, k)));
+    }
     c
 }
 

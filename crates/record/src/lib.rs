@@ -34,7 +34,11 @@
 //! - `f_ext_<k>`: the estimate of the external wrench at the first position or
 //!   pose level's frame, its task rows, from the control cycle
 //!   ([`WithWrench`]; NaN where the output has none; no columns without such
-//!   a level).
+//!   a level);
+//! - `xd<i>_<k>`: level i's desired value x_{i,d} — its goal, or its path's
+//!   value at the cycle (docs/tracking.md) — from the telemetry
+//!   ([`CycleOutput::desired`]; NaN where the output has none); with
+//!   `e<i>_<k>` = x_i − x_{i,d} the tracking error.
 //!
 //! The recorder is streaming: [`Recorder::record`] takes one cycle and pushes
 //! one row into a [`RowSink`]; the in-memory [`hcc_report::Trajectory`] is one

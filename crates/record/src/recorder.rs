@@ -38,6 +38,11 @@ pub trait CycleOutput {
     fn tank(&self, _i: usize) -> Option<(f64, f64)> {
         None
     }
+    /// Level `i`'s desired value x_{i,d} (`None`: not known, the
+    /// `xd<i>_<k>` columns are NaN).
+    fn desired(&self, _i: usize) -> Option<&[f64]> {
+        None
+    }
     /// The estimate r of the external joint torque (`None`: not known, the
     /// `tau_ext_<k>` columns are NaN).
     fn external_torque(&self) -> Option<&[f64]> {
@@ -254,6 +259,12 @@ impl Recorder {
         let valves = (0..r).map(|i| out.tank(i).map_or(f64::NAN, |t| t.1));
         self.row.extend(valves);
         self.push_contact_columns(cycle.output);
+        for (i, &m) in self.dims.iter().enumerate() {
+            match out.desired(i) {
+                Some(x) if x.len() == m => self.row.extend_from_slice(x),
+                _ => self.row.extend(std::iter::repeat_n(f64::NAN, m)),
+            }
+        }
         sink.push_row(&self.row)
     }
 

@@ -67,6 +67,9 @@ impl CycleOutput for Output {
     fn tank(&self, i: usize) -> Option<(f64, f64)> {
         Some([(0.0, 1.0), (2.5, 0.75)][i])
     }
+    fn desired(&self, i: usize) -> Option<&[f64]> {
+        Some([&[0.35][..], &[0.0, -0.3, 0.0, -2.2]][i])
+    }
 }
 
 /// Joint-space terms: J_1 selects joint 1, J_2 = I; J̄ = J stacked (not a
@@ -158,6 +161,7 @@ fn one_row_per_cycle_in_the_layout_of_column_names() {
     assert_eq!(get("qd2"), 0.2);
     assert_eq!(get("tau4"), 4.0);
     assert_eq!(get("e1_1"), 0.01);
+    assert_eq!(get("xd2_4"), -2.2);
     assert_eq!(get("e2_4"), 0.4);
     assert_eq!(get("S2"), 5.0);
     assert_eq!(get("P_mu"), 0.125);

@@ -62,6 +62,11 @@ pub fn torque(k: usize) -> String {
 pub fn error(i: usize, k: usize) -> String {
     format!("e{i}_{k}")
 }
+/// The desired value x_{i,d} of level `i`, component `k` (the goal, or a
+/// path's value at the cycle; roll, pitch, yaw for an orientation): `xd<i>_<k>`.
+pub fn desired(i: usize, k: usize) -> String {
+    format!("xd{i}_{k}")
+}
 /// Energy S_i of level `i`: `S<i>`.
 pub fn energy(i: usize) -> String {
     format!("S{i}")

@@ -6,7 +6,7 @@
 //! options ([`Form`], the Coriolis cancellation τ_μ of eq. 22, the singular
 //! ratio) and the safety layer's settings ([`SafetySpec`]); and the control
 //! cycle's settings around the law ([`contact`], [`setpoint_limits`],
-//! [`torque_filter`]).
+//! [`torque_filter`], the levels' desired paths [`tracking`]).
 //!
 //! Plain data with the checks that need no configuration
 //! ([`ControllerSpec::validate`], [`SafetySpec::validate`]); the checks at a
@@ -19,6 +19,7 @@ mod hierarchy;
 mod safety;
 pub mod setpoint_limits;
 pub mod torque_filter;
+pub mod tracking;
 
 pub use hierarchy::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};
 pub use safety::SafetySpec;

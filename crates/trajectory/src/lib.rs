@@ -97,7 +97,7 @@ pub struct PathSample {
 
 /// A level's path: its knots, each coordinate's segments, the orientations'
 /// reference rotations.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
     blocks: Vec<Block>,
     times: Vec<f64>,

@@ -59,6 +59,8 @@ struct LevelState {
     joints: Option<Vec<usize>>,
     /// Whether the law must be updated this cycle (a transition runs or just ended).
     active: bool,
+    /// A goal setpoint has been taken for the level (a path stops driving it).
+    goal_taken: bool,
     k: DMatrix<f64>,
     d: DMatrix<f64>,
 }
@@ -126,6 +128,7 @@ impl SetpointHandler {
                 workspace,
                 joints,
                 active: false,
+                goal_taken: false,
                 k: DMatrix::zeros(m, m),
                 d: DMatrix::zeros(m, m),
             });
@@ -302,6 +305,7 @@ impl SetpointHandler {
         let level = &mut self.levels[sp.level as usize];
         let mut duration = sp.duration_s;
         if sp.sets(SETPOINT_GOAL) {
+            level.goal_taken = true;
             let distance = level.transition.distance_to(sp.goal());
             // Peak speed of the quintic profile: 15/8 · distance / T.
             duration = duration.max(1.875 * distance / level.max_speed);
@@ -371,6 +375,24 @@ impl SetpointHandler {
             };
             let _ = controller.set_goal_velocity(i, velocity);
             level.active = t.is_moving() || t.has_feed_forward();
+        }
+    }
+
+    /// Whether a goal setpoint has been taken for level `i`.
+    pub(crate) fn goal_taken(&self, i: usize) -> bool {
+        self.levels.get(i).is_some_and(|l| l.goal_taken)
+    }
+
+    /// Level `i`'s equilibrium is at `goal` now (a path moves it; crate
+    /// `paths`): a later goal setpoint starts from here. Allocation-free.
+    pub(crate) fn follow(&mut self, i: usize, goal: &[f64]) {
+        if let Some(l) = self.levels.get_mut(i) {
+            let target = Target {
+                goal: Some(goal),
+                stiffness: None,
+                damping: None,
+            };
+            l.transition.start(target, 0.0);
         }
     }
 

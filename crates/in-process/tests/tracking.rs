@@ -1,0 +1,183 @@
+//! The tracking form on the Panda (docs/tracking.md), `config/panda-figure-eight.toml`:
+//! the TCP on a figure-eight, the orientation held, joint 3 on a sine in the
+//! null space, exact model, 1 kHz, starting on the paths. Prints the figures
+//! the docs quote.
+
+use std::path::PathBuf;
+
+use hcc_config::Scenario;
+use hcc_in_process::run_observed;
+
+fn scenario() -> Scenario {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-figure-eight.toml");
+    Scenario::load(path).expect("the figure-eight scenario loads")
+}
+
+/// Per cycle: t, each level's task error x_i − x_{i,d} (telemetry).
+struct Errors {
+    t: Vec<f64>,
+    e: Vec<[Vec<f64>; 3]>,
+}
+
+fn run(scenario: &Scenario) -> Errors {
+    let mut out = Errors {
+        t: Vec::new(),
+        e: Vec::new(),
+    };
+    run_observed(scenario, &mut |view| {
+        let tel = view.cycle.telemetry();
+        out.t.push(view.t);
+        out.e.push([0, 1, 2].map(|i| tel.task_error(i).to_vec()));
+        Ok(())
+    })
+    .expect("the run");
+    out
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+impl Errors {
+    /// The largest ‖e_i‖ from `from` s on.
+    fn max_after(&self, i: usize, from: f64) -> f64 {
+        self.t
+            .iter()
+            .zip(&self.e)
+            .filter(|(t, _)| **t >= from)
+            .map(|(_, e)| norm(&e[i]))
+            .fold(0.0, f64::max)
+    }
+
+    /// The decay rate λ of ‖e_i‖ ≈ c e^{−λ t}: least squares on ln ‖e_i‖
+    /// over the first `window` s.
+    fn decay_rate(&self, i: usize, window: f64) -> f64 {
+        let pts: Vec<(f64, f64)> = self
+            .t
+            .iter()
+            .zip(&self.e)
+            .filter(|(t, e)| **t <= window && norm(&e[i]) > 0.0)
+            .map(|(t, e)| (*t, norm(&e[i]).ln()))
+            .collect();
+        let n = pts.len() as f64;
+        let (st, sy) = pts.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
+        let (mt, my) = (st / n, sy / n);
+        let (num, den) = pts.iter().fold((0.0, 0.0), |a, p| {
+            (a.0 + (p.0 - mt) * (p.1 - my), a.1 + (p.0 - mt) * (p.0 - mt))
+        });
+        -num / den
+    }
+}
+
+#[test]
+fn the_panda_tracks_a_figure_eight_with_the_posture_on_a_sine_in_the_null_space() {
+    let s = scenario();
+    assert!(s.tracking.any() && s.tracking.feed_forward.iter().all(|&f| f));
+    let tracked = run(&s);
+    let (e1, e2, e3) = (
+        tracked.max_after(0, 3.0),
+        tracked.max_after(1, 3.0),
+        tracked.max_after(2, 3.0),
+    );
+    println!(
+        "tracking, largest error from 3 s: TCP {e1:.3e} m, orientation {e2:.3e} rad, joint 3 {e3:.3e} rad"
+    );
+    assert!(e1 < 1e-4, "TCP error {e1:.3e} m");
+    assert!(e3 < 1e-3, "joint 3 error {e3:.3e} rad");
+    assert!(e2 < 1e-3, "orientation error {e2:.3e} rad");
+
+    // Strictness while tracking: the same run with joint 3 held at its start
+    // moves the TCP by what the posture's motion does to it.
+    let mut held = s.clone();
+    held.tracking.paths[2] = None;
+    let still = run(&held);
+    let moved = tracked
+        .e
+        .iter()
+        .zip(&still.e)
+        .map(|(a, b)| {
+            norm(
+                &a[0]
+                    .iter()
+                    .zip(&b[0])
+                    .map(|(x, y)| x - y)
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .fold(0.0, f64::max);
+    println!("the posture's motion moves the TCP by at most {moved:.3e} m");
+    assert!(moved < 1e-6, "{moved:.3e} m");
+
+    // Pulled along: no feed-forward, the goal a spring pulls — with the
+    // damping relative to the path's velocity (the default, as transitions
+    // do) and with the paper's D ẋ.
+    let mut pulled = s.clone();
+    pulled.tracking.feed_forward = vec![false; 3];
+    let relative = run(&pulled).max_after(0, 3.0);
+    pulled.setpoint_limits.relative_damping = false;
+    let absolute = run(&pulled).max_after(0, 3.0);
+    println!(
+        "TCP error from 3 s: tracking {e1:.3e} m; pulled along {relative:.3e} m (damping relative \
+         to the path, {:.0}×), {absolute:.3e} m (D ẋ, {:.0}×)",
+        relative / e1,
+        absolute / e1
+    );
+    assert!(relative > 100.0 * e1 && absolute > 100.0 * e1);
+    assert!(
+        absolute >= 0.01,
+        "pulled along with D ẋ lags {absolute:.3e} m"
+    );
+}
+
+#[test]
+fn started_off_the_path_every_level_s_error_decays() {
+    let mut s = scenario();
+    // Joint 3 0.04 rad off its path: the TCP about 2 cm off its path, the
+    // hand's orientation 0.04 rad off.
+    s.q0[2] += 0.04;
+    let off = run(&s);
+    let e0: Vec<f64> = (0..3).map(|i| norm(&off.e[0][i])).collect();
+    let rates: Vec<f64> = (0..3).map(|i| off.decay_rate(i, 1.5)).collect();
+    let e2s: Vec<f64> = (0..3).map(|i| off.max_after(i, 2.0)).collect();
+    println!(
+        "started off the path by {:.3e} m, {:.3e} rad, {:.3e} rad: fitted decay rates {:.1} {:.1} {:.1} 1/s; \
+         largest error from 2 s {:.2e} m, {:.2e} rad, {:.2e} rad",
+        e0[0], e0[1], e0[2], rates[0], rates[1], rates[2], e2s[0], e2s[1], e2s[2]
+    );
+    assert!(
+        e0[0] > 0.015 && e0[0] < 0.025,
+        "TCP starts {:.3e} m off",
+        e0[0]
+    );
+    for i in 0..3 {
+        assert!(
+            rates[i] > 1.0,
+            "level {} decays at {:.2} 1/s",
+            i + 1,
+            rates[i]
+        );
+        assert!(
+            e2s[i] < 0.01 * e0[i].max(1e-3),
+            "level {} at 2 s: {:.2e}",
+            i + 1,
+            e2s[i]
+        );
+    }
+}
+
+#[test]
+fn a_path_that_does_not_start_at_the_arm_is_refused() {
+    let mut s = scenario();
+    s.q0[2] += 0.5;
+    let Err(e) = hcc_cycle::controller_for(&s) else {
+        panic!("a path 0.5 rad from joint 3 is refused");
+    };
+    let e = e.to_string();
+    println!("{e}");
+    assert!(
+        e.contains("level[0].trajectory") && e.contains("panda-figure-eight-tcp.csv"),
+        "{e}"
+    );
+    assert!(e.contains("start the path where the arm is"), "{e}");
+}
