@@ -1,5 +1,6 @@
 //! Controller step time (median, p99, p99.9, max) for the paper's planar arm and the
-//! Panda's three-level hierarchy: back to back; paced at 1 kHz (the core idle between
+//! Panda's three-level hierarchy: back to back; regulation and the tracking form
+//! interleaved (their ratios); paced at 1 kHz (the core idle between
 //! steps, as in the controller's loop); and paced with the loop's cache warm-up, with
 //! what sets its slower cycles apart. `cargo bench -p hcc-control --bench step`.
 
@@ -28,6 +29,19 @@ fn main() {
     for (name, model, spec, q0) in cases {
         let s = support::time_steps(model, spec.clone(), &q0, 5_000, 50_000, None);
         print_stats(name, model.nq(), "back to back", &s);
+        // The tracking form beside regulation, interleaved (docs/tracking.md).
+        let (reg, trk) =
+            support::time_regulation_and_tracking(model, spec.clone(), &q0, 5_000, 50_000);
+        print_stats(name, model.nq(), "regulation", &reg);
+        print_stats(name, model.nq(), "tracking", &trk);
+        println!(
+            "{:<28} {:<17} tracking / regulation: median x{:.2}, p99 x{:.2}, p99.9 x{:.2}",
+            "",
+            "",
+            trk.median / reg.median,
+            trk.p99 / reg.p99,
+            trk.p999 / reg.p999
+        );
         // The same steps once per millisecond, the core idle in between as in the
         // controller's loop: what the machine's idle costs the next step.
         let s = support::time_steps(model, spec.clone(), &q0, 500, 5_000, Some(PERIOD));

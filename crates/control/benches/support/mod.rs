@@ -58,6 +58,46 @@ pub fn time_steps(
     stats(t)
 }
 
+/// The regulation law's step and the tracking form's (every level tracks,
+/// level 1's goal moves: `controller/tracking.rs`) at the same states,
+/// interleaved back to back so that both see the same machine; µs.
+pub fn time_regulation_and_tracking(
+    model: &Model,
+    spec: ControllerSpec,
+    q0: &[f64],
+    warmup: usize,
+    samples: usize,
+) -> (Stats, Stats) {
+    let n = model.nq();
+    let q0v = DVector::from_column_slice(q0);
+    let mut reg = Controller::new(model, spec.clone(), &q0v).expect("controller");
+    let mut trk = Controller::new(model, spec, &q0v).expect("controller");
+    for i in 0..trk.levels() {
+        let m = trk.task_dim(i);
+        let a: Vec<f64> = (0..m).map(|k| 0.01 * (k as f64 + 1.0)).collect();
+        trk.set_goal_velocity(i, &a).expect("velocity");
+        trk.set_goal_acceleration(i, Some(&a)).expect("acceleration");
+    }
+    let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
+    let mut q = q0.to_vec();
+    let (mut tr, mut tt) = (Vec::with_capacity(samples), Vec::with_capacity(samples));
+    for k in 0..warmup + samples {
+        for (qi, vi) in q.iter_mut().zip(&qd) {
+            *qi += 1e-5 * vi;
+        }
+        for (c, t) in [(&mut reg, &mut tr), (&mut trk, &mut tt)] {
+            let t0 = Instant::now();
+            let out = c.step(&q, &qd).expect("step");
+            std::hint::black_box(out.tau[0]);
+            let dt = t0.elapsed().as_nanos() as f64;
+            if k >= warmup {
+                t.push(dt);
+            }
+        }
+    }
+    (stats(tr), stats(tt))
+}
+
 /// [`time_paced_warmed`]'s figures: the step's, its warm-up's, and how the
 /// slower half of the cycles differs from the faster half.
 #[derive(Clone, Copy, Debug)]
