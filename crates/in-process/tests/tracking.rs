@@ -14,21 +14,25 @@ fn scenario() -> Scenario {
     Scenario::load(path).expect("the figure-eight scenario loads")
 }
 
-/// Per cycle: t, each level's task error x_i − x_{i,d} (telemetry).
+/// Per cycle: t, each level's task error x_i − x_{i,d} and level 1's
+/// desired value x_{1,d} (telemetry).
 struct Errors {
     t: Vec<f64>,
     e: Vec<[Vec<f64>; 3]>,
+    xd: Vec<Vec<f64>>,
 }
 
 fn run(scenario: &Scenario) -> Errors {
     let mut out = Errors {
         t: Vec::new(),
         e: Vec::new(),
+        xd: Vec::new(),
     };
     run_observed(scenario, &mut |view| {
         let tel = view.cycle.telemetry();
         out.t.push(view.t);
         out.e.push([0, 1, 2].map(|i| tel.task_error(i).to_vec()));
+        out.xd.push(tel.goal[0][..3].to_vec());
         Ok(())
     })
     .expect("the run");
@@ -116,7 +120,9 @@ fn the_panda_tracks_a_figure_eight_with_the_posture_on_a_sine_in_the_null_space(
     pulled.tracking.feed_forward = vec![false; 3];
     let relative = run(&pulled).max_after(0, 3.0);
     pulled.setpoint_limits.relative_damping = false;
-    let absolute = run(&pulled).max_after(0, 3.0);
+    let pulled_abs = run(&pulled);
+    let absolute = pulled_abs.max_after(0, 3.0);
+    plot(&tracked, &pulled_abs);
     println!(
         "TCP error from 3 s: tracking {e1:.3e} m; pulled along {relative:.3e} m (damping relative \
          to the path, {:.0}×), {absolute:.3e} m (D ẋ, {:.0}×)",
@@ -180,4 +186,53 @@ fn a_path_that_does_not_start_at_the_arm_is_refused() {
         "{e}"
     );
     assert!(e.contains("start the path where the arm is"), "{e}");
+}
+
+/// With `HCC_TRACKING_PLOTS=<dir>` set: the TCP's y and z, desired and
+/// actual, tracking and pulled along (D ẋ), and the TCP error of both, as
+/// `<dir>/tracking-figure-eight.png` (the figure of docs/tracking.md).
+fn plot(tracked: &Errors, pulled: &Errors) {
+    let Some(dir) = std::env::var_os("HCC_TRACKING_PLOTS") else {
+        return;
+    };
+    let dir = PathBuf::from(dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let shown: Vec<usize> = (0..tracked.t.len()).step_by(10).collect();
+    let t: Vec<f64> = shown.iter().map(|&k| tracked.t[k]).collect();
+    let actual = |r: &Errors, a: usize| -> Vec<f64> {
+        shown.iter().map(|&k| r.xd[k][a] + r.e[k][0][a]).collect()
+    };
+    let axis = |a: usize, name: &str| hcc_report::TimePanel {
+        title: format!("TCP {name}: desired, tracking, pulled along"),
+        y_label: format!("{name} [m]"),
+        series: vec![
+            (
+                "desired x_d".into(),
+                shown.iter().map(|&k| tracked.xd[k][a]).collect(),
+            ),
+            ("tracking".into(), actual(tracked, a)),
+            ("pulled along (D xdot)".into(), actual(pulled, a)),
+        ],
+    };
+    let error_mm =
+        |r: &Errors| -> Vec<f64> { shown.iter().map(|&k| 1e3 * norm(&r.e[k][0])).collect() };
+    let panels = [
+        axis(1, "y"),
+        axis(2, "z"),
+        hcc_report::TimePanel {
+            title: "TCP error |x - x_d|".into(),
+            y_label: "error [mm]".into(),
+            series: vec![
+                ("tracking".into(), error_mm(tracked)),
+                ("pulled along (D xdot)".into(), error_mm(pulled)),
+            ],
+        },
+    ];
+    hcc_report::plot_time_series(
+        &dir.join("tracking-figure-eight.png"),
+        "panda-figure-eight: the TCP on a figure-eight, tracking vs pulled along",
+        &t,
+        &panels,
+    )
+    .unwrap();
 }

@@ -76,7 +76,8 @@ pub fn time_regulation_and_tracking(
         let m = trk.task_dim(i);
         let a: Vec<f64> = (0..m).map(|k| 0.01 * (k as f64 + 1.0)).collect();
         trk.set_goal_velocity(i, &a).expect("velocity");
-        trk.set_goal_acceleration(i, Some(&a)).expect("acceleration");
+        trk.set_goal_acceleration(i, Some(&a))
+            .expect("acceleration");
     }
     let qd: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
     let mut q = q0.to_vec();
