@@ -302,7 +302,11 @@ pub fn scenario_of(path: &Path, config: Option<&Path>) -> anyhow::Result<Scenari
         // The texts the recording carries: the scenario as it ran, whatever
         // the files say now (the URDF from the file when not recorded).
         let toml = field("toml").map(String::as_str).unwrap_or_default();
-        Scenario::from_texts(toml, &config, field("urdf").map(String::as_str)).with_context(what)?
+        let paths = field("paths")
+            .and_then(|p| serde_json::from_str(p).ok())
+            .unwrap_or_default();
+        Scenario::from_texts(toml, &config, field("urdf").map(String::as_str), &paths)
+            .with_context(what)?
     } else {
         Scenario::load(&config).with_context(what)?
     };

@@ -33,25 +33,29 @@ impl Scenario {
     /// Like [`Scenario::load`] for TOML text; `path` names the file in errors and is
     /// the base for the relative URDF path.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Scenario, ConfigError> {
-        Self::from_texts(text, path, None)
+        Self::from_texts(text, path, None, &Default::default())
     }
 
     /// The scenario a controller publishes on its scenario service
     /// (`hcc_msgs::ipc::read_scenario`): its file's text as the controller
     /// loaded it, the robot from the URDF's text it sent (the file on disk
-    /// when the document has none). Errors name the controller's file.
+    /// when the document has none), its paths from the texts it sent.
+    /// Errors name the controller's file.
     pub fn from_document(doc: &hcc_msgs::scenario::ScenarioDoc) -> Result<Scenario, ConfigError> {
         let urdf = (!doc.urdf.is_empty()).then_some(doc.urdf.as_str());
-        Self::from_texts(&doc.toml, Path::new(&doc.path), urdf)
+        Self::from_texts(&doc.toml, Path::new(&doc.path), urdf, &doc.paths)
     }
 
     /// Like [`Scenario::from_toml_str`], the robot from `urdf` (the URDF's
-    /// text) when given, else from the file `[robot] urdf` names (a
-    /// recording or a controller's document carries both texts).
+    /// text) when given, else from the file `[robot] urdf` names, and each
+    /// level's path from `paths` (file as the scenario names it → text)
+    /// where it holds the file, else from the file (a recording or a
+    /// controller's document carries all the texts).
     pub fn from_texts(
         text: &str,
         path: &Path,
         urdf: Option<&str>,
+        paths: &std::collections::BTreeMap<String, String>,
     ) -> Result<Scenario, ConfigError> {
         let file: ScenarioFile = toml::from_str(text).map_err(|e| from_toml(path, text, &e))?;
         let cx = Ctx {
@@ -95,7 +99,14 @@ impl Scenario {
         check_namespace(&cx, &file.ipc.namespace)?;
 
         let torque_filter = torque_filter::resolve(cx.file, cx.text, &file.torque_filter)?;
-        let tracking = resolve_tracking(&cx, &file.levels, &mut levels, n, file.controller.form)?;
+        let tracking = resolve_tracking(
+            &cx,
+            &file.levels,
+            &mut levels,
+            n,
+            file.controller.form,
+            paths,
+        )?;
         let spec = ControllerSpec {
             levels,
             gravity_compensation: file.robot.gravity_compensation,

@@ -140,10 +140,23 @@ impl Scenario {
         &self.text
     }
 
+    /// The levels' path files (`trajectory`) as the scenario names them,
+    /// with their texts as loaded (what a recording and the scenario
+    /// document carry, so that the scenario is built again without them).
+    pub fn path_texts(&self) -> std::collections::BTreeMap<String, String> {
+        self.tracking
+            .paths
+            .iter()
+            .flatten()
+            .map(|p| (p.file.clone(), p.text.clone()))
+            .collect()
+    }
+
     /// What the controller publishes on its scenario service for the tools
     /// that know only `namespace` (`hcc_msgs::ipc::ScenarioPublisher`): the
     /// file's text as loaded, the URDF's text (empty when it cannot be read
-    /// again), the levels, the joints with their limits, the control rate.
+    /// again), the levels, the joints with their limits, the control rate, the
+    /// levels' path files.
     pub fn document(&self, namespace: &str) -> ScenarioDoc {
         let n = self.model.nq();
         let dims = self.task_dims();
@@ -159,6 +172,7 @@ impl Scenario {
             toml: self.text.clone(),
             urdf_path: self.urdf_path.display().to_string(),
             urdf: std::fs::read_to_string(&self.urdf_path).unwrap_or_default(),
+            paths: self.path_texts(),
             levels: self
                 .spec
                 .levels

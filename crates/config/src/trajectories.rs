@@ -7,19 +7,22 @@ use hcc_spec::tracking::{LevelPath, Tracking, blocks};
 use hcc_spec::{Form, LevelSpec};
 use hcc_trajectory::Trajectory;
 use nalgebra::DVector;
+use std::collections::BTreeMap;
 
 use crate::context::Ctx;
 use crate::error::ConfigError;
 use crate::schema::LevelSection;
 
 /// The levels' paths and feed-forward flags; sets each path level's goal to
-/// its first row.
+/// its first row. A file's text is `texts`' where it holds the file (a
+/// recording's, a controller's document's), else the file's.
 pub(crate) fn resolve_tracking(
     cx: &Ctx,
     sections: &[LevelSection],
     levels: &mut [LevelSpec],
     n: usize,
     form: Form,
+    texts: &BTreeMap<String, String>,
 ) -> Result<Tracking, ConfigError> {
     let mut tracking = Tracking::default();
     for (i, (l, spec)) in sections.iter().zip(levels.iter_mut()).enumerate() {
@@ -37,13 +40,14 @@ pub(crate) fn resolve_tracking(
                  \"extended\"); or set feed_forward = false for this level",
             ));
         }
-        let at = cx
-            .file
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join(file);
-        let text = std::fs::read_to_string(&at)
-            .map_err(|e| cx.err(&field, format!("{file}: cannot be read ({e})")))?;
+        let text = match texts.get(file) {
+            Some(t) => t.clone(),
+            None => {
+                let base = cx.file.parent().unwrap_or(std::path::Path::new("."));
+                std::fs::read_to_string(base.join(file))
+                    .map_err(|e| cx.err(&field, format!("{file}: cannot be read ({e})")))?
+            }
+        };
         let trajectory = Trajectory::parse(&text, &blocks(&spec.tasks, n))
             .map_err(|e| cx.err(&field, format!("{file}: {e}")))?;
         let mut first = trajectory.sample_buffer();

@@ -165,3 +165,27 @@ fn the_feed_forward_needs_the_extended_form() {
     assert!(!s.tracking.feed_forward[0]);
     std::fs::remove_dir_all(path.parent().unwrap()).ok();
 }
+
+#[test]
+fn the_scenario_document_carries_the_paths_and_rebuilds_them_without_the_files() {
+    let s = Scenario::load(repo("config/panda-figure-eight.toml")).expect("loads");
+    let mut doc = s.document("ns");
+    assert_eq!(
+        doc.paths.keys().collect::<Vec<_>>(),
+        [
+            "paths/panda-figure-eight-joint3.csv",
+            "paths/panda-figure-eight-tcp.csv"
+        ]
+    );
+    // As a tool on another machine: the scenario's directory does not exist.
+    doc.path = "/nonexistent/panda-figure-eight.toml".into();
+    let again = Scenario::from_document(&doc).expect("rebuilt from the texts");
+    assert_eq!(again.tracking, s.tracking);
+    // A JSON round trip keeps them; a document without them reads as none.
+    let json = String::from_utf8(doc.to_json()).unwrap();
+    let back = hcc_msgs::scenario::ScenarioDoc::from_json(json.as_bytes()).unwrap();
+    assert_eq!(back.paths, doc.paths);
+    let old = json.replacen("\"paths\":", "\"unused_paths\":", 1);
+    let old = hcc_msgs::scenario::ScenarioDoc::from_json(old.as_bytes()).unwrap();
+    assert!(old.paths.is_empty());
+}

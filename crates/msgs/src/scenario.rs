@@ -86,6 +86,11 @@ pub struct ScenarioDoc {
     pub urdf_path: String,
     /// The URDF's text.
     pub urdf: String,
+    /// The levels' path files (`trajectory`), as the scenario names them,
+    /// with their texts (empty without paths; absent in a document of an
+    /// earlier release).
+    #[serde(default)]
+    pub paths: std::collections::BTreeMap<String, String>,
     /// The levels in priority order.
     pub levels: Vec<LevelInfo>,
     /// The joints, root to tip.
@@ -144,6 +149,7 @@ mod tests {
             toml: "[robot]\n".into(),
             urdf_path: "planar4.urdf".into(),
             urdf: "<robot/>".into(),
+            paths: Default::default(),
             form: "extended".into(),
             coriolis_cancellation: true,
             gravity_compensation: true,

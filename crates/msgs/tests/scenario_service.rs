@@ -26,6 +26,7 @@ fn doc(namespace: &str) -> ScenarioDoc {
         toml: "# a comment line of the scenario\n".repeat(4000),
         urdf_path: "planar4.urdf".into(),
         urdf: "<robot name=\"planar4\"/>".into(),
+        paths: Default::default(),
         levels: vec![
             LevelInfo {
                 name: "TCP position".into(),

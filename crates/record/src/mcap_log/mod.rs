@@ -138,7 +138,8 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 
 impl RunInfo {
     /// The scenario record of `scenario`: its TOML text as loaded, path,
-    /// name, the URDF's path, text, robot name and SHA-256 — what a replay
+    /// name, the URDF's path, text, robot name and SHA-256, the levels'
+    /// path files with their texts (`paths`, JSON) — what a replay
     /// or a plot needs to build the scenario again without the files.
     pub fn describe_scenario(scenario: &hcc_config::Scenario) -> BTreeMap<String, String> {
         let mut m = BTreeMap::new();
@@ -154,6 +155,14 @@ impl RunInfo {
             if let Ok(text) = String::from_utf8(urdf) {
                 m.insert("urdf".into(), text);
             }
+        }
+        let paths = scenario.path_texts();
+        if !paths.is_empty() {
+            // The levels' path files (`trajectory`) with their texts.
+            m.insert(
+                "paths".into(),
+                serde_json::to_string(&paths).unwrap_or_default(),
+            );
         }
         m.insert("n_joints".into(), scenario.model.nq().to_string());
         m.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
