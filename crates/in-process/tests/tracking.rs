@@ -236,3 +236,82 @@ fn plot(tracked: &Errors, pulled: &Errors) {
     )
     .unwrap();
 }
+
+/// The warped phase time of the shipped paths: its rate rises from 0 to 1
+/// over the first second (quintic smoothstep), so a path starts at rest.
+fn phase(t: f64) -> f64 {
+    let x = t.min(1.0);
+    let ramp = x.powi(6) - 3.0 * x.powi(5) + 2.5 * x.powi(4);
+    if t <= 1.0 { ramp } else { t - 0.5 }
+}
+
+#[test]
+fn an_orientation_path_is_tracked_on_so3() {
+    // The figure-eight scenario with the hand turning as well: about the
+    // world z by 0.3 sin(2π 0.3 τ) rad and about its own x by
+    // 0.2 sin(2π 0.2 τ) rad, a quaternion path every 10 ms.
+    use nalgebra::{UnitQuaternion, Vector3};
+    let dir = std::env::temp_dir().join(format!("hcc-tracking-so3-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("paths")).unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    for f in [
+        "panda-figure-eight-tcp.csv",
+        "panda-figure-eight-joint3.csv",
+    ] {
+        std::fs::copy(root.join("config/paths").join(f), dir.join("paths").join(f)).unwrap();
+    }
+    let r0 = UnitQuaternion::from_euler_angles(
+        -3.140127636212154,
+        -0.09998930383585482,
+        -0.01467514073335553,
+    );
+    let mut csv = String::from("t,qw,qx,qy,qz\n");
+    for k in 0..=600 {
+        let t = k as f64 * 0.01;
+        let p = phase(t);
+        let yaw = UnitQuaternion::from_axis_angle(
+            &Vector3::z_axis(),
+            0.3 * (2.0 * std::f64::consts::PI * 0.3 * p).sin(),
+        );
+        let roll = UnitQuaternion::from_axis_angle(
+            &Vector3::x_axis(),
+            0.2 * (2.0 * std::f64::consts::PI * 0.2 * p).sin(),
+        );
+        let q = yaw * r0 * roll;
+        csv += &format!("{t:.2},{},{},{},{}\n", q.w, q.i, q.j, q.k);
+    }
+    std::fs::write(dir.join("paths/hand.csv"), csv).unwrap();
+    let urdf = root
+        .join("config/robots/panda/panda.urdf")
+        .canonicalize()
+        .unwrap();
+    let text = std::fs::read_to_string(root.join("config/panda-figure-eight.toml"))
+        .unwrap()
+        .replace(
+            "urdf = \"robots/panda/panda.urdf\"",
+            &format!("urdf = {:?}", urdf.to_string_lossy()),
+        )
+        .replace(
+            "goal = [-3.140127636212154, -0.09998930383585482, -0.01467514073335553]",
+            "trajectory = \"paths/hand.csv\"",
+        )
+        .replace("duration_s = 10.0", "duration_s = 5.5");
+    let path = dir.join("so3.toml");
+    std::fs::write(&path, text).unwrap();
+    let s = Scenario::load(&path).expect("the orientation path loads");
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(s.tracking.paths[1].is_some());
+    let tracked = run(&s);
+    let mut pulled = s.clone();
+    pulled.tracking.feed_forward = vec![false; 3];
+    let lagging = run(&pulled);
+    let (e2, e2_pulled) = (tracked.max_after(1, 3.0), lagging.max_after(1, 3.0));
+    let (e1, e3) = (tracked.max_after(0, 3.0), tracked.max_after(2, 3.0));
+    println!(
+        "orientation path: largest error from 3 s {e2:.3e} rad tracking, {e2_pulled:.3e} rad pulled \
+         along; TCP {e1:.3e} m, joint 3 {e3:.3e} rad"
+    );
+    assert!(e2 < 1e-3, "orientation error {e2:.3e} rad");
+    assert!(e2_pulled > 10.0 * e2, "pulled along {e2_pulled:.3e} rad");
+    assert!(e1 < 1e-4 && e3 < 1e-3);
+}
