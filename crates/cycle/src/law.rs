@@ -58,9 +58,10 @@ fn check_path_starts(scenario: &Scenario, controller: &Controller) -> Result<(),
                 return Err(scenario.error_at(
                     &format!("level[{i}].trajectory"),
                     format!(
-                        "{}: its first row starts {:.4} {what} from the arm at initial.q0 in \
+                        "{}: row {}: the path starts {:.4} {what} from the arm at initial.q0 in \
                          coordinate {} (at most {limit} {what}): start the path where the arm is",
                         path.file,
+                        path.trajectory.first_line(),
                         e.abs(),
                         a + 1
                     ),

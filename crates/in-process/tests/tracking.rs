@@ -185,7 +185,10 @@ fn a_path_that_does_not_start_at_the_arm_is_refused() {
         e.contains("level[0].trajectory") && e.contains("panda-figure-eight-tcp.csv"),
         "{e}"
     );
-    assert!(e.contains("start the path where the arm is"), "{e}");
+    assert!(
+        e.contains("row 7:") && e.contains("start the path where the arm is"),
+        "{e}"
+    );
 }
 
 /// With `HCC_TRACKING_PLOTS=<dir>` set: the TCP's y and z, desired and

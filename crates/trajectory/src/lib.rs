@@ -108,6 +108,8 @@ pub struct Trajectory {
     held: Vec<f64>,
     /// Per orientation block, R_0 (the first row's orientation).
     references: Vec<UnitQuaternion<f64>>,
+    /// The file's line of the first row (after the header).
+    first_line: usize,
 }
 
 impl Trajectory {
@@ -179,6 +181,7 @@ impl Trajectory {
             segments,
             held,
             references,
+            first_line: rows[0].0,
         })
     }
 
@@ -190,6 +193,12 @@ impl Trajectory {
     /// The time of the last row (s): from then on the path holds.
     pub fn duration(&self) -> f64 {
         self.times[self.times.len() - 1]
+    }
+
+    /// The file's line of the first row (1-based; errors about where the
+    /// path starts name it).
+    pub fn first_line(&self) -> usize {
+        self.first_line
     }
 
     /// The number of rows.

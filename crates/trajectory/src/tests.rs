@@ -53,7 +53,10 @@ fn refusals_name_the_row_and_the_reason() {
 #[test]
 fn a_pose_path_passes_its_rows_with_so3_rates_and_holds_at_rest() {
     let path = Trajectory::parse(&pose_text(), &POSE).expect("pose path");
-    assert_eq!((path.rows(), path.duration()), (21, 2.0));
+    assert_eq!(
+        (path.rows(), path.duration(), path.first_line()),
+        (21, 2.0, 2)
+    );
     let mut s = path.sample_buffer();
     let rot = |s: &PathSample| UnitQuaternion::from_euler_angles(s.goal[3], s.goal[4], s.goal[5]);
     // The rows themselves.
