@@ -18,6 +18,7 @@ import json
 import os
 import pathlib
 import random
+import re
 import socket
 import subprocess
 import time
@@ -205,12 +206,24 @@ def test_a_recording_plays_back_unchanged(tmp_path: pathlib.Path) -> None:
     assert len(by_seq) == len(recorded)
     # The layouts' message paths find their fields in the served messages
     # (null where the URDF gives no limit; joint indices beyond the planar
-    # arm's 4 joints excepted).
+    # arm's 4 joints, and task rows beyond a level's dimension, excepted).
     n_joints = len(recorded[0]["q"])
     for p in paths:
         topic, *fields = p.split(".")
         v = value_at(last[topic], fields)
-        assert v is not MISSING or max_index(p) >= n_joints, f"{p} has no value"
+        beyond = max_index(p) >= n_joints or beyond_level_rows(last[topic], p)
+        assert v is not MISSING or beyond, f"{p} has no value"
+
+
+def beyond_level_rows(msg: object, path: str) -> bool:
+    """Whether ``path`` is a task row ``levels[i].goal[k]`` or ``levels[i].error[k]`` beyond
+    level i's dimension (the length of its ``error`` in ``msg``)."""
+    m = re.fullmatch(r"/telemetry\.levels\[(\d+)\]\.(goal|error)\[(\d+)\]", path)
+    if m is None or not isinstance(msg, dict):
+        return False
+    levels = msg.get("levels", [])
+    i, k = int(m.group(1)), int(m.group(3))
+    return i < len(levels) and k >= len(levels[i].get("error", []))
 
 
 def layout_paths() -> list[str]:
