@@ -15,6 +15,9 @@
 //!
 //! [`Trajectory::parse`] reads and checks a file (allocates);
 //! [`Trajectory::sample`] allocates nothing (a 1 kHz loop calls it).
+//! [`PathStream`] is the path that arrives while it runs (knots appended to
+//! a preallocated ring, interpolated from local data so that nothing already
+//! executing changes; `stream.rs`).
 //!
 //! ```
 //! use hcc_trajectory::{Block, Trajectory};
@@ -30,9 +33,11 @@
 mod csv;
 mod rotation;
 mod spline;
+mod stream;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use spline::Quintic;
+pub use stream::{KnotError, PathStream, StreamState};
 
 /// How far (rad) an orientation may turn from the path's first orientation:
 /// its rotation vector is interpolated relative to it, unique below π.
@@ -237,36 +242,49 @@ impl Trajectory {
                 spline::evaluate(&self.segments[i][k], h, s)
             }
         };
-        let (mut i, mut g, mut rot) = (0, 0, 0);
-        for b in &self.blocks {
-            match b {
-                Block::Vector(n) => {
-                    for a in 0..*n {
-                        let [p, v, acc] = coord(i + a);
-                        out.goal[g + a] = p;
-                        out.velocity[g + a] = v;
-                        out.acceleration[g + a] = acc;
-                    }
-                    i += n;
-                    g += n;
+        assemble(&self.blocks, &self.references, coord, out);
+    }
+}
+
+/// A sample from each interpolated coordinate's position, velocity and
+/// acceleration (`coord(i)`): vector blocks as they are, an orientation
+/// block's rotation vector r relative to its reference R_0 as the goal's
+/// roll, pitch, yaw of R_0 exp([r]×) and the world ω, ω̇ (`rotation.rs`).
+pub(crate) fn assemble(
+    blocks: &[Block],
+    references: &[UnitQuaternion<f64>],
+    coord: impl Fn(usize) -> [f64; 3],
+    out: &mut PathSample,
+) {
+    let (mut i, mut g, mut rot) = (0, 0, 0);
+    for b in blocks {
+        match b {
+            Block::Vector(n) => {
+                for a in 0..*n {
+                    let [p, v, acc] = coord(i + a);
+                    out.goal[g + a] = p;
+                    out.velocity[g + a] = v;
+                    out.acceleration[g + a] = acc;
                 }
-                Block::Rotation => {
-                    let (mut r, mut rd, mut rdd) =
-                        (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
-                    for a in 0..3 {
-                        [r[a], rd[a], rdd[a]] = coord(i + a);
-                    }
-                    let rotation = self.references[rot] * UnitQuaternion::from_scaled_axis(r);
-                    let (wb, wdb) = rotation::body_rates(&r, &rd, &rdd);
-                    let (w, wd) = (rotation * wb, rotation * wdb);
-                    let (roll, pitch, yaw) = rotation.euler_angles();
-                    out.goal[g..g + 3].copy_from_slice(&[roll, pitch, yaw]);
-                    out.velocity[g..g + 3].copy_from_slice(w.as_slice());
-                    out.acceleration[g..g + 3].copy_from_slice(wd.as_slice());
-                    i += 3;
-                    g += 3;
-                    rot += 1;
+                i += n;
+                g += n;
+            }
+            Block::Rotation => {
+                let (mut r, mut rd, mut rdd) =
+                    (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+                for a in 0..3 {
+                    [r[a], rd[a], rdd[a]] = coord(i + a);
                 }
+                let rotation = references[rot] * UnitQuaternion::from_scaled_axis(r);
+                let (wb, wdb) = rotation::body_rates(&r, &rd, &rdd);
+                let (w, wd) = (rotation * wb, rotation * wdb);
+                let (roll, pitch, yaw) = rotation.euler_angles();
+                out.goal[g..g + 3].copy_from_slice(&[roll, pitch, yaw]);
+                out.velocity[g..g + 3].copy_from_slice(w.as_slice());
+                out.acceleration[g..g + 3].copy_from_slice(wd.as_slice());
+                i += 3;
+                g += 3;
+                rot += 1;
             }
         }
     }

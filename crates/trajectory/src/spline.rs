@@ -62,7 +62,7 @@ pub(crate) fn segments(t: &[f64], y: &[f64]) -> Vec<Quintic> {
 
 /// The quintic in s ∈ [0, 1] with position, velocity, acceleration `p0` at
 /// s = 0 and `p1` at s = 1 over a segment of `h` s.
-fn hermite(h: f64, p0: [f64; 3], p1: [f64; 3]) -> Quintic {
+pub(crate) fn hermite(h: f64, p0: [f64; 3], p1: [f64; 3]) -> Quintic {
     let c0 = p0[0];
     let c1 = p0[1] * h;
     let c2 = 0.5 * p0[2] * h * h;
