@@ -154,6 +154,7 @@
 pub mod driver;
 mod error;
 pub mod ipc;
+mod path;
 pub mod scenario;
 mod sequence;
 mod service;
@@ -162,6 +163,10 @@ mod telemetry;
 mod types;
 
 pub use error::{MsgError, NamespaceError};
+pub use path::{
+    KnotsRejection, MAX_KNOTS_PER_MESSAGE, MAX_PATH_COLUMNS, PATH_EXTEND, PATH_FLAGS_KNOWN,
+    PATH_NEW, PathKnots, PathRejection,
+};
 pub use sequence::{CommandFreshness, SeqEvent, SequenceChecker, command_freshness};
 pub use service::{
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, MAX_NAMESPACE_LEN, Namespace, SERVICE_PREFIX,

@@ -97,6 +97,7 @@ pub struct ServiceNames {
     torque_command: String,
     telemetry: String,
     setpoint: String,
+    path: String,
     state_ready: String,
     command_ready: String,
     scenario: String,
@@ -116,6 +117,7 @@ impl ServiceNames {
             torque_command: format!("{base}/torque_command"),
             telemetry: format!("{base}/telemetry"),
             setpoint: format!("{base}/setpoint"),
+            path: format!("{base}/path"),
             state_ready: format!("{base}/state_ready"),
             command_ready: format!("{base}/command_ready"),
             scenario: format!("{base}/scenario"),
@@ -148,6 +150,11 @@ impl ServiceNames {
         &self.setpoint
     }
 
+    /// Publish-subscribe service of [`crate::PathKnots`] (clients → controller).
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
     /// Event service the driver notifies with [`EVENT_STATE_PUBLISHED`].
     pub fn state_ready(&self) -> &str {
         &self.state_ready
@@ -165,12 +172,13 @@ impl ServiceNames {
     }
 
     /// All names, for listing/cleanup.
-    pub fn all(&self) -> [&str; 7] {
+    pub fn all(&self) -> [&str; 8] {
         [
             &self.joint_state,
             &self.torque_command,
             &self.telemetry,
             &self.setpoint,
+            &self.path,
             &self.state_ready,
             &self.command_ready,
             &self.scenario,

@@ -12,9 +12,9 @@ use iceoryx2::service::port_factory::publish_subscribe;
 use super::error::IpcError;
 use super::node::Ipc;
 use super::settings::{MAX_LOANED_SAMPLES, MAX_SUBSCRIBER_BUFFER};
-use crate::Telemetry;
 use crate::setpoint::Setpoint;
 use crate::types::{JointState, TorqueCommand};
+use crate::{PathKnots, Telemetry};
 
 /// Publisher of [`JointState`] (driver/simulator).
 pub type StatePublisher = Publisher<Ipc, JointState, ()>;
@@ -30,6 +30,10 @@ pub type CommandSubscriber = Subscriber<Ipc, TorqueCommand, ()>;
 pub type SetpointPublisher = Publisher<Ipc, Setpoint, ()>;
 /// Subscriber of [`Setpoint`] (the controller).
 pub type SetpointSubscriber = Subscriber<Ipc, Setpoint, ()>;
+/// Publisher of [`PathKnots`] (a client).
+pub type PathPublisher = Publisher<Ipc, PathKnots, ()>;
+/// Subscriber of [`PathKnots`] (the controller).
+pub type PathSubscriber = Subscriber<Ipc, PathKnots, ()>;
 /// Publisher of [`Telemetry`] (controller).
 pub type TelemetryPublisher = Publisher<Ipc, Telemetry, ()>;
 /// Subscriber of [`Telemetry`].

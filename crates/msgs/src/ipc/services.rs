@@ -14,18 +14,19 @@ use super::error::IpcError;
 use super::events::{EventListener, EventNotifier, listener, notifier};
 use super::node::{Ipc, IpcNode};
 use super::pubsub::{
-    CommandPublisher, CommandSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher,
-    StateSubscriber, TelemetryPublisher, TelemetrySubscriber, publisher, subscriber,
+    CommandPublisher, CommandSubscriber, PathPublisher, PathSubscriber, SetpointPublisher,
+    SetpointSubscriber, StatePublisher, StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
+    publisher, subscriber,
 };
 use super::settings::{
     EVENT_ID_MAX, MAX_BORROWED_SAMPLES, MAX_COMMAND_SUBSCRIBERS, MAX_LISTENERS, MAX_NODES,
     MAX_NOTIFIERS, MAX_SETPOINT_PUBLISHERS, MAX_SETPOINT_SUBSCRIBERS, MAX_STATE_SUBSCRIBERS,
     MAX_SUBSCRIBER_BUFFER, MAX_TELEMETRY_SUBSCRIBERS,
 };
-use crate::Telemetry;
 use crate::service::{EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, ServiceNames};
 use crate::setpoint::Setpoint;
 use crate::types::{JointState, TorqueCommand};
+use crate::{PathKnots, Telemetry};
 
 fn pubsub_open_reason(e: PublishSubscribeOpenError) -> String {
     use PublishSubscribeOpenError as E;
@@ -145,13 +146,14 @@ fn open_event(
         .map_err(|e| err(event_reason(e)))
 }
 
-/// The six services of one namespace, opened (or created) with the contract's settings.
+/// The seven services of one namespace, opened (or created) with the contract's settings.
 pub struct Services {
     names: ServiceNames,
     joint_state: publish_subscribe::PortFactory<Ipc, JointState, ()>,
     torque_command: publish_subscribe::PortFactory<Ipc, TorqueCommand, ()>,
     telemetry: publish_subscribe::PortFactory<Ipc, Telemetry, ()>,
     setpoint: publish_subscribe::PortFactory<Ipc, Setpoint, ()>,
+    path: publish_subscribe::PortFactory<Ipc, PathKnots, ()>,
     state_ready: event::PortFactory<Ipc>,
     command_ready: event::PortFactory<Ipc>,
 }
@@ -174,6 +176,12 @@ impl Services {
             setpoint: open_pubsub(
                 node,
                 names.setpoint(),
+                MAX_SETPOINT_PUBLISHERS,
+                MAX_SETPOINT_SUBSCRIBERS,
+            )?,
+            path: open_pubsub(
+                node,
+                names.path(),
                 MAX_SETPOINT_PUBLISHERS,
                 MAX_SETPOINT_SUBSCRIBERS,
             )?,
@@ -234,6 +242,19 @@ impl Services {
     /// [`SETPOINT_BUFFER`]: super::SETPOINT_BUFFER
     pub fn setpoint_subscriber(&self, buffer: usize) -> Result<SetpointSubscriber, IpcError> {
         subscriber(&self.setpoint, self.names.setpoint(), buffer)
+    }
+
+    /// A path publisher (a client; up to [`MAX_SETPOINT_PUBLISHERS`] at once).
+    pub fn path_publisher(&self) -> Result<PathPublisher, IpcError> {
+        publisher(&self.path, self.names.path(), "client")
+    }
+
+    /// A path subscriber with a queue of `buffer` samples (the controller
+    /// uses [`SETPOINT_BUFFER`]).
+    ///
+    /// [`SETPOINT_BUFFER`]: super::SETPOINT_BUFFER
+    pub fn path_subscriber(&self, buffer: usize) -> Result<PathSubscriber, IpcError> {
+        subscriber(&self.path, self.names.path(), buffer)
     }
 
     /// Notifier of `state_ready` (default event [`EVENT_STATE_PUBLISHED`]).
