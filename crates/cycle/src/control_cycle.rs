@@ -49,7 +49,7 @@
 use hcc_control::Controller;
 use hcc_msgs::ipc::SETPOINT_BUFFER;
 use hcc_msgs::{
-    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, Setpoint,
+    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, PathKnots, Setpoint,
     TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
     TelemetryTimings, TorqueCommand, monotonic_now_ns,
 };
@@ -160,6 +160,7 @@ impl ControlCycle {
         let paths = Paths::new(
             &settings.tracking,
             settings.setpoint_limits.relative_damping,
+            settings.period_s(),
             &mut controller,
         );
         let spec = controller.spec();
@@ -350,6 +351,21 @@ impl ControlCycle {
     /// recording says were taken in a cycle. Allocation-free.
     pub fn take_setpoint_now(&mut self, setpoint: &Setpoint) -> u32 {
         let code = self.setpoints.take(setpoint, &mut self.controller);
+        self.setpoints.fill(&mut self.telemetry);
+        code
+    }
+
+    /// Takes a client's path knots ([`PathKnots`], docs/tracking.md) in the
+    /// cycle of the last well-formed state: checked against the level,
+    /// starting or extending its path, answered in the client's slot like a
+    /// setpoint. Returns the answer code. Allocation-free.
+    pub fn take_path(&mut self, knots: &PathKnots) -> u32 {
+        let code = self.paths.take(
+            knots,
+            self.clock_seq,
+            &mut self.controller,
+            &mut self.setpoints,
+        );
         self.setpoints.fill(&mut self.telemetry);
         code
     }
@@ -606,6 +622,7 @@ impl ControlCycle {
         // until a goal setpoint takes it (module `paths`).
         self.paths
             .advance(self.period_s, &mut self.controller, &mut self.setpoints);
+        self.counters.core.paths_stopped = self.paths.stopped;
         // The contact reaction, from the flag of the previous state (module `reaction`).
         self.reaction.before_law(
             self.contact.in_contact(),

@@ -26,6 +26,9 @@ hcc_msgs::define_counters! {
         /// The energy the output stages fed in beyond what their tank held
         /// (mJ, total; H rose by it).
         energy_unpaid_mj: "energy fed in beyond the output stages' tank (mJ)",
+        /// Paths sent at run time that reached their last knot and stopped
+        /// there at rest (module `paths`).
+        paths_stopped: "run-time paths that stopped on their last knot",
     }
 }
 

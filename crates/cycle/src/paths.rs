@@ -1,73 +1,243 @@
-//! The levels' desired paths (a scenario level's `trajectory`;
-//! docs/tracking.md): every used state moves each path one nominal period on,
-//! as transitions do; the law is handed x_{i,d}, ẋ_{i,d} and, for a level with
-//! the feed-forward, ẍ_{i,d}. The setpoint handler's equilibrium follows the
-//! path, so a goal setpoint for the level starts from where the path is —
-//! and ends the path (the newest command wins). Allocation-free after
-//! [`Paths::new`].
+//! The levels' desired paths (docs/tracking.md): a scenario level's
+//! `trajectory`, and paths a client sends while the controller runs
+//! ([`PathKnots`] on `hcc/<ns>/path`). Every used state moves each path one
+//! nominal period on, as transitions do; the law is handed x_{i,d}, ẋ_{i,d}
+//! and, for a level with the feed-forward, ẍ_{i,d}. The setpoint handler's
+//! equilibrium follows the path, so a goal setpoint for the level starts from
+//! where the path is — and ends the path (the newest command wins); a new
+//! path replaces the running one from where it is.
+//!
+//! A path sent at run time is a [`PathStream`]: its knots are checked (the
+//! level's columns, joint limits and workspace of every knot, unit
+//! quaternions, a first knot at the level's equilibrium) and answered in the
+//! client's answer slot; a path that runs out of knots stops on its last at
+//! rest (counted: `paths_stopped`). Allocation-free after [`Paths::new`]; the
+//! spare stream a new path is built in is swapped in whole, so a refused
+//! message changes nothing.
 
 use hcc_control::Controller;
-use hcc_spec::tracking::Tracking;
-use hcc_trajectory::{PathSample, Trajectory};
+use hcc_msgs::{
+    ANSWER_ACCEPTED, KnotsRejection, PATH_NEW, PathKnots, PathRejection, SetpointRejection,
+};
+use hcc_spec::TaskUnit;
+use hcc_spec::tracking::{Tracking, blocks};
+use hcc_trajectory::{Block, KnotError, PathSample, PathStream, StreamState, Trajectory};
 
 use crate::setpoints::SetpointHandler;
 
-/// One level's path and its sample buffers.
+/// Knots a level's run-time path holds ahead at most.
+pub const PATH_KNOTS: usize = 256;
+/// How a run-time path that runs out of knots decelerates at most (m/s² or
+/// rad/s² on its coordinates).
+pub const PATH_STOP_DECELERATION: f64 = 1.0;
+/// How far a new path's first knot may be from the level's equilibrium.
+const START_OFFSET_M: f64 = 0.05;
+const START_OFFSET_RAD: f64 = 0.2;
+
+/// What drives a level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Driver {
+    /// Its goal (and the setpoints).
+    Goal,
+    /// The scenario's path.
+    Scenario,
+    /// A path sent at run time.
+    Stream,
+}
+
+/// One level's paths and buffers.
 struct LevelPath {
-    trajectory: Trajectory,
+    scenario: Option<Trajectory>,
+    stream: PathStream,
+    /// A new path is built here, then swapped in.
+    spare: PathStream,
+    blocks: Vec<Block>,
+    units: Vec<TaskUnit>,
     sample: PathSample,
+    /// A knot in the goal format (checks).
+    goal: Vec<f64>,
     feed_forward: bool,
     /// Hand the law ẋ_{i,d} (with the feed-forward always; without it as a
     /// transition does, `[setpoint_limits] relative_damping`).
     velocity: bool,
-    /// Still driving the level (no goal setpoint has taken it over).
-    driving: bool,
+    driver: Driver,
+    /// The run-time path's own time, s (negative before it starts).
+    stream_t: f64,
+    /// The setpoint handler's goal count when the path began.
+    goals_at_start: u64,
+    stopping: bool,
 }
 
-/// The paths of a cycle's levels and their clock.
+/// The paths of a cycle's levels and their clocks.
 pub(crate) struct Paths {
-    levels: Vec<Option<LevelPath>>,
-    /// Time since the first used state, s.
+    levels: Vec<LevelPath>,
+    /// Time since the first used state, s (the scenario's paths).
     elapsed_s: f64,
+    period_s: f64,
+    /// The feed-forward is on for the levels that have it.
+    tracking: bool,
+    /// Run-time paths that reached their last knot.
+    pub(crate) stopped: u64,
 }
 
 impl Paths {
-    /// The paths of `tracking`; every level with the feed-forward tracks
-    /// (its fixed goal a constant path) while any level follows a path. A
-    /// level without it is pulled along as a transition pulls it: the damping
-    /// relative to the path's velocity with `relative_damping`.
+    /// The paths of `tracking` for `controller`'s levels; every level with
+    /// the feed-forward tracks (its fixed goal a constant path) once any
+    /// level follows a path. A level without it is pulled along as a
+    /// transition pulls it: the damping relative to the path's velocity with
+    /// `relative_damping`.
     pub(crate) fn new(
         tracking: &Tracking,
         relative_damping: bool,
+        period_s: f64,
         controller: &mut Controller,
     ) -> Paths {
-        let any = tracking.any();
-        let mut levels = Vec::with_capacity(tracking.paths.len());
-        for (i, p) in tracking.paths.iter().enumerate() {
+        let n = controller.nq();
+        let mut levels = Vec::with_capacity(controller.levels());
+        for i in 0..controller.levels() {
+            let spec = &controller.spec().levels[i];
             let feed_forward = tracking.feed_forward.get(i).copied().unwrap_or(true);
-            if any && feed_forward {
-                let zeros = vec![0.0; controller.task_dim(i)];
-                // The level exists and the values are finite: this cannot fail.
-                let _ = controller.set_goal_acceleration(i, Some(&zeros));
-            }
-            levels.push(p.as_ref().map(|p| LevelPath {
-                sample: p.trajectory.sample_buffer(),
-                trajectory: p.trajectory.clone(),
+            let blocks = blocks(&spec.tasks, n);
+            let scenario = tracking
+                .paths
+                .get(i)
+                .cloned()
+                .flatten()
+                .map(|p| p.trajectory);
+            let stream = PathStream::new(&blocks, PATH_KNOTS, PATH_STOP_DECELERATION);
+            levels.push(LevelPath {
+                sample: stream.sample_buffer(),
+                goal: vec![0.0; controller.task_dim(i)],
+                spare: stream.clone(),
+                stream,
+                units: spec.units(n),
+                blocks,
+                driver: if scenario.is_some() {
+                    Driver::Scenario
+                } else {
+                    Driver::Goal
+                },
+                scenario,
                 feed_forward,
                 velocity: feed_forward || relative_damping,
-                driving: true,
-            }));
+                stream_t: 0.0,
+                goals_at_start: 0,
+                stopping: false,
+            });
         }
-        Paths {
+        let mut paths = Paths {
             levels,
             elapsed_s: 0.0,
+            period_s,
+            tracking: false,
+            stopped: 0,
+        };
+        if tracking.any() {
+            paths.track(controller);
         }
+        paths
+    }
+
+    /// Turns the feed-forward on for every level that has it.
+    fn track(&mut self, controller: &mut Controller) {
+        if self.tracking {
+            return;
+        }
+        for (i, l) in self.levels.iter().enumerate() {
+            if l.feed_forward {
+                // The level exists and the values are finite: this cannot fail.
+                let zeros = [0.0; hcc_msgs::MAX_TASK_DIM];
+                let _ = controller.set_goal_acceleration(i, Some(&zeros[..l.goal.len()]));
+            }
+        }
+        self.tracking = true;
+    }
+
+    /// Takes a client's knots in the cycle of the state `state_seq`: checks
+    /// them against the level, starts or extends its path, and answers in
+    /// the client's slot. Returns the answer code. Allocation-free.
+    pub(crate) fn take(
+        &mut self,
+        knots: &PathKnots,
+        state_seq: u64,
+        controller: &mut Controller,
+        setpoints: &mut SetpointHandler,
+    ) -> u32 {
+        let result = self.check_and_take(knots, state_seq, setpoints);
+        let code = match result {
+            Ok(()) => {
+                self.track(controller);
+                ANSWER_ACCEPTED
+            }
+            Err(r) => r.code(),
+        };
+        setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
+        code
+    }
+
+    fn check_and_take(
+        &mut self,
+        knots: &PathKnots,
+        state_seq: u64,
+        setpoints: &SetpointHandler,
+    ) -> Result<(), KnotsRejection> {
+        use KnotsRejection::{Path, Setpoint as Sp};
+        knots.validate()?;
+        let i = knots.level as usize;
+        let goals_now = setpoints.goals_taken(i);
+        let l = self
+            .levels
+            .get_mut(i)
+            .ok_or(Sp(SetpointRejection::UnknownLevel))?;
+        if knots.columns() != l.stream.columns() {
+            return Err(Path(PathRejection::ColumnMismatch));
+        }
+        // Every knot against the level's limits, in its goal format.
+        for k in 0..knots.count() {
+            let (_, columns) = knots.knot(k);
+            if !hcc_trajectory::goal_of(&l.blocks, columns, &mut l.goal) {
+                return Err(Path(PathRejection::NotUnitQuaternion));
+            }
+            setpoints.check_goal(i, &l.goal).map_err(Sp)?;
+        }
+        let new = knots.flags == PATH_NEW;
+        if new {
+            // Its first knot at the level's equilibrium.
+            let (_, first) = knots.knot(0);
+            hcc_trajectory::goal_of(&l.blocks, first, &mut l.goal);
+            let here = setpoints
+                .equilibrium(i)
+                .ok_or(Sp(SetpointRejection::UnknownLevel))?;
+            if !starts_at(&l.blocks, &l.units, &l.goal, here) {
+                return Err(Path(PathRejection::StartsAway));
+            }
+            l.spare.clear();
+            push_all(&mut l.spare, knots)?;
+            std::mem::swap(&mut l.stream, &mut l.spare);
+            l.driver = Driver::Stream;
+            let start = knots.apply_at_state_seq.max(state_seq);
+            l.stream_t = -((start - state_seq) as f64) * self.period_s;
+            l.goals_at_start = goals_now;
+            l.stopping = false;
+            return Ok(());
+        }
+        let running = l.driver == Driver::Stream && l.goals_at_start == goals_now;
+        if !running || l.stream.is_empty() {
+            return Err(Path(PathRejection::NoPath));
+        }
+        if l.stream.state(l.stream_t) != StreamState::Running {
+            return Err(Path(PathRejection::PathEnded));
+        }
+        if knots.count() > l.stream.room() {
+            return Err(Path(PathRejection::PathFull));
+        }
+        let before = l.stream.len();
+        push_all(&mut l.stream, knots).inspect_err(|_| l.stream.truncate(before))
     }
 
     /// Hands every driving path's value at this state's time to the law and
-    /// to the setpoint handler's equilibrium, then moves the clock `dt` s on.
-    /// A level whose goal a setpoint has taken is left to it (the
-    /// feed-forward ends there).
+    /// to the setpoint handler's equilibrium, then moves the clocks `dt` s
+    /// on. A level whose goal a setpoint has taken is left to it.
     pub(crate) fn advance(
         &mut self,
         dt: f64,
@@ -75,23 +245,41 @@ impl Paths {
         setpoints: &mut SetpointHandler,
     ) {
         let t = self.elapsed_s;
-        for (i, level) in self.levels.iter_mut().enumerate() {
-            let Some(p) = level.as_mut().filter(|p| p.driving) else {
-                continue;
-            };
-            if setpoints.goal_taken(i) {
-                p.driving = false;
-                let _ = controller.set_goal_acceleration(i, None);
-                continue;
+        for (i, p) in self.levels.iter_mut().enumerate() {
+            let goals = setpoints.goals_taken(i);
+            match p.driver {
+                Driver::Goal => continue,
+                Driver::Scenario if goals > 0 => {
+                    p.driver = Driver::Goal;
+                    continue;
+                }
+                Driver::Stream if goals != p.goals_at_start => {
+                    p.driver = Driver::Goal;
+                    continue;
+                }
+                Driver::Scenario => match &p.scenario {
+                    Some(s) => s.sample(t, &mut p.sample),
+                    None => continue,
+                },
+                Driver::Stream => {
+                    p.stream.sample(p.stream_t, &mut p.sample);
+                    let stopping = p.stream.state(p.stream_t) != StreamState::Running;
+                    if stopping && !p.stopping {
+                        self.stopped += 1;
+                    }
+                    p.stopping = stopping;
+                    if dt.is_finite() && dt > 0.0 {
+                        p.stream_t += dt;
+                    }
+                }
             }
-            p.trajectory.sample(t, &mut p.sample);
             let s = &p.sample;
             // Checked paths of the level's dimension: these calls cannot fail.
             let _ = controller.set_goal(i, &s.goal);
             if p.velocity {
                 let _ = controller.set_goal_velocity(i, &s.velocity);
             }
-            if p.feed_forward {
+            if p.feed_forward && self.tracking {
                 let _ = controller.set_goal_acceleration(i, Some(&s.acceleration));
             }
             setpoints.follow(i, &s.goal);
@@ -100,4 +288,54 @@ impl Paths {
             self.elapsed_s += dt;
         }
     }
+}
+
+/// Appends every knot of `knots` to `stream`.
+fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRejection> {
+    for k in 0..knots.count() {
+        let (t, columns) = knots.knot(k);
+        stream.push(t, columns).map_err(|e| {
+            KnotsRejection::Path(match e {
+                KnotError::NotIncreasing => PathRejection::NotIncreasing,
+                KnotError::NotUnit => PathRejection::NotUnitQuaternion,
+                KnotError::Turn => PathRejection::TurnTooFar,
+                KnotError::Full => PathRejection::PathFull,
+                KnotError::Ended => PathRejection::PathEnded,
+                KnotError::Malformed => PathRejection::ColumnMismatch,
+            })
+        })?;
+    }
+    Ok(())
+}
+
+/// Whether a path's first knot `first` (goal format) is within the start
+/// offsets of the equilibrium `here`: per row by its unit, an orientation by
+/// the angle between the two rotations.
+fn starts_at(blocks: &[Block], units: &[TaskUnit], first: &[f64], here: &[f64]) -> bool {
+    let mut g = 0;
+    for b in blocks {
+        match b {
+            Block::Vector(n) => {
+                for a in g..g + n {
+                    let limit = match units[a] {
+                        TaskUnit::Length => START_OFFSET_M,
+                        TaskUnit::Angle => START_OFFSET_RAD,
+                    };
+                    if (first[a] - here[a]).abs() > limit {
+                        return false;
+                    }
+                }
+            }
+            Block::Rotation => {
+                let rpy = |v: &[f64]| {
+                    nalgebra::UnitQuaternion::from_euler_angles(v[g], v[g + 1], v[g + 2])
+                };
+                if rpy(first).angle_to(&rpy(here)) > START_OFFSET_RAD {
+                    return false;
+                }
+            }
+        }
+        g += b.dim();
+    }
+    true
 }

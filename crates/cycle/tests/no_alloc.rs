@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
-use hcc_msgs::{CommandMode, JointState, Setpoint};
+use hcc_msgs::{CommandMode, JointState, PATH_EXTEND, PATH_NEW, PathKnots, Setpoint};
 use hcc_rtalloc::{RtAllocator, RtSection, thread_stats};
 use hcc_spec::contact::Reaction;
 
@@ -97,6 +97,23 @@ fn allocates_nothing_with(reaction: Reaction) {
             cycle.stale(k * 1_000_000);
         }
         let mut setpoint = Some(setpoints[k as usize]);
+        // A path sent at run time (docs/tracking.md): begun from level 1's
+        // equilibrium, extended, and a refused extension (back in time).
+        if k % 250 == 100 || k % 250 == 150 || k % 250 == 160 {
+            let g = &cycle.telemetry().goal[0];
+            let (x, y) = (g[0], g[1]);
+            let mut knots = PathKnots::zeroed();
+            let (flags, t0) = match k % 250 {
+                100 => (PATH_NEW, 0.0),
+                150 => (PATH_EXTEND, 0.4),
+                _ => (PATH_EXTEND, 0.1),
+            };
+            knots.flags = flags;
+            for j in 0..8 {
+                let _ = knots.push(t0 + 0.02 * j as f64, &[x + 1e-4 * j as f64, y]);
+            }
+            cycle.take_path(&knots);
+        }
         let answer = cycle.step(&states[k as usize], k * 1_000_000, || setpoint.take());
         let code = cycle
             .telemetry()

@@ -67,3 +67,197 @@ fn a_goal_setpoint_takes_a_path_level_over_from_where_the_path_is() {
         "{last:?}"
     );
 }
+
+/// A 5 cm circle in the y-z plane at 0.25 Hz through `start` (its first
+/// point), its phase rising smoothly from rest over the first second: the
+/// knot at t.
+fn circle(start: [f64; 3], t: f64) -> [f64; 3] {
+    let x = t.min(1.0);
+    let phase = if t <= 1.0 {
+        x.powi(6) - 3.0 * x.powi(5) + 2.5 * x.powi(4)
+    } else {
+        t - 0.5
+    };
+    let w = 2.0 * std::f64::consts::PI * 0.25;
+    let (r, a) = (0.05, w * phase);
+    [
+        start[0],
+        start[1] + r * a.sin(),
+        start[2] + r * (1.0 - a.cos()),
+    ]
+}
+
+/// The Panda regulating its pose (`config/panda-pose-posture.toml`); at 2 s
+/// a client sends level 1 (TCP position) the circle's knots every 20 ms up
+/// to `knots`, in messages of 16. Per cycle from then: the TCP's error to
+/// the path's desired value, the desired value, the commanded torque.
+struct Sent {
+    err: Vec<f64>,
+    desired: Vec<[f64; 3]>,
+    tau: Vec<Vec<f64>>,
+    start: [f64; 3],
+    codes: Vec<u32>,
+    stopped: u64,
+}
+
+fn send_circle(knots: usize, seconds: f64) -> Sent {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let sc = Scenario::load(&path).unwrap();
+    let c = hcc_cycle::controller_for(&sc).unwrap();
+    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let mut plant = hcc_plant::plant_for(&sc).unwrap();
+    let n = sc.model.nq();
+    let period_ns = sc.period_ns();
+    let send_at = 2000;
+    let timing = LoopTiming {
+        control_period_s: sc.period_s(),
+        substeps: 10,
+        cycles: send_at + (seconds * 1000.0) as usize,
+    };
+    let mut out = Sent {
+        err: Vec::new(),
+        desired: Vec::new(),
+        tau: Vec::new(),
+        start: [0.0; 3],
+        codes: Vec::new(),
+        stopped: 0,
+    };
+    run_zoh(&mut plant, timing, |k, _t, q, qd, tau| {
+        let mut s = JointState::zeroed();
+        s.set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
+            .unwrap();
+        s.header.seq = k as u64 + 1;
+        if k == send_at {
+            // From the level's equilibrium (its goal).
+            let g = &d.telemetry().goal[0];
+            out.start = [g[0], g[1], g[2]];
+            let mut msg = PathKnots::zeroed();
+            for j in 0..knots {
+                if msg.count() == hcc_msgs::MAX_KNOTS_PER_MESSAGE {
+                    out.codes.push(d.take_path(&msg));
+                    msg = PathKnots::zeroed();
+                }
+                if msg.count() == 0 {
+                    msg.flags = if j == 0 { PATH_NEW } else { PATH_EXTEND };
+                    msg.client_id = 9;
+                    msg.header.seq = out.codes.len() as u64 + 1;
+                }
+                let t = j as f64 * 0.02;
+                msg.push(t, &circle(out.start, t)).unwrap();
+            }
+            out.codes.push(d.take_path(&msg));
+        }
+        d.decide(&s, (k as u64 + 1) * period_ns);
+        if k >= send_at {
+            let t = d.telemetry();
+            let e = t.task_error(0);
+            out.err
+                .push((e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt());
+            out.desired.push([t.goal[0][0], t.goal[0][1], t.goal[0][2]]);
+            out.tau.push(d.command().tau().to_vec());
+        }
+        tau.as_mut_slice().copy_from_slice(d.command().tau());
+        Ok(())
+    })
+    .unwrap();
+    out.stopped = d.counters().core.paths_stopped;
+    out
+}
+
+#[test]
+fn a_circle_sent_at_run_time_is_tracked_within_a_millimetre() {
+    // 5 s of knots (251, within the level's 256), sent at once.
+    let s = send_circle(251, 6.0);
+    assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
+    let from = 2000; // 2 s after the path began
+    let worst = s.err[from..].iter().fold(0.0_f64, |m, e| m.max(*e));
+    let off_circle = s.desired[..4900]
+        .iter()
+        .enumerate()
+        .map(|(k, x)| {
+            let c = circle(s.start, k as f64 * 1e-3);
+            ((x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt()
+        })
+        .fold(0.0_f64, f64::max);
+    println!(
+        "run-time circle: largest TCP error to the path from 2 s {worst:.3e} m; the path off the \
+         circle by at most {off_circle:.3e} m (knots every 20 ms)"
+    );
+    assert!(worst < 1e-3, "{worst:.3e} m");
+    assert!(off_circle < 1e-4, "{off_circle:.3e} m");
+}
+
+#[test]
+fn a_stream_that_stops_mid_path_comes_to_rest_on_its_last_knot() {
+    let s = send_circle(100, 4.0);
+    assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
+    assert_eq!(s.stopped, 1);
+    let last = circle(s.start, 99.0 * 0.02);
+    let end = s.desired[s.desired.len() - 1];
+    assert!(
+        (0..3).all(|a| (end[a] - last[a]).abs() < 1e-9),
+        "{end:?} vs {last:?}"
+    );
+    let settled = s.err[s.err.len() - 1];
+    // No torque step above the filter's rate (1000 N·m/s: 1 N·m per cycle).
+    let step = s
+        .tau
+        .windows(2)
+        .map(|w| {
+            w[0].iter()
+                .zip(&w[1])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0_f64, f64::max);
+    println!(
+        "stopped stream: at rest {settled:.2e} m from its last knot; largest torque step {step:.3} N·m"
+    );
+    assert!(settled < 1e-4 && step <= 1.0 + 1e-9, "{settled} {step}");
+}
+
+#[test]
+fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let sc = Scenario::load(&path).unwrap();
+    let c = hcc_cycle::controller_for(&sc).unwrap();
+    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let goal = [0.55, 0.20, 0.30];
+    let msg = |flags: u32, pts: &[(f64, [f64; 3])]| {
+        let mut m = PathKnots::zeroed();
+        m.flags = flags;
+        for (t, p) in pts {
+            m.push(*t, p).unwrap();
+        }
+        m
+    };
+    // Extending with no path; starting away from the equilibrium; a knot
+    // out of the arm's reach; the wrong columns; the posture past a limit.
+    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.0, goal)])), 107);
+    assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, [0.65, 0.2, 0.3])])), 110);
+    assert_eq!(
+        d.take_path(&msg(PATH_NEW, &[(0.0, goal), (1.0, [3.0, 0.0, 0.3])])),
+        16
+    );
+    let mut m = PathKnots::zeroed();
+    m.flags = PATH_NEW;
+    m.push(0.0, &[0.5, 0.2]).unwrap();
+    assert_eq!(d.take_path(&m), 104);
+    let mut m = PathKnots::zeroed();
+    m.flags = PATH_NEW;
+    m.level = 2;
+    m.push(0.0, &[0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]).unwrap();
+    m.push(1.0, &[0.0, -0.3, 0.0, -3.2, 0.0, 2.0, 0.8]).unwrap();
+    assert_eq!(d.take_path(&m), 15);
+    // A good start, then an extension that goes back in time.
+    assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, goal), (0.5, goal)])), 0);
+    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.4, goal)])), 103);
+    assert_eq!(
+        d.take_path(&msg(PATH_EXTEND, &[(0.6, goal), (0.7, goal)])),
+        0
+    );
+}

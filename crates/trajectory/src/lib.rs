@@ -246,6 +246,39 @@ impl Trajectory {
     }
 }
 
+/// A knot's `columns` (a path file's: a vector's values, an orientation's
+/// quaternion w x y z) in the level's goal format (an orientation as roll,
+/// pitch, yaw) into `goal`. `false` for a wrong number of columns or an
+/// orientation that is not a unit quaternion (within 1e-3). Allocation-free.
+pub fn goal_of(blocks: &[Block], columns: &[f64], goal: &mut [f64]) -> bool {
+    let need: usize = blocks.iter().map(Block::columns).sum();
+    let dim: usize = blocks.iter().map(Block::dim).sum();
+    if columns.len() != need || goal.len() != dim {
+        return false;
+    }
+    let (mut c, mut g) = (0, 0);
+    for b in blocks {
+        match b {
+            Block::Vector(n) => goal[g..g + n].copy_from_slice(&columns[c..c + n]),
+            Block::Rotation => {
+                let w = &columns[c..c + 4];
+                let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if (norm - 1.0).abs() > 1e-3 {
+                    return false;
+                }
+                let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+                    w[0], w[1], w[2], w[3],
+                ));
+                let (roll, pitch, yaw) = q.euler_angles();
+                goal[g..g + 3].copy_from_slice(&[roll, pitch, yaw]);
+            }
+        }
+        c += b.columns();
+        g += b.dim();
+    }
+    true
+}
+
 /// A sample from each interpolated coordinate's position, velocity and
 /// acceleration (`coord(i)`): vector blocks as they are, an orientation
 /// block's rotation vector r relative to its reference R_0 as the goal's

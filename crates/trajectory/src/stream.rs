@@ -154,6 +154,31 @@ impl PathStream {
         }
     }
 
+    /// How many knots it holds (those not yet passed).
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds no knot.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Drops the knots appended after it held `len` (a batch refused
+    /// part-way is taken back whole). Only knots no segment has entered.
+    pub fn truncate(&mut self, len: usize) {
+        let entered = self
+            .segment
+            .as_ref()
+            .map_or(0, |s| (s.k + 2 - self.first) as usize);
+        self.len = self.len.min(len.max(entered));
+    }
+
+    /// How many more knots it holds now.
+    pub fn room(&self) -> usize {
+        self.capacity - self.len
+    }
+
     /// The time of the last knot, if any.
     pub fn last_time(&self) -> Option<f64> {
         (self.len > 0).then(|| self.t[self.slot(self.first + self.len as u64 - 1)])

@@ -59,8 +59,9 @@ struct LevelState {
     joints: Option<Vec<usize>>,
     /// Whether the law must be updated this cycle (a transition runs or just ended).
     active: bool,
-    /// A goal setpoint has been taken for the level (a path stops driving it).
-    goal_taken: bool,
+    /// Goal setpoints taken for the level so far (a path stops driving it
+    /// when one is taken after it began).
+    goals_taken: u64,
     k: DMatrix<f64>,
     d: DMatrix<f64>,
 }
@@ -128,7 +129,7 @@ impl SetpointHandler {
                 workspace,
                 joints,
                 active: false,
-                goal_taken: false,
+                goals_taken: 0,
                 k: DMatrix::zeros(m, m),
                 d: DMatrix::zeros(m, m),
             });
@@ -249,22 +250,7 @@ impl SetpointHandler {
         if !sp.sets(SETPOINT_GOAL) {
             return Ok(());
         }
-        let goal = sp.goal();
-        if let Some(joints) = &level.joints {
-            for (a, &j) in joints.iter().enumerate() {
-                let (lo, hi) = (self.lower[j], self.upper[j]);
-                // A joint without limits (continuous) has lower ≥ upper in the model.
-                if lo < hi && !(lo..=hi).contains(&goal[a]) {
-                    return Err(SetpointRejection::JointLimit);
-                }
-            }
-        }
-        let inside = level.workspace.contains(&goal[..m]);
-        if inside {
-            Ok(())
-        } else {
-            Err(SetpointRejection::OutsideWorkspace)
-        }
+        self.check_goal(sp.level as usize, &sp.goal()[..m])
     }
 
     /// The gains of a checked setpoint against the control rate at the
@@ -305,7 +291,7 @@ impl SetpointHandler {
         let level = &mut self.levels[sp.level as usize];
         let mut duration = sp.duration_s;
         if sp.sets(SETPOINT_GOAL) {
-            level.goal_taken = true;
+            level.goals_taken += 1;
             let distance = level.transition.distance_to(sp.goal());
             // Peak speed of the quintic profile: 15/8 · distance / T.
             duration = duration.max(1.875 * distance / level.max_speed);
@@ -378,9 +364,51 @@ impl SetpointHandler {
         }
     }
 
-    /// Whether a goal setpoint has been taken for level `i`.
-    pub(crate) fn goal_taken(&self, i: usize) -> bool {
-        self.levels.get(i).is_some_and(|l| l.goal_taken)
+    /// How many goal setpoints have been taken for level `i` (a path that
+    /// began at another count has been taken over).
+    pub(crate) fn goals_taken(&self, i: usize) -> u64 {
+        self.levels.get(i).map_or(0, |l| l.goals_taken)
+    }
+
+    /// Level `i`'s equilibrium now (the transition's goal; a path's value
+    /// while one drives the level).
+    pub(crate) fn equilibrium(&self, i: usize) -> Option<&[f64]> {
+        self.levels.get(i).map(|l| l.transition.goal())
+    }
+
+    /// A goal `goal` (m_i values, the level's goal format) for level `i`
+    /// against the joint limits of a joint level and the level's workspace
+    /// (a path's knots; [`SetpointHandler::check`] for a setpoint's goal).
+    pub(crate) fn check_goal(&self, i: usize, goal: &[f64]) -> Result<(), SetpointRejection> {
+        let level = self.levels.get(i).ok_or(SetpointRejection::UnknownLevel)?;
+        let m = level.transition.dim();
+        if goal.len() != m {
+            return Err(SetpointRejection::DimensionMismatch);
+        }
+        if let Some(joints) = &level.joints {
+            for (a, &j) in joints.iter().enumerate() {
+                let (lo, hi) = (self.lower[j], self.upper[j]);
+                // A joint without limits (continuous) has lower ≥ upper in the model.
+                if lo < hi && !(lo..=hi).contains(&goal[a]) {
+                    return Err(SetpointRejection::JointLimit);
+                }
+            }
+        }
+        if level.workspace.contains(goal) {
+            Ok(())
+        } else {
+            Err(SetpointRejection::OutsideWorkspace)
+        }
+    }
+
+    /// Records an answer for a client's message that is not a setpoint (a
+    /// path's knots) in the client's answer slot.
+    pub(crate) fn record_answer(&mut self, client_id: u64, seq: u64, level: u32, code: u32) {
+        let mut sp = Setpoint::zeroed();
+        sp.client_id = client_id;
+        sp.header.seq = seq;
+        sp.level = level;
+        self.record(&sp, code, 0.0, false);
     }
 
     /// Level `i`'s equilibrium is at `goal` now (a path moves it; crate
