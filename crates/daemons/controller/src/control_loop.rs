@@ -27,8 +27,8 @@ use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleError, CycleSettings};
 use hcc_msgs::ipc::{
     self, CommandPublisher, ConnectionFailure, EventListener, EventNotifier, IpcError,
-    LATEST_BUFFER, PreLoan, SETPOINT_BUFFER, ScenarioPublisher, Services, SetpointSubscriber,
-    StateSubscriber, TelemetryPublisher, UpdateConnections,
+    LATEST_BUFFER, PathSubscriber, PreLoan, SETPOINT_BUFFER, ScenarioPublisher, Services,
+    SetpointSubscriber, StateSubscriber, TelemetryPublisher, UpdateConnections,
 };
 use hcc_msgs::{
     CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryTimings, monotonic_now_ns,
@@ -56,6 +56,9 @@ pub struct Ports {
     pub telemetry: TelemetryPublisher,
     /// Setpoints from clients (buffer [`SETPOINT_BUFFER`]; all taken each cycle).
     pub setpoints: SetpointSubscriber,
+    /// Path knots from clients (buffer [`SETPOINT_BUFFER`]; all taken each
+    /// cycle after the setpoints; docs/tracking.md).
+    pub paths: PathSubscriber,
     /// The scenario the controller runs, for tools that know only the
     /// namespace (none in a test rig that does not publish one).
     pub scenario: Option<ScenarioPublisher>,
@@ -77,6 +80,7 @@ impl Ports {
         // that sees the controller listening for states can already send it
         // setpoints (a schedule due at the first state).
         let setpoints = services.setpoint_subscriber(SETPOINT_BUFFER)?;
+        let paths = services.path_subscriber(SETPOINT_BUFFER)?;
         let commands = services.torque_command_publisher()?;
         let telemetry = services.telemetry_publisher()?;
         let command_ready = services.command_ready_notifier()?;
@@ -84,6 +88,7 @@ impl Ports {
         let state_ready = services.state_ready_listener()?;
         Ok(Ports {
             setpoints,
+            paths,
             commands,
             telemetry,
             command_ready,
@@ -97,13 +102,14 @@ impl Ports {
     /// while it waits ([`rt::ConnectionUpkeep`]): the publishers, the
     /// notifier and the subscribers (a listener has no connections), and the
     /// scenario's publisher, which hands its document to tools that connect.
-    pub fn connections(&self) -> [&dyn UpdateConnections; 6] {
+    pub fn connections(&self) -> [&dyn UpdateConnections; 7] {
         [
             &self.commands,
             &self.telemetry,
             &self.command_ready,
             &self.states,
             &self.setpoints,
+            &self.paths,
             match &self.scenario {
                 Some(p) => p,
                 None => &NoPort,
@@ -478,6 +484,13 @@ impl ControlLoop {
                 .flatten()
                 .map(|sample| *sample)
         });
+        // Then the paths' knots, in arrival order (bounded by the queue).
+        for _ in 0..SETPOINT_BUFFER {
+            let Some(knots) = ports.paths.receive().ok().flatten() else {
+                break;
+            };
+            self.cycle.take_path(&knots);
+        }
         let taken = monotonic_now_ns();
         let answer = self.cycle.decide_command(state, wake);
         if let Some(step_ns) = self.cycle.step_ns() {
