@@ -19,9 +19,14 @@
 //! Not for a real-time thread: connecting allocates; sending and reading do
 //! not, but waiting sleeps.
 
+mod path;
+pub use path::KnotsRefused;
+
 use std::time::{Duration, Instant};
 
-use hcc_msgs::ipc::{self, IpcError, IpcNode, Services, SetpointPublisher, TelemetrySubscriber};
+use hcc_msgs::ipc::{
+    self, IpcError, IpcNode, PathPublisher, Services, SetpointPublisher, TelemetrySubscriber,
+};
 use hcc_msgs::{
     ANSWER_ACCEPTED, ServiceNames, Setpoint, SetpointAnswer, SetpointRejection, Telemetry,
 };
@@ -50,6 +55,13 @@ pub enum ClientError {
     /// The controller rejected the setpoint.
     #[error("rejected by the controller: {0}")]
     Rejected(SetpointRejection),
+    /// The path's knots failed the checks before they were sent (nothing
+    /// was sent).
+    #[error("path not sent: {0}")]
+    PathInvalid(hcc_msgs::KnotsRejection),
+    /// The controller refused the path's knots.
+    #[error("path refused by the controller: {0}")]
+    PathRejected(hcc_msgs::PathRejection),
     /// The controller answered with a code this client does not know.
     #[error("the controller answered with unknown code {0}")]
     UnknownCode(u32),
@@ -58,10 +70,22 @@ pub enum ClientError {
     Timeout(String),
 }
 
+/// The error of a refusal's answer code (a setpoint's or a path's).
+fn rejection(code: u32) -> ClientError {
+    if let Some(r) = SetpointRejection::from_code(code) {
+        ClientError::Rejected(r)
+    } else if let Some(r) = hcc_msgs::PathRejection::from_code(code) {
+        ClientError::PathRejected(r)
+    } else {
+        ClientError::UnknownCode(code)
+    }
+}
+
 /// A connection to one controller.
 pub struct Client {
     _node: IpcNode,
     publisher: SetpointPublisher,
+    paths: PathPublisher,
     telemetry: TelemetrySubscriber,
     client_id: u64,
     seq: u64,
@@ -81,12 +105,14 @@ impl Client {
         )?;
         let services = Services::open(&node, &names)?;
         let publisher = services.setpoint_publisher()?;
+        let paths = services.path_publisher()?;
         let telemetry = services.telemetry_subscriber(TELEMETRY_BUFFER)?;
         // Unique among the clients of one host: the process id and the clock.
         let client_id = (pid << 32) ^ (hcc_msgs::monotonic_now_ns() & 0xffff_ffff);
         Ok(Client {
             _node: node,
             publisher,
+            paths,
             telemetry,
             client_id,
             seq: 0,
@@ -192,8 +218,7 @@ impl Client {
             if let Some(a) = answer {
                 return match a.code {
                     ANSWER_ACCEPTED => Ok(a),
-                    code => Err(SetpointRejection::from_code(code)
-                        .map_or(ClientError::UnknownCode(code), ClientError::Rejected)),
+                    code => Err(rejection(code)),
                 };
             }
             if Instant::now() >= deadline {

@@ -1,0 +1,124 @@
+//! Paths at run time (docs/tracking.md): a level's knots sent on
+//! `hcc/<ns>/path`, [`Client::follow`] to begin a path, [`Client::extend_path`]
+//! to extend it while it runs (two knots ahead of where it is, at least).
+//! Each message is sent once the controller has answered the one before
+//! (the controller takes a bounded number of messages per cycle): a refusal
+//! names the message's knots.
+
+use std::time::Duration;
+
+use hcc_msgs::{
+    MAX_KNOTS_PER_MESSAGE, PATH_EXTEND, PATH_NEW, PathKnots, PathRejection, SetpointAnswer,
+};
+
+use crate::{Client, ClientError};
+
+/// A refusal of one message of a path: its knots and why.
+#[derive(Debug, thiserror::Error)]
+#[error("knots {first}..={last} (t = {t_first} s … {t_last} s): {error}")]
+pub struct KnotsRefused {
+    /// The message's first and last knot (0-based in what was sent).
+    pub first: usize,
+    pub last: usize,
+    /// Their times.
+    pub t_first: f64,
+    pub t_last: f64,
+    /// The refusal.
+    pub error: ClientError,
+}
+
+impl Client {
+    /// Begins a new path on `level` (0-based) with the knots (`times` in s
+    /// from 0, `points` in the path file's columns: a position's x y z, an
+    /// orientation's quaternion w x y z, a joint level's values), starting in
+    /// the cycle of joint state `start_at_state_seq` (0: on receipt). Sends
+    /// them in messages of [`MAX_KNOTS_PER_MESSAGE`] (the first begins the
+    /// path, the others extend it), each after the answer to the one before
+    /// (within `timeout`); returns the last answer.
+    pub fn follow(
+        &mut self,
+        level: usize,
+        times: &[f64],
+        points: &[Vec<f64>],
+        start_at_state_seq: u64,
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, KnotsRefused> {
+        self.send_knots(level, times, points, (true, start_at_state_seq), timeout)
+    }
+
+    /// Extends `level`'s running path with the knots (later than its last).
+    pub fn extend_path(
+        &mut self,
+        level: usize,
+        times: &[f64],
+        points: &[Vec<f64>],
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, KnotsRefused> {
+        self.send_knots(level, times, points, (false, 0), timeout)
+    }
+
+    fn send_knots(
+        &mut self,
+        level: usize,
+        times: &[f64],
+        points: &[Vec<f64>],
+        (new, start_at_state_seq): (bool, u64),
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, KnotsRefused> {
+        let refused = |first: usize, last: usize, error: ClientError| KnotsRefused {
+            first,
+            last,
+            t_first: times.get(first).copied().unwrap_or(f64::NAN),
+            t_last: times.get(last).copied().unwrap_or(f64::NAN),
+            error,
+        };
+        if times.is_empty() || times.len() != points.len() {
+            let e =
+                ClientError::PathInvalid(hcc_msgs::KnotsRejection::Path(PathRejection::KnotCount));
+            return Err(refused(0, times.len().saturating_sub(1), e));
+        }
+        let mut answer = None;
+        for (chunk, (ts, ps)) in times
+            .chunks(MAX_KNOTS_PER_MESSAGE)
+            .zip(points.chunks(MAX_KNOTS_PER_MESSAGE))
+            .enumerate()
+        {
+            let (first, last) = (
+                chunk * MAX_KNOTS_PER_MESSAGE,
+                chunk * MAX_KNOTS_PER_MESSAGE + ts.len() - 1,
+            );
+            let mut m = PathKnots::zeroed();
+            m.client_id = self.client_id;
+            m.level = level as u32;
+            m.flags = if new && chunk == 0 {
+                PATH_NEW
+            } else {
+                PATH_EXTEND
+            };
+            m.apply_at_state_seq = start_at_state_seq;
+            for (t, p) in ts.iter().zip(ps) {
+                m.push(*t, p).map_err(|r| {
+                    refused(
+                        first,
+                        last,
+                        ClientError::PathInvalid(hcc_msgs::KnotsRejection::Path(r)),
+                    )
+                })?;
+            }
+            m.validate()
+                .map_err(|r| refused(first, last, ClientError::PathInvalid(r)))?;
+            self.seq += 1;
+            m.header.seq = self.seq;
+            m.header.stamp_ns = hcc_msgs::monotonic_now_ns();
+            self.paths
+                .send_copy(m)
+                .map_err(|e| refused(first, last, ClientError::Send(format!("{e:?}"))))?;
+            let seq = self.seq;
+            answer = Some(
+                self.wait_until_accepted(seq, timeout)
+                    .map_err(|e| refused(first, last, e))?,
+            );
+        }
+        answer.ok_or_else(|| refused(0, 0, ClientError::Timeout("no knots sent".into())))
+    }
+}
