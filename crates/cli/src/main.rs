@@ -11,6 +11,7 @@ use std::process::ExitCode;
 mod capture;
 mod daemons;
 mod derive;
+mod follow_cmd;
 mod jitter;
 mod model_cmd;
 mod monitor_cmd;
@@ -62,6 +63,9 @@ enum Command {
     Goal(setpoint_cmd::GoalArgs),
     /// Set a level's stiffness and/or damping on a running controller.
     Gains(setpoint_cmd::GainsArgs),
+    /// Send a path file to a running controller's level while it runs, and
+    /// follow its progress (the format of a scenario's `trajectory`).
+    Follow(follow_cmd::FollowArgs),
     /// Watch a running controller's telemetry (a table, or JSON lines).
     Monitor(monitor_cmd::MonitorArgs),
     /// Serve a running namespace (or a recording, FILE.mcap) live to Foxglove over
@@ -86,6 +90,7 @@ fn main() -> ExitCode {
         Command::Replay(args) => replay_cmd::run(args),
         Command::Goal(args) => setpoint_cmd::goal(args),
         Command::Gains(args) => setpoint_cmd::gains(args),
+        Command::Follow(args) => follow_cmd::follow(args),
         Command::Monitor(args) => monitor_cmd::monitor(args),
         Command::View(args) => hcc_view::run(args),
         Command::Bridge(args) => hcc_bridge::run(args),

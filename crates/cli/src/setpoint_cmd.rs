@@ -93,7 +93,7 @@ pub(crate) fn scenario_of(t: &Target) -> anyhow::Result<hcc_msgs::scenario::Scen
 
 /// The 0-based level `--level` names: a 1-based number, or a level's name
 /// looked up in the controller's scenario (which also gives its dimension).
-fn level_index(t: &Target, level: &str) -> anyhow::Result<(usize, Option<usize>)> {
+pub(crate) fn level_index(t: &Target, level: &str) -> anyhow::Result<(usize, Option<usize>)> {
     if let Ok(k) = level.parse::<usize>() {
         if k == 0 {
             bail!("--level is 1-based (the first [[level]] is 1)");

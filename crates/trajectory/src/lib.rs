@@ -246,6 +246,18 @@ impl Trajectory {
     }
 }
 
+/// The rows of a path file's `text` for a level of `blocks`, checked as
+/// [`Trajectory::parse`] checks them (header, t from 0 increasing, finite,
+/// unit quaternions, normalised): (t, columns) each — what a client sends
+/// as a path's knots.
+pub fn read_rows(text: &str, blocks: &[Block]) -> Result<Vec<(f64, Vec<f64>)>, TrajectoryError> {
+    Trajectory::parse(text, blocks)?;
+    Ok(csv::rows(text, blocks)?
+        .into_iter()
+        .map(|(_, t, v)| (t, v))
+        .collect())
+}
+
 /// A knot's `columns` (a path file's: a vector's values, an orientation's
 /// quaternion w x y z) in the level's goal format (an orientation as roll,
 /// pitch, yaw) into `goal`. `false` for a wrong number of columns or an
