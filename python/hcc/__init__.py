@@ -13,7 +13,7 @@
   (``python -m hcc.mujoco``).
 """
 
-from .client import Client, SetpointRejected, new_client_id
+from .client import Client, KnotsRefused, SetpointRejected, new_client_id
 from .driver import Action, CommandRejection, Driver, DriverSettings, Offer, StopReason
 from .msgs import (
     ANSWER_ACCEPTED,
@@ -24,7 +24,10 @@ from .msgs import (
     MAX_LEVELS,
     MAX_PENDING_SETPOINTS,
     MAX_SETPOINT_CLIENTS,
+    MAX_KNOTS_PER_MESSAGE,
     MAX_TASK_DIM,
+    PATH_EXTEND,
+    PATH_NEW,
     SETPOINT_DAMPING,
     SETPOINT_GOAL,
     SETPOINT_STIFFNESS,
@@ -39,6 +42,8 @@ from .msgs import (
     Header,
     JointState,
     MsgError,
+    PathKnots,
+    PathRejection,
     Setpoint,
     SetpointAnswer,
     SetpointError,
@@ -66,8 +71,14 @@ __all__ = [
     "MAX_LEVELS",
     "MAX_PENDING_SETPOINTS",
     "MAX_SETPOINT_CLIENTS",
+    "MAX_KNOTS_PER_MESSAGE",
     "MAX_TASK_DIM",
+    "KnotsRefused",
     "MsgError",
+    "PATH_EXTEND",
+    "PATH_NEW",
+    "PathKnots",
+    "PathRejection",
     "Offer",
     "CommandRejection",
     "SETPOINT_DAMPING",

@@ -28,7 +28,12 @@ from typing import Any, Iterator, Sequence
 from . import ipc
 from .msgs import (
     ANSWER_ACCEPTED,
+    MAX_KNOTS_PER_MESSAGE,
+    PATH_EXTEND,
+    PATH_NEW,
     JointState,
+    PathKnots,
+    PathRejection,
     SetpointRejection,
     Setpoint,
     SetpointAnswer,
@@ -50,14 +55,38 @@ class SetpointRejected(SetpointError):
 
     def __init__(self, answer: SetpointAnswer) -> None:
         rejection = SetpointRejection.from_code(answer.code)
-        what = str(rejection) if rejection is not None else f"unknown code {answer.code}"
+        path = PathRejection.from_code(answer.code)
+        what = (
+            str(rejection) if rejection is not None
+            else str(path) if path is not None
+            else f"unknown code {answer.code}"
+        )
         super().__init__(
             rejection, f"setpoint {answer.seq} rejected by the controller: {what}"
         )
+        #: A path's own reason (codes from 101; :attr:`rejection` is None then).
+        self.path_rejection: PathRejection | None = path
         #: The answer code (a :class:`~hcc.msgs.SetpointRejection` value).
         self.code: int = answer.code
         #: The controller's answer.
         self.answer: SetpointAnswer = answer
+
+
+class KnotsRefused(SetpointError):
+    """The controller (or the checks before sending) refused a message of a
+    path: :attr:`first`, :attr:`last` are its knots (0-based in what was
+    sent), :attr:`cause` the refusal (:class:`SetpointRejected` or
+    :class:`~hcc.msgs.SetpointError`)."""
+
+    def __init__(self, first: int, last: int, times: Sequence[float], cause: Exception) -> None:
+        rejection = getattr(cause, "rejection", None)
+        super().__init__(
+            rejection,
+            f"knots {first}..={last} (t = {times[first]} s … {times[last]} s): {cause}",
+        )
+        self.first: int = first
+        self.last: int = last
+        self.cause: Exception = cause
 
 
 def new_client_id() -> int:
@@ -101,6 +130,7 @@ class Client:
         self._telemetry = self._services.subscriber("telemetry", buffer)
         self._states = self._services.subscriber("joint_state", buffer)
         self._publisher: Any = None
+        self._paths: Any = None
         self._last_telemetry: Telemetry | None = None
         self._last_state: JointState | None = None
         self._client_id = new_client_id() if client_id is None else client_id
@@ -115,10 +145,10 @@ class Client:
 
     def close(self) -> None:
         """Releases the ports and the node."""
-        for port in (self._telemetry, self._states, self._publisher):
+        for port in (self._telemetry, self._states, self._publisher, self._paths):
             if port is not None:
                 port.delete()
-        self._telemetry = self._states = self._publisher = None
+        self._telemetry = self._states = self._publisher = self._paths = None
         self._services = None
         self._node = None
 
@@ -273,6 +303,62 @@ class Client:
         if damping is not None:
             sp.with_damping(damping)
         return self.send(sp.with_duration(0.0 if duration is None else duration))
+
+    def follow(
+        self,
+        level: int,
+        times: Sequence[float],
+        points: Sequence[Sequence[float]],
+        *,
+        extend: bool = False,
+        start_at_state_seq: int = 0,
+        timeout: float = 2.0,
+    ) -> SetpointAnswer:
+        """Sends ``level`` a path (docs/tracking.md): knots at ``times`` (s of
+        the path's own time, from 0) with ``points`` in a path file's columns
+        (a position's x y z, an orientation's quaternion w x y z, a joint
+        level's values). A new path (``extend`` False) must start at the
+        level's equilibrium and starts in the cycle of joint state
+        ``start_at_state_seq`` (0: on receipt); ``extend`` True appends
+        knots to the running path (later than its last). Sent in messages
+        of :data:`~hcc.msgs.MAX_KNOTS_PER_MESSAGE`, each after the answer to
+        the one before (within ``timeout`` s); returns the last answer.
+        Raises :class:`KnotsRefused` naming the refused message's knots."""
+        times = [float(t) for t in times]
+        points = [list(p) for p in points]
+        if not times or len(times) != len(points):
+            raise ValueError("give as many points as times, at least one")
+        answer: SetpointAnswer | None = None
+        if self._paths is None:
+            self._paths = self._services.publisher("path")
+        for first in range(0, len(times), MAX_KNOTS_PER_MESSAGE):
+            last = min(first + MAX_KNOTS_PER_MESSAGE, len(times)) - 1
+            msg = PathKnots.zeroed()
+            msg.client_id = self._client_id
+            msg.level = level
+            msg.flags = PATH_NEW if (first == 0 and not extend) else PATH_EXTEND
+            msg.apply_at_state_seq = start_at_state_seq
+            try:
+                for k in range(first, last + 1):
+                    msg.push(times[k], points[k])
+            except Exception as e:
+                raise KnotsRefused(first, last, times, e) from e
+            found = msg.check()
+            if found is not None:
+                raise KnotsRefused(first, last, times, SetpointError(found, str(found)))
+            self._seq += 1
+            msg.header.seq = self._seq
+            msg.header.stamp_ns = time.monotonic_ns()
+            try:
+                self._paths.send_copy(msg)
+            except Exception as e:  # iceoryx2 raises its own exception types
+                raise ipc.IpcError(f"cannot send the path: {e!r}") from e
+            try:
+                answer = self.wait_until_accepted(self._seq, timeout)
+            except (SetpointRejected, TimeoutError) as e:
+                raise KnotsRefused(first, last, times, e) from e
+        assert answer is not None
+        return answer
 
     def wait_until_accepted(self, seq: int, timeout: float = 1.0) -> SetpointAnswer:
         """Waits for the controller's answer to this client's setpoint ``seq``

@@ -11,6 +11,7 @@ joint_state       JointState       1            MAX_STATE_SUBSCRIBERS        128
 torque_command    TorqueCommand    1            MAX_COMMAND_SUBSCRIBERS      128
 telemetry         Telemetry        1            MAX_TELEMETRY_SUBSCRIBERS    128
 setpoint          Setpoint         4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
+path              PathKnots        4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
 state_ready       event            2 notifiers  4 listeners
 command_ready     event            2 notifiers  4 listeners
 scenario          bytes (JSON)     1            MAX_SCENARIO_SUBSCRIBERS     1
@@ -19,9 +20,10 @@ scenario          bytes (JSON)     1            MAX_SCENARIO_SUBSCRIBERS     1
 ``scenario`` keeps its one sample (history 1): the controller publishes the
 scenario it runs once, and a tool that connects later reads it
 (:func:`read_scenario`). The others: history 0, safe overflow (the newest sample wins), publishers discard data
-instead of blocking. ``setpoint`` is the one service with several
+instead of blocking. ``setpoint`` and ``path`` are the services with several
 publishers: up to :data:`MAX_SETPOINT_PUBLISHERS` clients may command one
-controller at once; the controller reads every queued setpoint each cycle.
+controller at once; the controller reads every queued setpoint and path
+message each cycle.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from typing import Any
 
 import iceoryx2 as iox2
 
-from .msgs import JointState, Setpoint, Telemetry, TorqueCommand
+from .msgs import JointState, PathKnots, Setpoint, Telemetry, TorqueCommand
 
 #: Prefix of all hcc service names.
 SERVICE_PREFIX: str = "hcc"
@@ -128,6 +130,11 @@ class ServiceNames:
     def setpoint(self) -> str:
         """Publish-subscribe service of Setpoint (clients → controller)."""
         return self._name("setpoint")
+
+    @property
+    def path(self) -> str:
+        """Publish-subscribe service of :class:`~hcc.msgs.PathKnots` (clients → controller)."""
+        return self._name("path")
 
     @property
     def state_ready(self) -> str:
@@ -312,6 +319,9 @@ class Services:
         self.setpoint = _pubsub(
             node, names.setpoint, Setpoint, MAX_SETPOINT_SUBSCRIBERS, MAX_SETPOINT_PUBLISHERS
         )
+        self.path = _pubsub(
+            node, names.path, PathKnots, MAX_SETPOINT_SUBSCRIBERS, MAX_SETPOINT_PUBLISHERS
+        )
         self.state_ready = _event(node, names.state_ready)
         self.command_ready = _event(node, names.command_ready)
 
@@ -327,8 +337,8 @@ class Services:
         torque_command or telemetry, or one of the setpoint clients."""
         factory = getattr(self, which)
         limit = (
-            f"(setpoint allows {MAX_SETPOINT_PUBLISHERS} clients at once)"
-            if which == "setpoint"
+            f"({which} allows {MAX_SETPOINT_PUBLISHERS} clients at once)"
+            if which in ("setpoint", "path")
             else "(is another peer publishing in this namespace?)"
         )
         return self._port(

@@ -700,9 +700,12 @@ class SetpointError(MsgError):
     builders (the controller's codes for the same faults).
     """
 
-    def __init__(self, rejection: SetpointRejection | None, message: str | None = None) -> None:
+    def __init__(
+        self, rejection: SetpointRejection | PathRejection | None, message: str | None = None
+    ) -> None:
         super().__init__(message or f"setpoint not sent: {rejection}")
-        #: The rejection (None only for an answer code this schema does not know).
+        #: The rejection (None only for an answer code this schema does not know;
+        #: a :class:`PathRejection` for a path's knots checked before sending).
         self.rejection = rejection
 
 
@@ -973,6 +976,145 @@ class Setpoint(ctypes.Structure):
             raise SetpointError(found)
 
 
+#: Knots one :class:`PathKnots` message carries at most.
+MAX_KNOTS_PER_MESSAGE: int = 16
+#: Columns of one knot at most.
+MAX_PATH_COLUMNS: int = MAX_TASK_DIM
+#: :attr:`PathKnots.flags`: the knots begin a new path.
+PATH_NEW: int = 1 << 0
+#: :attr:`PathKnots.flags`: the knots extend the level's running path.
+PATH_EXTEND: int = 1 << 1
+#: Every :attr:`PathKnots.flags` bit of this schema.
+PATH_FLAGS_KNOWN: int = PATH_NEW | PATH_EXTEND
+
+_PATH_REJECTION_TEXT: dict[int, str] = {
+    101: "the message must either begin a path or extend one",
+    102: "the message holds no knot or more than it can",
+    103: "the knots' times are negative or do not increase past the path's last knot",
+    104: "the knots have a number of columns the level does not have",
+    105: "an orientation is not a unit quaternion w x y z",
+    106: "an orientation turns more than 0.9π from the path's first",
+    107: "there is no path running on the level to extend",
+    108: "the path ran out of knots and stopped: send a new path",
+    109: "the level's path holds as many knots ahead as it can",
+    110: "the path's first knot is too far from the level's equilibrium",
+}
+
+
+class PathRejection(enum.IntEnum):
+    """Why the controller refused a path's knots (codes from 101, apart from
+    :class:`SetpointRejection`'s, sharing the answer slots; mirror of
+    ``hcc_msgs::PathRejection``)."""
+
+    BAD_FLAGS = 101
+    KNOT_COUNT = 102
+    NOT_INCREASING = 103
+    COLUMN_MISMATCH = 104
+    NOT_UNIT_QUATERNION = 105
+    TURN_TOO_FAR = 106
+    NO_PATH = 107
+    PATH_ENDED = 108
+    PATH_FULL = 109
+    STARTS_AWAY = 110
+
+    @property
+    def label(self) -> str:
+        """The Rust ``PathRejection::name()`` (snake_case)."""
+        return self.name.lower()
+
+    @property
+    def reason(self) -> str:
+        """The reason in plain words."""
+        return _PATH_REJECTION_TEXT[self.value]
+
+    @classmethod
+    def from_code(cls, code: int) -> "PathRejection | None":
+        """Decodes a code; None for codes that are not a path's."""
+        try:
+            return cls(code)
+        except ValueError:
+            return None
+
+    def __str__(self) -> str:
+        return f"{self.label} (code {self.value}): {self.reason}"
+
+
+class PathKnots(ctypes.Structure):
+    """Up to :data:`MAX_KNOTS_PER_MESSAGE` knots of one level's path (mirror of
+    ``hcc_msgs::PathKnots``; docs/tracking.md): t in s of the path's own time
+    and the values in a path file's columns (a position's x y z, an
+    orientation's quaternion w x y z, a joint level's values). ``flags`` is
+    :data:`PATH_NEW` (begin a path, at the level's equilibrium) or
+    :data:`PATH_EXTEND` (knots later than the running path's last)."""
+
+    _fields_ = [
+        ("header", Header),
+        ("client_id", ctypes.c_uint64),
+        ("level", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
+        ("columns", ctypes.c_uint32),
+        ("count", ctypes.c_uint32),
+        ("apply_at_state_seq", ctypes.c_uint64),
+        ("t", ctypes.c_double * MAX_KNOTS_PER_MESSAGE),
+        ("values", (ctypes.c_double * MAX_PATH_COLUMNS) * MAX_KNOTS_PER_MESSAGE),
+    ]
+    header: Header
+    client_id: int
+    level: int
+    flags: int
+    columns: int
+    count: int
+    apply_at_state_seq: int
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name of the Rust type."""
+        return _client_type_name("PathKnots")
+
+    @classmethod
+    def zeroed(cls) -> "PathKnots":
+        """An empty message of the current schema."""
+        m = cls()
+        m.header = _client_header()
+        return m
+
+    def push(self, t: float, values: Sequence[float]) -> None:
+        """Appends a knot; :class:`MsgError` when the message is full or the
+        values do not fit its columns (set by the first knot)."""
+        values = _floats(values)
+        if self.count >= MAX_KNOTS_PER_MESSAGE:
+            raise MsgError("path knots: the message is full")
+        if self.columns == 0:
+            self.columns = min(len(values), MAX_PATH_COLUMNS)
+        if len(values) != self.columns:
+            raise MsgError(f"path knots: {len(values)} values, the message has {self.columns} columns")
+        self.t[self.count] = float(t)
+        for a, v in enumerate(values):
+            self.values[self.count][a] = v
+        self.count += 1
+
+    def check(self) -> "SetpointRejection | PathRejection | None":
+        """The model-free checks of ``PathKnots::validate``; None when it passes."""
+        if self.header.schema_version != CLIENT_SCHEMA_VERSION:
+            return SetpointRejection.SCHEMA_MISMATCH
+        if self.flags not in (PATH_NEW, PATH_EXTEND):
+            return PathRejection.BAD_FLAGS
+        if self.level >= MAX_LEVELS:
+            return SetpointRejection.LEVEL_CAPACITY
+        if not 0 < self.columns <= MAX_PATH_COLUMNS:
+            return PathRejection.COLUMN_MISMATCH
+        if not 0 < self.count <= MAX_KNOTS_PER_MESSAGE:
+            return PathRejection.KNOT_COUNT
+        for k in range(self.count):
+            t = self.t[k]
+            values = list(self.values[k])[: self.columns]
+            if not math.isfinite(t) or not all(math.isfinite(v) for v in values):
+                return SetpointRejection.NON_FINITE
+            if t < 0.0 or (k > 0 and t <= self.t[k - 1]):
+                return PathRejection.NOT_INCREASING
+        return None
+
+
 #: Every wire type by its Rust name.
 WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "Header": Header,
@@ -983,4 +1125,5 @@ WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "SetpointAnswer": SetpointAnswer,
     "Telemetry": Telemetry,
     "Setpoint": Setpoint,
+    "PathKnots": PathKnots,
 }

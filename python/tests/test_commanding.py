@@ -116,3 +116,53 @@ def test_the_scenario_of_a_namespace_without_a_controller_says_which(tmp_path: p
             del services, older
     finally:
         remove_ipc_files(prefix)
+
+
+def _circle(start: list[float], seconds: float) -> tuple[list[float], list[list[float]]]:
+    """A 5 cm circle at 0.25 Hz in the y-z plane through ``start``, its phase
+    rising smoothly from rest over the first second; a knot every 20 ms."""
+    times, points = [], []
+    w = 2 * math.pi * 0.25
+    for k in range(int(round(seconds / 0.02)) + 1):
+        t = k * 0.02
+        x = min(t, 1.0)
+        phase = x**6 - 3 * x**5 + 2.5 * x**4 if t <= 1.0 else t - 0.5
+        a = w * phase
+        times.append(t)
+        points.append([start[0], start[1] + 0.05 * math.sin(a), start[2] + 0.05 * (1 - math.cos(a))])
+    return times, points
+
+
+def test_follow_sends_a_path_that_the_tcp_tracks(tmp_path: pathlib.Path) -> None:
+    """Client.follow (docs/tracking.md): a circle the TCP follows within 1 mm
+    from 3 s on; a path that starts away from the level is refused, naming
+    its first knots and the reason."""
+    from hcc import KnotsRefused, PathRejection
+
+    with (
+        sim_pair(SCENARIO, tmp_path) as (ns, prefix, ctl, plant),
+        Client(ns, file_prefix=prefix) as client,
+    ):
+        client.wait_until_converged(0, 1e-3, timeout=30.0)
+        t = client.latest_telemetry()
+        assert t is not None
+        start = t.goal_list(0)
+        times, points = _circle(start, 5.0)
+        answer = client.follow(0, times, points, timeout=5.0)
+        assert answer.accepted()
+        began = time.monotonic()
+        worst = 0.0
+        for t in client.telemetry(timeout=1.0):
+            elapsed = time.monotonic() - began
+            if elapsed > 5.0:
+                break
+            if elapsed > 3.0:
+                worst = max(worst, math.hypot(*t.task_error_list(0)))
+        print(f"follow: largest TCP error from 3 s {worst:.3e} m")
+        assert 0.0 < worst < 1e-3
+
+        far = [start[0] + 0.15, start[1], start[2]]
+        with pytest.raises(KnotsRefused) as e:
+            client.follow(0, [0.0, 0.5], [far, far], timeout=5.0)
+        assert (e.value.first, e.value.last) == (0, 1)
+        assert e.value.cause.path_rejection is PathRejection.STARTS_AWAY, e.value

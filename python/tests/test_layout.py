@@ -44,13 +44,14 @@ def test_constants(rust: dict[str, Any]) -> None:
     for key in [
         "setpoint_goal", "setpoint_velocity", "setpoint_stiffness", "setpoint_damping",
         "setpoint_fields_known", "gain_stiffness_full", "gain_damping_full", "gain_layout_known",
+        "path_new", "path_extend", "path_flags_known",
     ]:
         assert flags[key] == getattr(msgs, key.upper()), key
-    assert len(flags) == 15, "a flag is not compared"
+    assert len(flags) == 18, "a flag is not compared"
     setpoint = rust["setpoint"]
     assert set(setpoint) == {
         "max_setpoint_clients", "max_pending_setpoints", "max_gain_entries", "max_transition_s",
-        "symmetry_tolerance", "answer_accepted",
+        "symmetry_tolerance", "answer_accepted", "max_knots_per_message", "max_path_columns",
     }
     for key, value in setpoint.items():
         assert getattr(msgs, key.upper()) == value, key
@@ -67,6 +68,46 @@ def test_rejection_codes_names_and_reasons(rust: dict[str, Any]) -> None:
         assert msgs.SetpointRejection.from_code(r["code"]) is mine
     assert msgs.SetpointRejection.from_code(msgs.ANSWER_ACCEPTED) is None
     assert msgs.SetpointRejection.from_code(len(codes) + 1) is None
+
+
+def test_path_rejection_codes_names_and_reasons(rust: dict[str, Any]) -> None:
+    codes = rust["path_rejections"]
+    assert [r["code"] for r in codes] == [r.value for r in msgs.PathRejection]
+    for r in codes:
+        mine = msgs.PathRejection(r["code"])
+        assert (mine.label, mine.reason) == (r["name"], r["reason"]), r
+        assert str(mine) == f"{r['name']} (code {r['code']}): {r['reason']}"
+    assert msgs.PathRejection.from_code(100) is None
+
+
+def test_path_knots_checks_mirror_the_rust_validate() -> None:
+    """The cases of crates/msgs/src/path.rs, through the Python mirror."""
+    def knots() -> msgs.PathKnots:
+        p = msgs.PathKnots.zeroed()
+        p.flags = msgs.PATH_NEW
+        p.level = 1
+        for k in range(4):
+            p.push(k * 0.1, [0.4, 0.01 * k, 0.3])
+        return p
+
+    assert knots().check() is None
+    P, S = msgs.PathRejection, msgs.SetpointRejection
+    cases = [
+        (lambda p: setattr(p.header, "schema_version", p.header.schema_version + 1), S.SCHEMA_MISMATCH),
+        (lambda p: setattr(p, "flags", msgs.PATH_NEW | msgs.PATH_EXTEND), P.BAD_FLAGS),
+        (lambda p: setattr(p, "level", msgs.MAX_LEVELS), S.LEVEL_CAPACITY),
+        (lambda p: setattr(p, "count", 0), P.KNOT_COUNT),
+        (lambda p: p.values[2].__setitem__(1, float("nan")), S.NON_FINITE),
+        (lambda p: p.t.__setitem__(2, p.t[1]), P.NOT_INCREASING),
+        (lambda p: setattr(p, "columns", 0), P.COLUMN_MISMATCH),
+    ]
+    for edit, code in cases:
+        p = knots()
+        edit(p)
+        assert p.check() is code, code
+    p = knots()
+    with pytest.raises(msgs.MsgError):
+        p.push(1.0, [0.0, 0.0])
 
 
 def test_every_struct_has_the_rust_layout(rust: dict[str, Any]) -> None:

@@ -13,13 +13,14 @@ use std::mem::{align_of, offset_of, size_of};
 use hcc_msgs::{
     ANSWER_ACCEPTED, CLIENT_SCHEMA_VERSION, COMMAND_FLAG_GRAVITY_INCLUDED, DRIVER_SCHEMA_VERSION,
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN,
-    GAIN_STIFFNESS_FULL, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_LEVELS,
-    MAX_NAMESPACE_LEN, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S,
-    SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY,
-    STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN,
-    SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer, SetpointRejection,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
-    TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+    GAIN_STIFFNESS_FULL, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_KNOTS_PER_MESSAGE,
+    MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_PATH_COLUMNS, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS,
+    MAX_TASK_DIM, MAX_TRANSITION_S, PATH_EXTEND, PATH_FLAGS_KNOWN, PATH_NEW, PathKnots,
+    PathRejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
+    SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
+    STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
+    SetpointRejection, TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD,
+    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -96,6 +97,11 @@ fn main() {
             fields!(Setpoint: header, client_id, level, fields, dim, gain_layout, duration_s,
                 apply_at_state_seq, goal, velocity, stiffness, damping),
         ),
+        (
+            "PathKnots",
+            fields!(PathKnots: header, client_id, level, flags, columns, count,
+                apply_at_state_seq, t, values),
+        ),
     ];
     let body: Vec<String> = structs
         .iter()
@@ -107,6 +113,7 @@ fn main() {
         ("torque_command", names.torque_command()),
         ("telemetry", names.telemetry()),
         ("setpoint", names.setpoint()),
+        ("path", names.path()),
         ("state_ready", names.state_ready()),
         ("command_ready", names.command_ready()),
     ]
@@ -154,6 +161,9 @@ fn main() {
         ("gain_stiffness_full", GAIN_STIFFNESS_FULL),
         ("gain_damping_full", GAIN_DAMPING_FULL),
         ("gain_layout_known", GAIN_LAYOUT_KNOWN),
+        ("path_new", PATH_NEW),
+        ("path_extend", PATH_EXTEND),
+        ("path_flags_known", PATH_FLAGS_KNOWN),
     ]);
     let setpoint = object(&[
         ("max_setpoint_clients", MAX_SETPOINT_CLIENTS.to_string()),
@@ -162,6 +172,8 @@ fn main() {
         ("max_transition_s", format!("{MAX_TRANSITION_S:?}")),
         ("symmetry_tolerance", format!("{SYMMETRY_TOLERANCE:?}")),
         ("answer_accepted", ANSWER_ACCEPTED.to_string()),
+        ("max_knots_per_message", MAX_KNOTS_PER_MESSAGE.to_string()),
+        ("max_path_columns", MAX_PATH_COLUMNS.to_string()),
     ]);
     // Names and reasons are plain ASCII without quotes or backslashes.
     let rejections: Vec<String> = SetpointRejection::ALL
@@ -175,11 +187,23 @@ fn main() {
             )
         })
         .collect();
+    let path_rejections: Vec<String> = PathRejection::ALL
+        .iter()
+        .map(|r| {
+            format!(
+                "{{\"code\": {}, \"name\": \"{}\", \"reason\": \"{}\"}}",
+                r.code(),
+                r.name(),
+                r.reason()
+            )
+        })
+        .collect();
     println!(
-        "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
+        "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"path_rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
         ipc::FILE_PREFIX_ENV,
         object(&services),
         rejections.join(", "),
+        path_rejections.join(", "),
         body.join(",\n")
     );
 }
