@@ -64,7 +64,7 @@ class SetpointRejected(SetpointError):
         super().__init__(
             rejection, f"setpoint {answer.seq} rejected by the controller: {what}"
         )
-        #: A path's own reason (codes from 101; :attr:`rejection` is None then).
+        #: A path's own reason (codes from 201; :attr:`rejection` is None then).
         self.path_rejection: PathRejection | None = path
         #: The answer code (a :class:`~hcc.msgs.SetpointRejection` value).
         self.code: int = answer.code

@@ -988,34 +988,34 @@ PATH_EXTEND: int = 1 << 1
 PATH_FLAGS_KNOWN: int = PATH_NEW | PATH_EXTEND
 
 _PATH_REJECTION_TEXT: dict[int, str] = {
-    101: "the message must either begin a path or extend one",
-    102: "the message holds no knot or more than it can",
-    103: "the knots' times are negative or do not increase past the path's last knot",
-    104: "the knots have a number of columns the level does not have",
-    105: "an orientation is not a unit quaternion w x y z",
-    106: "an orientation turns more than 0.9π from the path's first",
-    107: "there is no path running on the level to extend",
-    108: "the path ran out of knots and stopped: send a new path",
-    109: "the level's path holds as many knots ahead as it can",
-    110: "the path's first knot is too far from the level's equilibrium",
+    201: "the message must either begin a path or extend one",
+    202: "the message holds no knot or more than it can",
+    203: "the knots' times are negative or do not increase past the path's last knot",
+    204: "the knots have a number of columns the level does not have",
+    205: "an orientation is not a unit quaternion w x y z",
+    206: "an orientation turns more than 0.9π from the path's first",
+    207: "there is no path running on the level to extend",
+    208: "the path ran out of knots and stopped: send a new path",
+    209: "the level's path holds as many knots ahead as it can",
+    210: "the path's first knot is too far from the level's equilibrium",
 }
 
 
 class PathRejection(enum.IntEnum):
-    """Why the controller refused a path's knots (codes from 101, apart from
+    """Why the controller refused a path's knots (codes from 201, apart from
     :class:`SetpointRejection`'s, sharing the answer slots; mirror of
     ``hcc_msgs::PathRejection``)."""
 
-    BAD_FLAGS = 101
-    KNOT_COUNT = 102
-    NOT_INCREASING = 103
-    COLUMN_MISMATCH = 104
-    NOT_UNIT_QUATERNION = 105
-    TURN_TOO_FAR = 106
-    NO_PATH = 107
-    PATH_ENDED = 108
-    PATH_FULL = 109
-    STARTS_AWAY = 110
+    BAD_FLAGS = 201
+    KNOT_COUNT = 202
+    NOT_INCREASING = 203
+    COLUMN_MISMATCH = 204
+    NOT_UNIT_QUATERNION = 205
+    TURN_TOO_FAR = 206
+    NO_PATH = 207
+    PATH_ENDED = 208
+    PATH_FULL = 209
+    STARTS_AWAY = 210
 
     @property
     def label(self) -> str:

@@ -237,8 +237,8 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
     };
     // Extending with no path; starting away from the equilibrium; a knot
     // out of the arm's reach; the wrong columns; the posture past a limit.
-    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.0, goal)])), 107);
-    assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, [0.65, 0.2, 0.3])])), 110);
+    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.0, goal)])), 207);
+    assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, [0.65, 0.2, 0.3])])), 210);
     assert_eq!(
         d.take_path(&msg(PATH_NEW, &[(0.0, goal), (1.0, [3.0, 0.0, 0.3])])),
         16
@@ -246,7 +246,7 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
     let mut m = PathKnots::zeroed();
     m.flags = PATH_NEW;
     m.push(0.0, &[0.5, 0.2]).unwrap();
-    assert_eq!(d.take_path(&m), 104);
+    assert_eq!(d.take_path(&m), 204);
     let mut m = PathKnots::zeroed();
     m.flags = PATH_NEW;
     m.level = 2;
@@ -255,7 +255,7 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
     assert_eq!(d.take_path(&m), 15);
     // A good start, then an extension that goes back in time.
     assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, goal), (0.5, goal)])), 0);
-    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.4, goal)])), 103);
+    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.4, goal)])), 203);
     assert_eq!(
         d.take_path(&msg(PATH_EXTEND, &[(0.6, goal), (0.7, goal)])),
         0

@@ -19,7 +19,7 @@
 //! workspace, unit quaternions, where the path starts) and answers in the
 //! client's answer slot like a setpoint ([`crate::SetpointAnswer`]), with
 //! [`crate::ANSWER_ACCEPTED`], a [`crate::SetpointRejection`] code for what the two
-//! share, or a [`PathRejection`] code. Nothing here allocates.
+//! share, or a [`PathRejection`] code (from 201). Nothing here allocates.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -42,35 +42,36 @@ pub const PATH_EXTEND: u32 = 1 << 1;
 /// All [`PathKnots::flags`] bits defined by this schema.
 pub const PATH_FLAGS_KNOWN: u32 = PATH_NEW | PATH_EXTEND;
 
-/// Why the controller refused a path's knots (codes from 101, apart from
-/// [`SetpointRejection`]'s, with which they share the answer slots). A refused
+/// Why the controller refused a path's knots (codes from 201, apart from
+/// [`SetpointRejection`]'s, with which they share the answer slots, and from
+/// the bridge's own refusals, 100–103). A refused
 /// message changes nothing. The codes are stable.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum PathRejection {
     /// `flags` is neither [`PATH_NEW`] nor [`PATH_EXTEND`] alone.
-    BadFlags = 101,
+    BadFlags = 201,
     /// `count` is 0 or above [`MAX_KNOTS_PER_MESSAGE`].
-    KnotCount = 102,
+    KnotCount = 202,
     /// The knots' times are negative, do not increase, or do not come after
     /// the running path's last knot.
-    NotIncreasing = 103,
+    NotIncreasing = 203,
     /// `columns` is not the level's (its values, 4 per orientation).
-    ColumnMismatch = 104,
+    ColumnMismatch = 204,
     /// An orientation's columns are not a unit quaternion w x y z.
-    NotUnitQuaternion = 105,
+    NotUnitQuaternion = 205,
     /// An orientation turns more than 0.9π from the path's first knot.
-    TurnTooFar = 106,
+    TurnTooFar = 206,
     /// [`PATH_EXTEND`] with no path running on the level.
-    NoPath = 107,
+    NoPath = 207,
     /// The running path has stopped (it ran out of knots): send a new path.
-    PathEnded = 108,
+    PathEnded = 208,
     /// The level's path holds as many knots ahead as it can
     /// (`[setpoint_limits] path_knots`).
-    PathFull = 109,
+    PathFull = 209,
     /// A new path's first knot is farther from the level's equilibrium than
     /// a path may start (5 cm, 0.2 rad).
-    StartsAway = 110,
+    StartsAway = 210,
 }
 
 impl PathRejection {
@@ -95,10 +96,10 @@ impl PathRejection {
 
     /// Decodes a code; `None` for codes that are not a path's.
     pub const fn from_code(code: u32) -> Option<Self> {
-        if code < 101 || code as usize > 100 + Self::ALL.len() {
+        if code < 201 || code as usize > 200 + Self::ALL.len() {
             None
         } else {
-            Some(Self::ALL[code as usize - 101])
+            Some(Self::ALL[code as usize - 201])
         }
     }
 
@@ -314,12 +315,12 @@ mod tests {
         type Edit<'a> = &'a dyn Fn(&mut PathKnots);
         let cases: [(Edit, u32); 7] = [
             (&|p| p.header.schema_version += 1, 1),
-            (&|p| p.flags = PATH_NEW | PATH_EXTEND, 101),
+            (&|p| p.flags = PATH_NEW | PATH_EXTEND, 201),
             (&|p| p.level = MAX_LEVELS as u32, 6),
-            (&|p| p.count = 0, 102),
+            (&|p| p.count = 0, 202),
             (&|p| p.values[2][1] = f64::NAN, 8),
-            (&|p| p.t[2] = p.t[1], 103),
-            (&|p| p.columns = 0, 104),
+            (&|p| p.t[2] = p.t[1], 203),
+            (&|p| p.columns = 0, 204),
         ];
         for (edit, code) in cases {
             let mut p = knots();
@@ -328,7 +329,7 @@ mod tests {
         }
         let mut p = knots();
         p.t[0] = -0.1;
-        assert_eq!(p.validate().unwrap_err().code(), 103);
+        assert_eq!(p.validate().unwrap_err().code(), 203);
     }
 
     #[test]
@@ -336,8 +337,8 @@ mod tests {
         for r in PathRejection::ALL {
             assert_eq!(PathRejection::from_code(r.code()), Some(r));
         }
-        assert_eq!(PathRejection::from_code(100), None);
-        assert_eq!(PathRejection::from_code(111), None);
+        assert_eq!(PathRejection::from_code(200), None);
+        assert_eq!(PathRejection::from_code(211), None);
         let mut p = knots();
         assert_eq!(p.push(1.0, &[0.0; 2]), Err(PathRejection::ColumnMismatch));
         for k in 4..MAX_KNOTS_PER_MESSAGE {
