@@ -56,6 +56,12 @@ FLOAT64_MULTI_ARRAY = ("std_msgs/msg/Float64MultiArray",
 TELEMETRY = ("hcc_msgs/msg/Telemetry",
              "RIHS01_db220c33bd4c3256f681620f11badb3fa8643fa216a88b8d3ea0967161f44b86")
 GOAL_TYPES = (POSE_STAMPED, POINT_STAMPED, QUATERNION_STAMPED, FLOAT64_MULTI_ARRAY)
+JOINT_TRAJECTORY = ("trajectory_msgs/msg/JointTrajectory",
+                    "RIHS01_179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e")
+MULTI_DOF_JOINT_TRAJECTORY = ("trajectory_msgs/msg/MultiDOFJointTrajectory",
+                              "RIHS01_3a18fd095292a65cfde8833c72985a30af981f3ec44494655c6267262b443a4a")
+#: The types of the levels' path topics (joint levels; Cartesian levels).
+PATH_TYPES = (JOINT_TRAJECTORY, MULTI_DOF_JOINT_TRAJECTORY)
 
 #: Codes of the bridge's own refusals (RemoteAnswer.code).
 REFUSED_READ_ONLY = 100
@@ -216,6 +222,41 @@ def encode_goal(ros_type: tuple[str, str], values: Sequence[float], stamp_ns: in
         coords = list(rpy_to_quaternion(*v))
     for x in coords:
         w.f64(x)
+    return bytes(w.buf)
+
+
+def encode_trajectory(
+    ros_type: tuple[str, str],
+    times: Sequence[float],
+    points: Sequence[Sequence[float]],
+    joint_names: Sequence[str] = (),
+    stamp_ns: int = 0,
+) -> bytes:
+    """A path message of ``ros_type`` (docs/tracking.md): a
+    ``JointTrajectory`` of positions, or a ``MultiDOFJointTrajectory`` of one
+    transform per point, each point x, y, z, qx, qy, qz, qw; ``times`` are the
+    points' ``time_from_start`` (s)."""
+    w = CdrWriter().header(stamp_ns)
+    w.u32(len(joint_names))
+    for n in joint_names:
+        w.string(n)
+    w.u32(len(points))
+    for t, p in zip(times, points):
+        v = [float(x) for x in p]
+        if ros_type == JOINT_TRAJECTORY:
+            w.u32(len(v))
+            for x in v:
+                w.f64(x)
+            w.u32(0).u32(0).u32(0)  # velocities, accelerations, effort
+        else:
+            if len(v) != 7:
+                raise ValueError(f"a multi-DOF point is x, y, z, qx, qy, qz, qw, not {len(v)} values")
+            w.u32(1)
+            for x in v:
+                w.f64(x)
+            w.u32(0).u32(0)  # velocities, accelerations
+        sec = math.floor(t)
+        w.i32(int(sec)).u32(int(round((t - sec) * 1e9)) % 1_000_000_000)
     return bytes(w.buf)
 
 
@@ -493,7 +534,7 @@ class Client:
             self._subscribe("torque_command", JOINT_STATE, self._commands),
             self._subscribe("telemetry", TELEMETRY, self._telemetry),
         ]
-        self._publishers: dict[int, tuple[Any, bytes, tuple[str, str]]] = {}
+        self._publishers: dict[Any, tuple[Any, bytes, tuple[str, str]]] = {}
         self._sent: dict[int, bytes] = {}
         self._seq = 0
 
@@ -590,7 +631,9 @@ class Client:
         self._publishers[level] = (pub, gid, ty)
         return self._publishers[level]
 
-    def _goal_type(self, topic: str, timeout: float) -> tuple[str, str]:
+    def _goal_type(
+        self, topic: str, timeout: float, types: Sequence[tuple[str, str]] = GOAL_TYPES
+    ) -> tuple[str, str]:
         """The goal type the bridge subscribes ``topic`` with (its liveliness
         token; asked again until ``timeout``, as tokens travel apart from data)."""
         mangled = topic.replace("/", "%")
@@ -602,7 +645,7 @@ class Client:
                     continue
                 parts = str(reply.ok.key_expr).split("/")
                 if len(parts) == 13 and parts[5] == "MS" and parts[9] == mangled:
-                    for ty in GOAL_TYPES:
+                    for ty in types:
                         if parts[10] == dds_name(ty[0]) and parts[11] == ty[1]:
                             return ty
             if time.monotonic() >= deadline:
@@ -618,6 +661,38 @@ class Client:
         self._seq += 1
         now = time.time_ns()
         pub.put(encode_goal(ty, values, now), attachment=attachment(self._seq, now, gid))
+        self._sent[self._seq] = gid
+        return self._seq
+
+    def follow(
+        self,
+        level: int,
+        times: Sequence[float],
+        points: Sequence[Sequence[float]],
+        joint_names: Sequence[str] = (),
+        timeout: float = 2.0,
+    ) -> int:
+        """Sends ``level`` a path on its path topic (docs/tracking.md): a
+        ``MultiDOFJointTrajectory`` for a Cartesian level (each point x, y, z,
+        qx, qy, qz, qw), a ``JointTrajectory`` for the others (the level's
+        values); ``times`` from when the controller accepts it. Returns the
+        sequence number for :meth:`wait_until_accepted`."""
+        key = ("path", level)
+        if key not in self._publishers:
+            t = self.latest_telemetry(timeout)
+            if t is None or not 0 <= level < t.levels():
+                raise ValueError(f"level {level} does not exist or no telemetry")
+            names = unique_ros_names([lv.name for lv in t.level_list])
+            topic = f"/{self.namespace}/{names[level]}/path"
+            ty = self._goal_type(topic, timeout, PATH_TYPES)
+            self._tokens.append(self._token("MP", (topic, ty)))
+            pub = self._session.declare_publisher(topic_key(self.domain, topic, ty))
+            self._publishers[key] = (pub, os.urandom(16), ty)
+        pub, gid, ty = self._publishers[key]
+        self._seq += 1
+        now = time.time_ns()
+        pub.put(encode_trajectory(ty, times, points, joint_names, now),
+                attachment=attachment(self._seq, now, gid))
         self._sent[self._seq] = gid
         return self._seq
 

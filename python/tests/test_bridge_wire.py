@@ -179,11 +179,11 @@ def check_attachments(samples: list[tuple[bytes, bytes | None]]) -> bytes:
 
 
 def check_tokens(session: zenoh.Session, ns: str, ts: Any) -> None:
-    """The node, its publishers and its goal subscriptions in the ROS graph."""
+    """The node, its publishers and its goal and path subscriptions in the ROS graph."""
     keys = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=5.0)
             if r.ok is not None]
     mine = [k.split("/") for k in keys if k.split("/")[7:9] == [f"%{ns}", "hcc_bridge"]]
-    assert len(mine) == 1 + 3 + 3, keys
+    assert len(mine) == 1 + 3 + 3 + 3, keys
     assert sum(p[5] == "NN" and len(p) == 9 and p[6] == "%" for p in mine) == 1
     topics = {(p[5], p[9], p[10], p[11], p[12]) for p in mine if len(p) == 13}
     goal = unique_ros_names(["TCP position", "TCP orientation", "posture"])
@@ -195,6 +195,9 @@ def check_tokens(session: zenoh.Session, ns: str, ts: Any) -> None:
         ("MS", "tcp_position/goal", "geometry_msgs/msg/PointStamped"),
         ("MS", "tcp_orientation/goal", "geometry_msgs/msg/QuaternionStamped"),
         ("MS", "posture/goal", "std_msgs/msg/Float64MultiArray"),
+        ("MS", "tcp_position/path", "trajectory_msgs/msg/MultiDOFJointTrajectory"),
+        ("MS", "tcp_orientation/path", "trajectory_msgs/msg/MultiDOFJointTrajectory"),
+        ("MS", "posture/path", "trajectory_msgs/msg/JointTrajectory"),
     }
     assert topics == {(kind, f"%{ns}%{name}".replace("/", "%"), dds(ty), ts.hash_rihs01(ty), "::,10:,:,:,,")
                       for kind, name, ty in want}
@@ -271,7 +274,17 @@ def test_remote_goal_messages_are_ros_messages() -> None:
                            "std_msgs/msg/Float64MultiArray")
     assert m.data.tolist() == [0.1, -0.2, 0.3] and m.layout.data_offset == 0
     # Types and hashes of hcc.remote are ROS 2's.
-    for ty in (*remote.GOAL_TYPES, remote.JOINT_STATE, remote.TELEMETRY):
+    for ty in (*remote.GOAL_TYPES, *remote.PATH_TYPES, remote.JOINT_STATE, remote.TELEMETRY):
         assert ts.hash_rihs01(ty[0]) == ty[1], ty[0]
+    # The path messages decode with rosbags too.
+    m = ts.deserialize_cdr(remote.encode_trajectory(remote.JOINT_TRAJECTORY, [0.0, 1.5], [[0.1, 0.2], [0.3, 0.4]],
+                                                    ["a", "b"], stamp), "trajectory_msgs/msg/JointTrajectory")
+    assert m.joint_names == ["a", "b"] and m.points[1].positions.tolist() == [0.3, 0.4]
+    assert (m.points[1].time_from_start.sec, m.points[1].time_from_start.nanosec) == (1, 500_000_000)
+    m = ts.deserialize_cdr(remote.encode_trajectory(remote.MULTI_DOF_JOINT_TRAJECTORY, [0.25],
+                                                    [[0.5, 0.1, 0.3, 0.0, 0.0, 0.0, 1.0]]),
+                           "trajectory_msgs/msg/MultiDOFJointTrajectory")
+    tf = m.points[0].transforms[0]
+    assert (tf.translation.x, tf.rotation.w, m.points[0].time_from_start.nanosec) == (0.5, 1.0, 250_000_000)
     att = remote.attachment(5, stamp, bytes(range(16)))
     assert remote.read_attachment(att) == (5, stamp, bytes(range(16))) and len(att) == 33

@@ -41,6 +41,7 @@ pub mod names;
 pub mod rate;
 pub mod ros;
 mod run;
+pub mod trajectory;
 pub mod zenoh_side;
 
 pub use run::{Args, run};

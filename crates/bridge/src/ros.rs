@@ -169,9 +169,10 @@ pub struct TelemetryExtras<'a> {
 pub fn answer_reason(code: u32) -> String {
     match code {
         hcc_msgs::ANSWER_ACCEPTED => "accepted".into(),
-        c => {
-            SetpointRejection::from_code(c).map_or_else(|| format!("code {c}"), |r| r.name().into())
-        }
+        c => SetpointRejection::from_code(c)
+            .map(|r| r.name().to_string())
+            .or_else(|| hcc_msgs::PathRejection::from_code(c).map(|r| r.name().to_string()))
+            .unwrap_or_else(|| format!("code {c}")),
     }
 }
 

@@ -19,6 +19,7 @@ use crate::ipc_side::{IpcReader, Sample};
 use crate::names;
 use crate::rate::RateLimiter;
 use crate::ros::{self, ClockMap, RemoteAnswer, TelemetryExtras};
+use crate::trajectory;
 use crate::zenoh_side::{Graph, RosPublisher, RosSubscription, zenoh_config};
 
 /// Highest `--rate`: the control rate.
@@ -117,11 +118,13 @@ impl Args {
     }
 }
 
-/// A remote goal as the Zenoh callback hands it on.
+/// A remote goal (or path, on a level's path topic) as the Zenoh callback
+/// hands it on.
 struct RemoteGoal {
     level: usize,
     payload: Vec<u8>,
     attachment: Option<Attachment>,
+    path: bool,
 }
 
 /// A forwarded goal waiting for the controller's answer.
@@ -147,6 +150,11 @@ struct Outputs {
 /// The remote goals' side.
 struct Goals {
     levels: Vec<GoalLevel>,
+    /// Per level, its joint names (a joint level's; the check of a
+    /// trajectory's `joint_names`) and its equilibrium as the last telemetry
+    /// gave it (where a trajectory that starts later than 0 starts from).
+    joints: Vec<Vec<String>>,
+    equilibrium: Vec<Vec<f64>>,
     root_link: String,
     client: Option<Client>,
     limiter: RateLimiter,
@@ -375,6 +383,7 @@ impl Goals {
         let (tx, rx) = mpsc::sync_channel(GOAL_BACKLOG);
         let mut subscriptions = Vec::new();
         for level in &levels {
+            let path_tx = tx.clone();
             let topic = graph.topic(&format!("{}/goal", level.ros_name));
             let (tx, index, c) = (tx.clone(), level.index, counters.clone());
             let sub = graph.subscription(&topic, level.kind.ros_type(), move |sample| {
@@ -382,6 +391,24 @@ impl Goals {
                     level: index,
                     payload: sample.payload().to_bytes().into_owned(),
                     attachment: Attachment::from_zbytes(sample.attachment()),
+                    path: false,
+                };
+                bump(&c.goals_received);
+                if tx.try_send(goal).is_err() {
+                    bump(&c.goals_refused_rate);
+                }
+            })?;
+            subscriptions.push(sub);
+            // The level's path topic (trajectory.rs).
+            let topic = graph.topic(&format!("{}/path", level.ros_name));
+            let (tx, index, c) = (path_tx, level.index, counters.clone());
+            let ty = trajectory::ros_type(&level.kind);
+            let sub = graph.subscription(&topic, ty, move |sample| {
+                let goal = RemoteGoal {
+                    level: index,
+                    payload: sample.payload().to_bytes().into_owned(),
+                    attachment: Attachment::from_zbytes(sample.attachment()),
+                    path: true,
                 };
                 bump(&c.goals_received);
                 if tx.try_send(goal).is_err() {
@@ -399,8 +426,20 @@ impl Goals {
         } else {
             None
         };
+        let joints = scenario
+            .levels()
+            .iter()
+            .map(|l| trajectory::joint_names(l, scenario))
+            .collect();
+        let equilibrium = scenario
+            .levels()
+            .iter()
+            .map(|l| l.goal.iter().copied().collect())
+            .collect();
         Ok(Goals {
             levels,
+            joints,
+            equilibrium,
             root_link: scenario.model.root_link.clone(),
             client,
             limiter: RateLimiter::new(args.setpoint_rate, args.setpoint_burst),
@@ -433,6 +472,25 @@ impl Goals {
             reason: String::new(),
             duration_s: 0.0,
         };
+        if g.path {
+            match self.forward_path(&g, c) {
+                Ok(()) => {
+                    bump(&c.goals_accepted);
+                    answer.reason = ros::answer_reason(0);
+                }
+                Err((code, reason)) => {
+                    answer.code = code;
+                    answer.reason = reason;
+                    tracing::info!(
+                        "remote path for level {} refused: {}",
+                        g.level + 1,
+                        answer.reason
+                    );
+                }
+            }
+            self.record(answer);
+            return;
+        }
         match self.forward(&g, c) {
             Ok(seq) => {
                 if self.pending.len() == PENDING {
@@ -496,6 +554,55 @@ impl Goals {
         }
     }
 
+    /// Checks and sends one path (trajectory.rs) through the client, a
+    /// message at a time after the controller's answer to the one before;
+    /// the refusal (code, reason) names the knots.
+    fn forward_path(&mut self, g: &RemoteGoal, c: &Counters) -> Result<(), (u32, String)> {
+        let Some(client) = self.client.as_mut() else {
+            bump(&c.goals_refused_read_only);
+            return Err((
+                ros::REFUSED_READ_ONLY,
+                "read-only bridge (no --allow-setpoints)".into(),
+            ));
+        };
+        if !self.limiter.allow(hcc_msgs::monotonic_now_ns()) {
+            bump(&c.goals_refused_rate);
+            return Err((ros::REFUSED_RATE, "over the bridge's setpoint rate".into()));
+        }
+        let level = &self.levels[g.level];
+        let ty = trajectory::ros_type(&level.kind);
+        let knots = trajectory::read_trajectory(ty, &g.payload)
+            .map_err(|e| e.to_string())
+            .and_then(|m| {
+                trajectory::knots(
+                    &m,
+                    &level.kind,
+                    &self.joints[g.level],
+                    &self.root_link,
+                    &self.equilibrium[g.level],
+                )
+                .map_err(|e| e.to_string())
+            });
+        let (times, points) = knots
+            .inspect_err(|_| bump(&c.goals_refused_bad))
+            .map_err(|e| (ros::REFUSED_BAD_MESSAGE, e))?;
+        bump(&c.goals_forwarded);
+        client
+            .follow(g.level, &times, &points, 0, Duration::from_millis(500))
+            .map(|_| ())
+            .map_err(|e| {
+                bump(&c.goals_rejected);
+                let code = match &e.error {
+                    ClientError::Rejected(r) => r.code(),
+                    ClientError::PathRejected(r) => r.code(),
+                    ClientError::PathInvalid(r) => r.code(),
+                    ClientError::Invalid(r) => r.code(),
+                    _ => ros::REFUSED_UNREACHABLE,
+                };
+                (code, e.to_string())
+            })
+    }
+
     /// Keeps `answer` as the last of its publisher.
     fn record(&mut self, answer: RemoteAnswer) {
         self.answers.retain(|a| a.source_gid != answer.source_gid);
@@ -508,6 +615,12 @@ impl Goals {
     /// Turns the controller's answer to the bridge's client into the
     /// answers of the remote goals it settles.
     fn observe_answers(&mut self, t: &Telemetry, c: &Counters) {
+        for (i, e) in self.equilibrium.iter_mut().enumerate() {
+            let m = e.len().min(hcc_msgs::MAX_TASK_DIM);
+            if i < t.n_levels as usize {
+                e[..m].copy_from_slice(&t.goal[i][..m]);
+            }
+        }
         let Some(id) = self.client.as_ref().map(Client::client_id) else {
             return;
         };
