@@ -4,6 +4,7 @@
 //! ```toml
 //! [setpoint_limits]
 //! relative_damping = true        # damp ẋ_i − ẋ_{i,d} while a goal moves (default true)
+//! path_knots = 256               # knots a level's run-time path holds ahead (docs/tracking.md)
 //!
 //! [[setpoint_limits.level]]          # one per [[level]], in order; all optional
 //! max_stiffness = 3000.0         # largest eigenvalue of K_i a setpoint may ask for
@@ -24,8 +25,8 @@ use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
 use hcc_spec::setpoint_limits::{
-    DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED, DEFAULT_STIFFNESS_FACTOR,
-    LevelSetpointLimits, SetpointLimits,
+    DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED, DEFAULT_PATH_KNOTS,
+    DEFAULT_STIFFNESS_FACTOR, LevelSetpointLimits, MAX_PATH_KNOTS, SetpointLimits,
 };
 
 /// `[setpoint_limits]` as written.
@@ -34,6 +35,8 @@ use hcc_spec::setpoint_limits::{
 pub struct SetpointLimitsSection {
     /// Damp the velocity relative to a moving equilibrium (default true).
     pub relative_damping: Option<bool>,
+    /// Knots a level's run-time path holds ahead at most (default 256).
+    pub path_knots: Option<usize>,
     /// Per-level limits, in level order.
     #[serde(default, rename = "level")]
     pub levels: Vec<LevelSetpointLimitsSection>,
@@ -140,8 +143,18 @@ pub(crate) fn resolve(
             workspace,
         });
     }
+    let path_knots = section.path_knots.unwrap_or(DEFAULT_PATH_KNOTS);
+    if !(3..=MAX_PATH_KNOTS).contains(&path_knots) {
+        return Err(invalid(
+            file,
+            text,
+            "setpoint_limits.path_knots",
+            format!("{path_knots} must be from 3 to {MAX_PATH_KNOTS}"),
+        ));
+    }
     Ok(SetpointLimits {
         relative_damping: section.relative_damping.unwrap_or(true),
+        path_knots,
         levels: out,
     })
 }

@@ -118,3 +118,19 @@ fn the_former_table_names_are_refused_with_the_new_ones() {
         assert!(e.contains(new) && e.contains("rename"), "{old}: {e}");
     }
 }
+
+#[test]
+fn the_path_window_defaults_to_256_knots_and_is_checked() {
+    assert_eq!(load("").unwrap().setpoint_limits.path_knots, 256);
+    let s = load("\n[setpoint_limits]\npath_knots = 1000\n").unwrap();
+    assert_eq!(s.setpoint_limits.path_knots, 1000);
+    for bad in ["2", "1000000"] {
+        let e = load(&format!("\n[setpoint_limits]\npath_knots = {bad}\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("setpoint_limits.path_knots") && e.contains("from 3 to"),
+            "{e}"
+        );
+    }
+}

@@ -159,7 +159,7 @@ impl ControlCycle {
         }
         let paths = Paths::new(
             &settings.tracking,
-            settings.setpoint_limits.relative_damping,
+            &settings.setpoint_limits,
             settings.period_s(),
             &mut controller,
         );

@@ -20,13 +20,12 @@ use hcc_msgs::{
     ANSWER_ACCEPTED, KnotsRejection, PATH_NEW, PathKnots, PathRejection, SetpointRejection,
 };
 use hcc_spec::TaskUnit;
+use hcc_spec::setpoint_limits::SetpointLimits;
 use hcc_spec::tracking::{Tracking, blocks};
 use hcc_trajectory::{Block, KnotError, PathSample, PathStream, StreamState, Trajectory};
 
 use crate::setpoints::SetpointHandler;
 
-/// Knots a level's run-time path holds ahead at most.
-pub const PATH_KNOTS: usize = 256;
 /// How a run-time path that runs out of knots decelerates at most (m/s² or
 /// rad/s² on its coordinates).
 pub const PATH_STOP_DECELERATION: f64 = 1.0;
@@ -85,13 +84,15 @@ impl Paths {
     /// the feed-forward tracks (its fixed goal a constant path) once any
     /// level follows a path. A level without it is pulled along as a
     /// transition pulls it: the damping relative to the path's velocity with
-    /// `relative_damping`.
+    /// `relative_damping`; each run-time path holds `path_knots` knots ahead
+    /// (`[setpoint_limits]`).
     pub(crate) fn new(
         tracking: &Tracking,
-        relative_damping: bool,
+        limits: &SetpointLimits,
         period_s: f64,
         controller: &mut Controller,
     ) -> Paths {
+        let relative_damping = limits.relative_damping;
         let n = controller.nq();
         let mut levels = Vec::with_capacity(controller.levels());
         for i in 0..controller.levels() {
@@ -104,7 +105,7 @@ impl Paths {
                 .cloned()
                 .flatten()
                 .map(|p| p.trajectory);
-            let stream = PathStream::new(&blocks, PATH_KNOTS, PATH_STOP_DECELERATION);
+            let stream = PathStream::new(&blocks, limits.path_knots, PATH_STOP_DECELERATION);
             levels.push(LevelPath {
                 sample: stream.sample_buffer(),
                 goal: vec![0.0; controller.task_dim(i)],

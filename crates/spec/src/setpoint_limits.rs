@@ -21,11 +21,18 @@ pub struct LevelSetpointLimits {
     pub workspace: Option<(Vec<f64>, Vec<f64>)>,
 }
 
+/// Default of [`SetpointLimits::path_knots`].
+pub const DEFAULT_PATH_KNOTS: usize = 256;
+/// Most knots a level's run-time path may be configured to hold ahead.
+pub const MAX_PATH_KNOTS: usize = 100_000;
+
 /// Resolved `[setpoint_limits]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SetpointLimits {
     /// Damp ẋ_i − ẋ_{i,d} while a goal moves.
     pub relative_damping: bool,
+    /// Knots a level's run-time path holds ahead at most (docs/tracking.md).
+    pub path_knots: usize,
     /// One per level.
     pub levels: Vec<LevelSetpointLimits>,
 }
