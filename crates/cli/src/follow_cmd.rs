@@ -1,8 +1,9 @@
 //! `hcc follow`: a path file (a scenario's `trajectory` format) sent to a
 //! running controller's level while it runs (docs/tracking.md). The path's
 //! t = 0 is the cycle that accepts it (or `--start-at` s later); its knots go
-//! out ahead of the path by `--window` s (at most [`MAX_AHEAD`] knots, within
-//! the controller's window), each message after the controller answered the
+//! out ahead of the path by `--window` s (at most three quarters of the
+//! controller's window, `[setpoint_limits] path_knots`), each message after
+//! the controller answered the
 //! one before. Progress is printed every half second; at the end, the
 //! level's largest tracking error from 3 s on.
 
@@ -12,10 +13,6 @@ use anyhow::{Context, bail};
 use hcc_client::Client;
 
 use crate::setpoint_cmd::{Target, connect, level_index, scenario_of, timeout};
-
-/// Knots sent ahead of where the path is at most (the controller's window
-/// holds 256).
-const MAX_AHEAD: usize = 200;
 
 /// `hcc follow`.
 #[derive(clap::Args, Debug)]
@@ -52,6 +49,9 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
         bail!("the controller has {} levels", scenario.spec.levels.len());
     };
     let blocks = hcc_spec::tracking::blocks(&spec.tasks, scenario.model.nq());
+    // Knots sent ahead of where the path is at most: within the controller's
+    // window, with room for what arrives while the path moves on.
+    let max_ahead = (scenario.setpoint_limits.path_knots * 3 / 4).max(2);
     let text = std::fs::read_to_string(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let rows = hcc_trajectory::read_rows(&text, &blocks)
@@ -77,10 +77,10 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
     } else {
         0
     };
-    // The knots from `from` on up to time `until` (at most MAX_AHEAD).
+    // The knots from `from` on up to time `until` (at most max_ahead).
     let ahead = |from: usize, until: f64| -> usize {
         let mut k = from;
-        while k < times.len() && times[k] <= until && k - from < MAX_AHEAD {
+        while k < times.len() && times[k] <= until && k - from < max_ahead {
             k += 1;
         }
         k
@@ -105,7 +105,7 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
         let t = begin.elapsed().as_secs_f64();
         if sent < times.len() {
             let passed = times.partition_point(|&tk| tk < t);
-            let until = ahead(sent, t + args.window).min(passed + MAX_AHEAD);
+            let until = ahead(sent, t + args.window).min(passed + max_ahead);
             if until > sent {
                 client
                     .extend_path(level, &times[sent..until], &points[sent..until], wait)
