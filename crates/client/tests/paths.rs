@@ -57,6 +57,16 @@ fn a_path_is_accepted_message_by_message_and_a_bad_knot_is_named() {
         })
     };
     let mut client = Client::connect(ns.as_str(), Some(&prefix)).unwrap();
+    // The stand-in listens once it publishes telemetry (a message sent
+    // before its subscriber exists would be lost).
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while client.poll_telemetry().is_none() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no stand-in telemetry"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
     // 1 cm along y over 1 s from the level's goal, a knot every 20 ms: four
     // messages, each answered before the next goes.
     let times: Vec<f64> = (0..51).map(|k| k as f64 * 0.02).collect();

@@ -623,6 +623,7 @@ impl ControlCycle {
         self.paths
             .advance(self.period_s, &mut self.controller, &mut self.setpoints);
         self.counters.core.paths_stopped = self.paths.stopped;
+        self.counters.core.streams_stopped = self.setpoints.streams_stopped;
         // The contact reaction, from the flag of the previous state (module `reaction`).
         self.reaction.before_law(
             self.contact.in_contact(),

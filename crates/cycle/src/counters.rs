@@ -29,6 +29,9 @@ hcc_msgs::define_counters! {
         /// Paths sent at run time that reached their last knot and stopped
         /// there at rest (module `paths`).
         paths_stopped: "run-time paths that stopped on their last knot",
+        /// Setpoint streams (goal and velocity) that stopped: their velocity
+        /// feed-forward faded to zero (module `setpoints`).
+        streams_stopped: "setpoint streams that stopped (feed-forward faded)",
     }
 }
 

@@ -318,3 +318,37 @@ fn setpoints_wait_for_their_state() {
     deliver(&mut d, &state(&sc, u64::MAX / 2), &[], id);
     assert_eq!(d.pending_setpoints(), 0);
 }
+
+#[test]
+fn a_stream_that_stops_fades_its_feed_forward_to_rest() {
+    use hcc_cycle::setpoints::{STREAM_FADE_S, STREAM_TIMEOUT_S};
+    let sc = scenario();
+    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    d.decide(&state(&sc, 1), PERIOD);
+    let sample = Setpoint::for_level(3, 1, 0, 3)
+        .with_goal(&[0.55, 0.20, 0.30])
+        .unwrap()
+        .with_velocity(&[0.0, 0.05, 0.0])
+        .unwrap();
+    assert_eq!(d.take_setpoint_now(&sample), ANSWER_ACCEPTED);
+    // The last sample of the stream: ẋ_d held, then fading, then zero.
+    let mut seen = Vec::new();
+    for k in 2..=120u64 {
+        d.decide(&state(&sc, k), k * PERIOD);
+        seen.push(d.controller().level_target(0).unwrap().goal_velocity[1]);
+    }
+    let at = |s: f64| seen[(s * 1000.0).round() as usize - 1];
+    assert_eq!(at(STREAM_TIMEOUT_S - 0.002), 0.05);
+    let mid = at(STREAM_TIMEOUT_S + 0.5 * STREAM_FADE_S);
+    assert!((mid - 0.025).abs() < 2e-3, "{mid}");
+    assert_eq!(at(STREAM_TIMEOUT_S + STREAM_FADE_S + 0.005), 0.0);
+    // Linear: no step above one period's share of the fade.
+    let step = seen
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0, f64::max);
+    assert!(step <= 0.05 * 1e-3 / STREAM_FADE_S + 1e-12, "{step}");
+    assert_eq!(d.counters().core.streams_stopped, 1);
+    assert_eq!(d.telemetry().goal[0][..3], [0.55, 0.20, 0.30]);
+}

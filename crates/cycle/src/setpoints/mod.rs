@@ -62,9 +62,22 @@ struct LevelState {
     /// Goal setpoints taken for the level so far (a path stops driving it
     /// when one is taken after it began).
     goals_taken: u64,
+    /// The velocity feed-forward of the last setpoint that set one, and the
+    /// time since (a stream that stops: [`STREAM_TIMEOUT_S`]).
+    feed_forward: [f64; MAX_TASK_DIM],
+    feed_forward_age_s: f64,
     k: DMatrix<f64>,
     d: DMatrix<f64>,
 }
+
+/// A velocity feed-forward is held this long after the setpoint that set it
+/// (a stream of goal and velocity refreshes it every cycle); then it fades
+/// linearly to zero over [`STREAM_FADE_S`]: a stream that stops leaves the
+/// equilibrium at its last goal at rest, without a step in the damping's
+/// reference. Counted (`streams_stopped`).
+pub const STREAM_TIMEOUT_S: f64 = 0.05;
+/// How long the feed-forward of a stream that stopped fades, s.
+pub const STREAM_FADE_S: f64 = 0.05;
 
 /// The setpoint side of the control cycle (see the module docs).
 pub struct SetpointHandler {
@@ -80,6 +93,8 @@ pub struct SetpointHandler {
     pending: Pending,
     /// Setpoints accepted so far (a contact hold's release).
     accepted: u64,
+    /// Setpoint streams whose feed-forward faded because they stopped.
+    pub(crate) streams_stopped: u64,
 }
 
 impl SetpointHandler {
@@ -130,6 +145,8 @@ impl SetpointHandler {
                 joints,
                 active: false,
                 goals_taken: 0,
+                feed_forward: [0.0; MAX_TASK_DIM],
+                feed_forward_age_s: 0.0,
                 k: DMatrix::zeros(m, m),
                 d: DMatrix::zeros(m, m),
             });
@@ -145,6 +162,7 @@ impl SetpointHandler {
             zeros: [0.0; MAX_TASK_DIM],
             pending: Pending::new(),
             accepted: 0,
+            streams_stopped: 0,
         })
     }
 
@@ -304,6 +322,9 @@ impl SetpointHandler {
         level.transition.start(target, duration);
         if sp.sets(SETPOINT_VELOCITY) {
             level.transition.set_feed_forward(sp.velocity());
+            let m = sp.velocity().len();
+            level.feed_forward[..m].copy_from_slice(sp.velocity());
+            level.feed_forward_age_s = 0.0;
         }
         level.active = true;
         duration
@@ -350,6 +371,23 @@ impl SetpointHandler {
                 continue;
             }
             level.transition.advance(dt);
+            if level.transition.has_feed_forward() {
+                // A stream that stopped: its feed-forward fades to zero.
+                level.feed_forward_age_s += dt;
+                let late = level.feed_forward_age_s - STREAM_TIMEOUT_S;
+                if late > 0.0 {
+                    let scale = (1.0 - late / STREAM_FADE_S).max(0.0);
+                    let m = level.transition.dim();
+                    let mut v = [0.0; MAX_TASK_DIM];
+                    for (a, x) in v[..m].iter_mut().enumerate() {
+                        *x = scale * level.feed_forward[a];
+                    }
+                    level.transition.set_feed_forward(&v[..m]);
+                    if scale == 0.0 {
+                        self.streams_stopped += 1;
+                    }
+                }
+            }
             let t = &level.transition;
             // The values come from checked setpoints: these calls cannot fail.
             let _ = controller.set_goal(i, t.goal());
