@@ -118,6 +118,28 @@ impl Args {
     }
 }
 
+/// The bridge's client when it forwards a remote goal or path now: none when
+/// read-only, and within the setpoint rate (the refusal, code and reason,
+/// counted).
+fn admit<'a>(
+    client: &'a mut Option<Client>,
+    limiter: &mut RateLimiter,
+    c: &Counters,
+) -> Result<&'a mut Client, (u32, String)> {
+    let Some(client) = client.as_mut() else {
+        bump(&c.goals_refused_read_only);
+        return Err((
+            ros::REFUSED_READ_ONLY,
+            "read-only bridge (no --allow-setpoints)".into(),
+        ));
+    };
+    if !limiter.allow(hcc_msgs::monotonic_now_ns()) {
+        bump(&c.goals_refused_rate);
+        return Err((ros::REFUSED_RATE, "over the bridge's setpoint rate".into()));
+    }
+    Ok(client)
+}
+
 /// A remote goal (or path, on a level's path topic) as the Zenoh callback
 /// hands it on.
 struct RemoteGoal {
@@ -520,17 +542,7 @@ impl Goals {
     /// Checks and sends one goal; its setpoint's sequence number, or the
     /// refusal (code, reason).
     fn forward(&mut self, g: &RemoteGoal, c: &Counters) -> Result<u64, (u32, String)> {
-        let Some(client) = self.client.as_mut() else {
-            bump(&c.goals_refused_read_only);
-            return Err((
-                ros::REFUSED_READ_ONLY,
-                "read-only bridge (no --allow-setpoints)".into(),
-            ));
-        };
-        if !self.limiter.allow(hcc_msgs::monotonic_now_ns()) {
-            bump(&c.goals_refused_rate);
-            return Err((ros::REFUSED_RATE, "over the bridge's setpoint rate".into()));
-        }
+        let client = admit(&mut self.client, &mut self.limiter, c)?;
         let level = &self.levels[g.level];
         let goal = ros::read_goal(level.kind.ros_type(), &g.payload)
             .map_err(|e| e.to_string())
@@ -558,17 +570,7 @@ impl Goals {
     /// message at a time after the controller's answer to the one before;
     /// the refusal (code, reason) names the knots.
     fn forward_path(&mut self, g: &RemoteGoal, c: &Counters) -> Result<(), (u32, String)> {
-        let Some(client) = self.client.as_mut() else {
-            bump(&c.goals_refused_read_only);
-            return Err((
-                ros::REFUSED_READ_ONLY,
-                "read-only bridge (no --allow-setpoints)".into(),
-            ));
-        };
-        if !self.limiter.allow(hcc_msgs::monotonic_now_ns()) {
-            bump(&c.goals_refused_rate);
-            return Err((ros::REFUSED_RATE, "over the bridge's setpoint rate".into()));
-        }
+        let client = admit(&mut self.client, &mut self.limiter, c)?;
         let level = &self.levels[g.level];
         let ty = trajectory::ros_type(&level.kind);
         let knots = trajectory::read_trajectory(ty, &g.payload)
