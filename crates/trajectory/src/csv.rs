@@ -5,9 +5,6 @@
 
 use crate::{Block, TrajectoryError};
 
-/// How far a quaternion's norm may be from 1 (it is then normalised).
-const UNIT_TOLERANCE: f64 = 1e-3;
-
 /// The rows (t and the columns) of `text` for `blocks`, quaternions normalised.
 /// Each row as (its line, t, the columns).
 pub(crate) fn rows(
@@ -95,7 +92,7 @@ pub(crate) fn rows(
 }
 
 /// Normalises each orientation block's quaternion; an error for one whose
-/// norm is not within [`UNIT_TOLERANCE`] of 1.
+/// norm is not within [`crate::UNIT_TOLERANCE`] of 1.
 fn normalise_quaternions(
     values: &mut [f64],
     blocks: &[Block],
@@ -105,8 +102,8 @@ fn normalise_quaternions(
     for b in blocks {
         if let Block::Rotation = b {
             let q = &mut values[c..c + 4];
-            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if (norm - 1.0).abs() > UNIT_TOLERANCE {
+            let Some(unit) = crate::unit_quaternion(q) else {
+                let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
                 return Err(TrajectoryError::at(
                     row,
                     format!(
@@ -115,8 +112,8 @@ fn normalise_quaternions(
                         c + 5
                     ),
                 ));
-            }
-            q.iter_mut().for_each(|x| *x /= norm);
+            };
+            q.copy_from_slice(&[unit.w, unit.i, unit.j, unit.k]);
         }
         c += b.columns();
     }

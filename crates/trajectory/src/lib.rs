@@ -39,6 +39,18 @@ use nalgebra::{UnitQuaternion, Vector3};
 use spline::Quintic;
 pub use stream::{KnotError, PathStream, StreamState};
 
+/// How far a quaternion's norm may be from 1 (it is then normalised).
+pub const UNIT_TOLERANCE: f64 = 1e-3;
+
+/// The unit quaternion of the columns w x y z (normalised), or `None` when
+/// their norm is more than [`UNIT_TOLERANCE`] from 1 (or not finite). The
+/// one reading of an orientation's columns: files, knots, goals.
+pub(crate) fn unit_quaternion(w: &[f64]) -> Option<UnitQuaternion<f64>> {
+    let q = nalgebra::Quaternion::new(w[0], w[1], w[2], w[3]);
+    let norm = q.norm();
+    ((norm - 1.0).abs() <= UNIT_TOLERANCE).then(|| UnitQuaternion::new_normalize(q))
+}
+
 /// How far (rad) an orientation may turn from the path's first orientation:
 /// its rotation vector is interpolated relative to it, unique below π.
 pub const MAX_TURN: f64 = 0.9 * std::f64::consts::PI;
@@ -136,13 +148,9 @@ impl Trajectory {
                     }
                 }
                 Block::Rotation => {
+                    // Unit quaternions already (the rows are checked).
                     let q = |v: &[f64]| {
-                        UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
-                            v[c],
-                            v[c + 1],
-                            v[c + 2],
-                            v[c + 3],
-                        ))
+                        unit_quaternion(&v[c..c + 4]).unwrap_or_else(UnitQuaternion::identity)
                     };
                     let r0 = q(&rows[0].2);
                     let mut r: Vec<Vec<f64>> =
@@ -273,14 +281,9 @@ pub fn goal_of(blocks: &[Block], columns: &[f64], goal: &mut [f64]) -> bool {
         match b {
             Block::Vector(n) => goal[g..g + n].copy_from_slice(&columns[c..c + n]),
             Block::Rotation => {
-                let w = &columns[c..c + 4];
-                let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if (norm - 1.0).abs() > 1e-3 {
+                let Some(q) = unit_quaternion(&columns[c..c + 4]) else {
                     return false;
-                }
-                let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
-                    w[0], w[1], w[2], w[3],
-                ));
+                };
                 let (roll, pitch, yaw) = q.euler_angles();
                 goal[g..g + 3].copy_from_slice(&[roll, pitch, yaw]);
             }

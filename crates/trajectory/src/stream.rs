@@ -25,7 +25,7 @@
 //! path is. Allocation-free after [`PathStream::new`].
 
 use crate::{Block, MAX_TURN, PathSample, spline};
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::UnitQuaternion;
 
 /// Why a knot was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -216,13 +216,15 @@ impl PathStream {
                     i += n;
                 }
                 Block::Rotation => {
-                    let w = &columns[col..col + 4];
-                    let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
-                    if (norm - 1.0).abs() > 1e-3 {
-                        return Err(KnotError::NotUnit);
+                    let q =
+                        crate::unit_quaternion(&columns[col..col + 4]).ok_or(KnotError::NotUnit)?;
+                    // A new path's first knot is its orientations' reference
+                    // (set even if a later block is refused: the path is
+                    // empty then, and the next first knot sets it again).
+                    if first {
+                        self.references[rot] = q;
                     }
-                    let q = UnitQuaternion::new_normalize(Quaternion::new(w[0], w[1], w[2], w[3]));
-                    let r0 = if first { q } else { self.references[rot] };
+                    let r0 = self.references[rot];
                     let r = (r0.inverse() * q).scaled_axis();
                     if r.norm() > MAX_TURN {
                         return Err(KnotError::Turn);
@@ -233,19 +235,6 @@ impl PathStream {
                 }
             }
             col += b.columns();
-        }
-        if first {
-            let mut rot = 0;
-            let mut col = 0;
-            for b in &self.blocks {
-                if *b == Block::Rotation {
-                    let w = &columns[col..col + 4];
-                    self.references[rot] =
-                        UnitQuaternion::new_normalize(Quaternion::new(w[0], w[1], w[2], w[3]));
-                    rot += 1;
-                }
-                col += b.columns();
-            }
         }
         let s = self.slot(self.first + self.len as u64);
         self.t[s] = t;
