@@ -10,13 +10,20 @@ use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::{ANSWER_ACCEPTED, JointState, Setpoint};
 use hcc_plant::zoh::{LoopTiming, run_zoh};
 
-#[test]
-fn a_goal_setpoint_takes_a_path_level_over_from_where_the_path_is() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-figure-eight.toml");
+/// The shipped scenario `name` and its control cycle.
+fn cycle_of(name: &str) -> (Scenario, ControlCycle) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(format!("{name}.toml"));
     let sc = Scenario::load(&path).unwrap();
     let c = hcc_cycle::controller_for(&sc).unwrap();
-    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    (sc, d)
+}
+
+#[test]
+fn a_goal_setpoint_takes_a_path_level_over_from_where_the_path_is() {
+    let (sc, mut d) = cycle_of("panda-figure-eight");
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
     let period_ns = sc.period_ns();
@@ -102,11 +109,7 @@ struct Sent {
 
 fn send_circle(knots: usize, seconds: f64) -> Sent {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let sc = Scenario::load(&path).unwrap();
-    let c = hcc_cycle::controller_for(&sc).unwrap();
-    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let (sc, mut d) = cycle_of("panda-pose-posture");
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
     let period_ns = sc.period_ns();
@@ -221,11 +224,7 @@ fn a_stream_that_stops_mid_path_comes_to_rest_on_its_last_knot() {
 #[test]
 fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let sc = Scenario::load(&path).unwrap();
-    let c = hcc_cycle::controller_for(&sc).unwrap();
-    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let (_, mut d) = cycle_of("panda-pose-posture");
     let goal = [0.55, 0.20, 0.30];
     let msg = |flags: u32, pts: &[(f64, [f64; 3])]| {
         let mut m = PathKnots::zeroed();

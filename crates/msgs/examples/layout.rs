@@ -175,28 +175,17 @@ fn main() {
         ("max_knots_per_message", MAX_KNOTS_PER_MESSAGE.to_string()),
         ("max_path_columns", MAX_PATH_COLUMNS.to_string()),
     ]);
-    // Names and reasons are plain ASCII without quotes or backslashes.
+    // Names and reasons are plain text without quotes or backslashes.
+    let entry = |(code, name, reason): (u32, &str, &str)| {
+        format!("{{\"code\": {code}, \"name\": \"{name}\", \"reason\": \"{reason}\"}}")
+    };
     let rejections: Vec<String> = SetpointRejection::ALL
         .iter()
-        .map(|r| {
-            format!(
-                "{{\"code\": {}, \"name\": \"{}\", \"reason\": \"{}\"}}",
-                r.code(),
-                r.name(),
-                r.reason()
-            )
-        })
+        .map(|r| entry((r.code(), r.name(), r.reason())))
         .collect();
     let path_rejections: Vec<String> = PathRejection::ALL
         .iter()
-        .map(|r| {
-            format!(
-                "{{\"code\": {}, \"name\": \"{}\", \"reason\": \"{}\"}}",
-                r.code(),
-                r.name(),
-                r.reason()
-            )
-        })
+        .map(|r| entry((r.code(), r.name(), r.reason())))
         .collect();
     println!(
         "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"path_rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
