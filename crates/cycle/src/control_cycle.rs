@@ -370,6 +370,29 @@ impl ControlCycle {
         code
     }
 
+    /// Takes every path message `next_knots` yields (at most
+    /// [`SETPOINT_BUFFER`]), as [`ControlCycle::take_path`] does, and writes
+    /// the answers into the telemetry once. What the controller daemon calls
+    /// each cycle after [`ControlCycle::take_setpoints`]. Allocation-free.
+    pub fn take_paths(&mut self, mut next_knots: impl FnMut() -> Option<PathKnots>) {
+        let mut taken = false;
+        for _ in 0..SETPOINT_BUFFER {
+            let Some(knots) = next_knots() else {
+                break;
+            };
+            self.paths.take(
+                &knots,
+                self.clock_seq,
+                &mut self.controller,
+                &mut self.setpoints,
+            );
+            taken = true;
+        }
+        if taken {
+            self.setpoints.fill(&mut self.telemetry);
+        }
+    }
+
     /// Setpoints waiting for their state.
     pub fn pending_setpoints(&self) -> usize {
         self.setpoints.pending()

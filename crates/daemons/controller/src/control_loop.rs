@@ -485,12 +485,8 @@ impl ControlLoop {
                 .map(|sample| *sample)
         });
         // Then the paths' knots, in arrival order (bounded by the queue).
-        for _ in 0..SETPOINT_BUFFER {
-            let Some(knots) = ports.paths.receive().ok().flatten() else {
-                break;
-            };
-            self.cycle.take_path(&knots);
-        }
+        self.cycle
+            .take_paths(|| ports.paths.receive().ok().flatten().map(|sample| *sample));
         let taken = monotonic_now_ns();
         let answer = self.cycle.decide_command(state, wake);
         if let Some(step_ns) = self.cycle.step_ns() {
