@@ -164,11 +164,14 @@ impl Controller {
         self.track.active = true;
         self.track.qd_d.fill(0.0);
         self.track.pdot.fill(0.0);
-        self.first_level_desired()?;
-        for i in 1..=depth {
-            self.level_desired(i);
-        }
+        // Each level's feed-forward right after its desired velocities, while
+        // `track.p` holds its Z_iᵀ v_{i,d}.
         for i in 0..=depth {
+            if i == 0 {
+                self.first_level_desired()?;
+            } else {
+                self.level_desired(i);
+            }
             if self.levels[i].track.on {
                 self.level_feed_forward(i)?;
             }
@@ -247,16 +250,12 @@ impl Controller {
     }
 
     /// τ_ff += β_i J̄_iᵀ Λ_i (v̇_{i,d} + (J̄_i M⁻¹ C − J̄̇_i) u), u = Z_iᵀ v_{i,d}
-    /// (T.3; J̄̇_i u as in eq. 22's chain, `coriolis.rs`).
+    /// (T.3; J̄̇_i u as in eq. 22's chain, `coriolis.rs`); u is in `track.p`,
+    /// where the level's desired velocities left it (the feed-forward uses
+    /// `track.e` and `track.t` as scratch, which they no longer need).
     fn level_feed_forward(&mut self, i: usize) -> Result<(), crate::ControlError> {
         let tw = &mut self.track;
         let l = &mut self.levels[i];
-        // u = (J̄⁻¹)_i v_{i,d}.
-        if i == 0 {
-            gemv(&mut tw.p, 1.0, &l.jbar_inv, &l.track.vd, 0.0);
-        } else {
-            gemv_t(&mut tw.p, 1.0, &l.z, &l.track.vd, 0.0);
-        }
         gemv(&mut tw.e, 1.0, &self.data.c, &tw.p, 0.0);
         hcc_model::linalg::cholesky_solve_slice(self.chol.as_slice(), self.n, tw.e.as_mut_slice())
             .map_err(|_| crate::ControlError::Numerical("M⁻¹ C in the tracking terms"))?;
