@@ -134,7 +134,14 @@ impl Trajectory {
     /// from 0 strictly increasing, finite values, unit quaternions, no
     /// orientation more than [`MAX_TURN`] from the first.
     pub fn parse(text: &str, blocks: &[Block]) -> Result<Trajectory, TrajectoryError> {
-        let rows = csv::rows(text, blocks)?;
+        Trajectory::from_rows(&csv::rows(text, blocks)?, blocks)
+    }
+
+    /// The path through checked rows (line, t, columns).
+    fn from_rows(
+        rows: &[(usize, f64, Vec<f64>)],
+        blocks: &[Block],
+    ) -> Result<Trajectory, TrajectoryError> {
         let times: Vec<f64> = rows.iter().map(|r| r.1).collect();
         // Each interpolated coordinate's values at the knots.
         let mut coords: Vec<Vec<f64>> = Vec::new();
@@ -155,7 +162,7 @@ impl Trajectory {
                     let r0 = q(&rows[0].2);
                     let mut r: Vec<Vec<f64>> =
                         (0..3).map(|_| Vec::with_capacity(rows.len())).collect();
-                    for (line, _, v) in &rows {
+                    for (line, _, v) in rows {
                         let rv = (r0.inverse() * q(v)).scaled_axis();
                         if rv.norm() > MAX_TURN {
                             return Err(TrajectoryError::at(
@@ -259,11 +266,10 @@ impl Trajectory {
 /// unit quaternions, normalised): (t, columns) each — what a client sends
 /// as a path's knots.
 pub fn read_rows(text: &str, blocks: &[Block]) -> Result<Vec<(f64, Vec<f64>)>, TrajectoryError> {
-    Trajectory::parse(text, blocks)?;
-    Ok(csv::rows(text, blocks)?
-        .into_iter()
-        .map(|(_, t, v)| (t, v))
-        .collect())
+    let rows = csv::rows(text, blocks)?;
+    // The turn limit (a knot the controller would refuse) as a file's.
+    Trajectory::from_rows(&rows, blocks)?;
+    Ok(rows.into_iter().map(|(_, t, v)| (t, v)).collect())
 }
 
 /// A knot's `columns` (a path file's: a vector's values, an orientation's
