@@ -13,7 +13,7 @@
   (``python -m hcc.mujoco``).
 """
 
-from .client import Client, KnotsRefused, SetpointRejected, new_client_id
+from .client import Client, KnotsRefused, SampleStream, SetpointRejected, new_client_id
 from .driver import Action, CommandRejection, Driver, DriverSettings, Offer, StopReason
 from .msgs import (
     ANSWER_ACCEPTED,
@@ -26,6 +26,8 @@ from .msgs import (
     MAX_SETPOINT_CLIENTS,
     MAX_KNOTS_PER_MESSAGE,
     MAX_TASK_DIM,
+    NO_KNOT,
+    PATH_DERIVATIVES,
     PATH_EXTEND,
     PATH_NEW,
     SETPOINT_DAMPING,
@@ -74,7 +76,10 @@ __all__ = [
     "MAX_KNOTS_PER_MESSAGE",
     "MAX_TASK_DIM",
     "KnotsRefused",
+    "SampleStream",
     "MsgError",
+    "NO_KNOT",
+    "PATH_DERIVATIVES",
     "PATH_EXTEND",
     "PATH_NEW",
     "PathKnots",

@@ -75,17 +75,28 @@ class SetpointRejected(SetpointError):
 class KnotsRefused(SetpointError):
     """The controller (or the checks before sending) refused a message of a
     path: :attr:`first`, :attr:`last` are its knots (0-based in what was
-    sent), :attr:`cause` the refusal (:class:`SetpointRejected` or
-    :class:`~hcc.msgs.SetpointError`)."""
+    sent), :attr:`knot` the knot refused when the refusal is one knot's (its
+    limits, workspace, order, quaternion, the start), :attr:`cause` the
+    refusal (:class:`SetpointRejected` or :class:`~hcc.msgs.SetpointError`)."""
 
-    def __init__(self, first: int, last: int, times: Sequence[float], cause: Exception) -> None:
+    def __init__(
+        self,
+        first: int,
+        last: int,
+        times: Sequence[float],
+        cause: Exception,
+        knot: int | None = None,
+    ) -> None:
         rejection = getattr(cause, "rejection", None)
-        super().__init__(
-            rejection,
-            f"knots {first}..={last} (t = {times[first]} s … {times[last]} s): {cause}",
+        where = (
+            f"knot {knot} (t = {times[knot]} s)"
+            if knot is not None and 0 <= knot < len(times)
+            else f"knots {first}..={last} (t = {times[first]} s … {times[last]} s)"
         )
+        super().__init__(rejection, f"{where}: {cause}")
         self.first: int = first
         self.last: int = last
+        self.knot: int | None = knot
         self.cause: Exception = cause
 
 
@@ -329,36 +340,51 @@ class Client:
         if not times or len(times) != len(points):
             raise ValueError("give as many points as times, at least one")
         answer: SetpointAnswer | None = None
-        if self._paths is None:
-            self._paths = self._services.publisher("path")
         for first in range(0, len(times), MAX_KNOTS_PER_MESSAGE):
             last = min(first + MAX_KNOTS_PER_MESSAGE, len(times)) - 1
             msg = PathKnots.zeroed()
-            msg.client_id = self._client_id
             msg.level = level
             msg.flags = PATH_NEW if (first == 0 and not extend) else PATH_EXTEND
             msg.apply_at_state_seq = start_at_state_seq
-            try:
-                for k in range(first, last + 1):
+            for k in range(first, last + 1):
+                try:
                     msg.push(times[k], points[k])
-            except Exception as e:
-                raise KnotsRefused(first, last, times, e) from e
-            found = msg.check()
+                except Exception as e:
+                    raise KnotsRefused(first, last, times, e, k) from e
+            found, knot = msg.check_knot()
             if found is not None:
-                raise KnotsRefused(first, last, times, SetpointError(found, str(found)))
-            self._seq += 1
-            msg.header.seq = self._seq
-            msg.header.stamp_ns = time.monotonic_ns()
-            try:
-                self._paths.send_copy(msg)
-            except Exception as e:  # iceoryx2 raises its own exception types
-                raise ipc.IpcError(f"cannot send the path: {e!r}") from e
+                at = None if knot is None else first + knot
+                raise KnotsRefused(first, last, times, SetpointError(found, str(found)), at)
+            self._send_path(msg)
             try:
                 answer = self.wait_until_accepted(self._seq, timeout)
-            except (SetpointRejected, TimeoutError) as e:
+            except SetpointRejected as e:
+                knot = e.answer.refused_knot()
+                at = None if knot is None else first + knot
+                raise KnotsRefused(first, last, times, e, at) from e
+            except TimeoutError as e:
                 raise KnotsRefused(first, last, times, e) from e
         assert answer is not None
         return answer
+
+    def stream_samples(self, level: int, *, start_at_state_seq: int = 0, timeout: float = 2.0) -> "SampleStream":
+        """A :class:`SampleStream` for ``level``: its path sent sample by
+        sample (teleoperation, a policy)."""
+        return SampleStream(self, level, start_at_state_seq, timeout)
+
+    def _send_path(self, msg: PathKnots) -> int:
+        """Sends one path message as this client's next; returns its seq."""
+        if self._paths is None:
+            self._paths = self._services.publisher("path")
+        msg.client_id = self._client_id
+        self._seq += 1
+        msg.header.seq = self._seq
+        msg.header.stamp_ns = time.monotonic_ns()
+        try:
+            self._paths.send_copy(msg)
+        except Exception as e:  # iceoryx2 raises its own exception types
+            raise ipc.IpcError(f"cannot send the path: {e!r}") from e
+        return self._seq
 
     def wait_until_accepted(self, seq: int, timeout: float = 1.0) -> SetpointAnswer:
         """Waits for the controller's answer to this client's setpoint ``seq``
@@ -430,3 +456,87 @@ def _gain_dim(values: Any) -> int:
         return int(shape[0])
     values = list(values)
     return len(values)
+
+
+class SampleStream:
+    """One level's path sent sample by sample as it is produced — a
+    teleoperation device, a learned policy (docs/tracking.md, "Samples"). A
+    sample is a knot with its velocity and acceleration in the level's
+    goal-velocity coordinates (a position's rates; an orientation's ω and ω̇
+    in the base frame); t is in s of the path's own time, from 0 at the first
+    sample, which must be at the level's equilibrium.
+
+    The controller interpolates with exactly these derivatives and needs one
+    sample ahead of where the path is: stamp each sample a lead (a few
+    control periods, more on a loaded host) ahead of the path. A stream that
+    stops comes to rest on its last sample and is over (counted as a stopped
+    path); begin a new stream then.
+
+    :meth:`send` begins the path with the first sample and waits for the
+    answer; later samples are sent one message each without waiting, and a
+    refusal of any of them raises :class:`KnotsRefused` at the next
+    :meth:`send` or :meth:`check`."""
+
+    def __init__(self, client: "Client", level: int, start_at_state_seq: int = 0, timeout: float = 2.0) -> None:
+        self._client = client
+        self.level: int = level
+        self._start_at = start_at_state_seq
+        self._timeout = timeout
+        self._times: list[float] = []
+        self._seqs: dict[int, int] = {}
+        self._rejected_before = 0
+
+    @property
+    def sent(self) -> int:
+        """Samples sent so far."""
+        return len(self._times)
+
+    def send(
+        self,
+        t: float,
+        values: Sequence[float],
+        velocity: Sequence[float],
+        acceleration: Sequence[float],
+    ) -> None:
+        """Sends one sample (the first begins the path and waits for its answer)."""
+        self.check()
+        msg = PathKnots.zeroed()
+        msg.level = self.level
+        msg.flags = PATH_EXTEND if self._times else PATH_NEW
+        msg.apply_at_state_seq = self._start_at
+        k = len(self._times)
+        times = self._times + [float(t)]
+        try:
+            msg.push_sample(t, values, velocity, acceleration)
+        except Exception as e:
+            raise KnotsRefused(k, k, times, e, k) from e
+        found, _ = msg.check_knot()
+        if found is not None:
+            raise KnotsRefused(k, k, times, SetpointError(found, str(found)), k)
+        seq = self._client._send_path(msg)
+        self._times.append(float(t))
+        self._seqs[seq] = k
+        if k == 0:
+            try:
+                answer = self._client.wait_until_accepted(seq, self._timeout)
+            except SetpointRejected as e:
+                self._times.clear()
+                raise KnotsRefused(0, 0, times, e, 0) from e
+            self._rejected_before = answer.rejected
+
+    def check(self) -> None:
+        """Raises :class:`KnotsRefused` if the controller refused a sample sent so far."""
+        if not self._times:
+            return
+        t = self._client._poll_telemetry()
+        answer = t.answer_for(self._client._client_id) if t is not None else None
+        if answer is None or answer.rejected <= self._rejected_before:
+            return
+        self._rejected_before = answer.rejected
+        copy = SetpointAnswer.from_buffer_copy(answer)
+        k = self._seqs.get(int(answer.seq)) if answer.code != ANSWER_ACCEPTED else None
+        if k is None:
+            # A later sample was answered since: the refused one is not known.
+            last = len(self._times) - 1
+            raise KnotsRefused(0, last, self._times, SetpointError(None, "a sample was refused"))
+        raise KnotsRefused(k, k, self._times, SetpointRejected(copy), k)

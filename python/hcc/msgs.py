@@ -26,7 +26,7 @@ from typing import Any, Sequence
 DRIVER_SCHEMA_VERSION: int = 3
 #: Version of the client-facing part (setpoints, telemetry, rejection codes);
 #: part of their type names (``@client<N>``).
-CLIENT_SCHEMA_VERSION: int = 6
+CLIENT_SCHEMA_VERSION: int = 7
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -365,6 +365,8 @@ class SetpointAnswer(ctypes.Structure):
         ("duration_s", ctypes.c_double),
         ("rejected", ctypes.c_uint32),
         ("late", ctypes.c_uint32),
+        ("knot", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
     ]
     #: The client's :attr:`Setpoint.client_id`.
     client_id: int
@@ -384,6 +386,11 @@ class SetpointAnswer(ctypes.Structure):
     #: Setpoints of this client applied late so far (they arrived after the
     #: state of their :attr:`Setpoint.apply_at_state_seq`).
     late: int
+    #: The knot a refused :class:`PathKnots` message was refused for, 0-based
+    #: in the message; :data:`NO_KNOT` when the answer names no knot.
+    knot: int
+    #: Zero.
+    reserved: int
 
     @staticmethod
     def type_name() -> str:
@@ -393,6 +400,10 @@ class SetpointAnswer(ctypes.Structure):
     def accepted(self) -> bool:
         """Whether the setpoint was accepted."""
         return self.code == ANSWER_ACCEPTED
+
+    def refused_knot(self) -> "int | None":
+        """The refused knot (0-based in its message), if the answer names one."""
+        return None if self.knot == NO_KNOT else int(self.knot)
 
     def rejection(self) -> "SetpointRejection | None":
         """The rejection, None when accepted or for an unknown code."""
@@ -984,8 +995,13 @@ MAX_PATH_COLUMNS: int = MAX_TASK_DIM
 PATH_NEW: int = 1 << 0
 #: :attr:`PathKnots.flags`: the knots extend the level's running path.
 PATH_EXTEND: int = 1 << 1
+#: :attr:`PathKnots.flags`, with :data:`PATH_NEW` or :data:`PATH_EXTEND`:
+#: the knots carry their velocity and acceleration (samples).
+PATH_DERIVATIVES: int = 1 << 2
 #: Every :attr:`PathKnots.flags` bit of this schema.
-PATH_FLAGS_KNOWN: int = PATH_NEW | PATH_EXTEND
+PATH_FLAGS_KNOWN: int = PATH_NEW | PATH_EXTEND | PATH_DERIVATIVES
+#: :attr:`SetpointAnswer.knot` of an answer that names no knot.
+NO_KNOT: int = 0xFFFF_FFFF
 
 _PATH_REJECTION_TEXT: dict[int, str] = {
     201: "the message must either begin a path or extend one",
@@ -1045,7 +1061,10 @@ class PathKnots(ctypes.Structure):
     and the values in a path file's columns (a position's x y z, an
     orientation's quaternion w x y z, a joint level's values). ``flags`` is
     :data:`PATH_NEW` (begin a path, at the level's equilibrium) or
-    :data:`PATH_EXTEND` (knots later than the running path's last)."""
+    :data:`PATH_EXTEND` (knots later than the running path's last), with
+    :data:`PATH_DERIVATIVES` when the knots are samples carrying their
+    velocity and acceleration in the level's goal-velocity coordinates (an
+    orientation's ω and ω̇ in the base frame, 3 entries)."""
 
     _fields_ = [
         ("header", Header),
@@ -1057,6 +1076,8 @@ class PathKnots(ctypes.Structure):
         ("apply_at_state_seq", ctypes.c_uint64),
         ("t", ctypes.c_double * MAX_KNOTS_PER_MESSAGE),
         ("values", (ctypes.c_double * MAX_PATH_COLUMNS) * MAX_KNOTS_PER_MESSAGE),
+        ("velocity", (ctypes.c_double * MAX_TASK_DIM) * MAX_KNOTS_PER_MESSAGE),
+        ("acceleration", (ctypes.c_double * MAX_TASK_DIM) * MAX_KNOTS_PER_MESSAGE),
     ]
     header: Header
     client_id: int
@@ -1093,11 +1114,52 @@ class PathKnots(ctypes.Structure):
             self.values[self.count][a] = v
         self.count += 1
 
+    def push_sample(
+        self,
+        t: float,
+        values: Sequence[float],
+        velocity: Sequence[float],
+        acceleration: Sequence[float],
+    ) -> None:
+        """Appends a sample: a knot with its velocity and acceleration (the
+        level's dimension each) and sets :data:`PATH_DERIVATIVES`."""
+        velocity = _floats(velocity)
+        acceleration = _floats(acceleration)
+        if len(velocity) != len(acceleration) or len(velocity) > min(len(values), MAX_TASK_DIM):
+            raise MsgError(
+                f"path sample: {len(velocity)} rates and {len(acceleration)} accelerations "
+                f"for {len(values)} values"
+            )
+        k = int(self.count)
+        self.push(t, values)
+        self.flags |= PATH_DERIVATIVES
+        for a in range(len(velocity)):
+            self.velocity[k][a] = velocity[a]
+            self.acceleration[k][a] = acceleration[a]
+
     def check(self) -> "SetpointRejection | PathRejection | None":
         """The model-free checks of ``PathKnots::validate``; None when it passes."""
+        return self.check_knot()[0]
+
+    def check_knot(self) -> "tuple[SetpointRejection | PathRejection | None, int | None]":
+        """:meth:`check` and the knot (0-based) its refusal is about, if one."""
+        found = self._check_message()
+        if found is not None:
+            return found, None
+        for k in range(self.count):
+            t = self.t[k]
+            values = list(self.values[k])[: self.columns]
+            values += list(self.velocity[k])[: self.columns] + list(self.acceleration[k])[: self.columns]
+            if not math.isfinite(t) or not all(math.isfinite(v) for v in values):
+                return SetpointRejection.NON_FINITE, k
+            if t < 0.0 or (k > 0 and t <= self.t[k - 1]):
+                return PathRejection.NOT_INCREASING, k
+        return None, None
+
+    def _check_message(self) -> "SetpointRejection | PathRejection | None":
         if self.header.schema_version != CLIENT_SCHEMA_VERSION:
             return SetpointRejection.SCHEMA_MISMATCH
-        if self.flags not in (PATH_NEW, PATH_EXTEND):
+        if self.flags & ~PATH_DERIVATIVES not in (PATH_NEW, PATH_EXTEND):
             return PathRejection.BAD_FLAGS
         if self.level >= MAX_LEVELS:
             return SetpointRejection.LEVEL_CAPACITY
@@ -1105,13 +1167,6 @@ class PathKnots(ctypes.Structure):
             return PathRejection.COLUMN_MISMATCH
         if not 0 < self.count <= MAX_KNOTS_PER_MESSAGE:
             return PathRejection.KNOT_COUNT
-        for k in range(self.count):
-            t = self.t[k]
-            values = list(self.values[k])[: self.columns]
-            if not math.isfinite(t) or not all(math.isfinite(v) for v in values):
-                return SetpointRejection.NON_FINITE
-            if t < 0.0 or (k > 0 and t <= self.t[k - 1]):
-                return PathRejection.NOT_INCREASING
         return None
 
 

@@ -164,5 +164,87 @@ def test_follow_sends_a_path_that_the_tcp_tracks(tmp_path: pathlib.Path) -> None
         far = [start[0] + 0.15, start[1], start[2]]
         with pytest.raises(KnotsRefused) as e:
             client.follow(0, [0.0, 0.5], [far, far], timeout=5.0)
-        assert (e.value.first, e.value.last) == (0, 1)
+        assert (e.value.first, e.value.last, e.value.knot) == (0, 1, 0)
         assert e.value.cause.path_rejection is PathRejection.STARTS_AWAY, e.value
+
+
+def _circle_sample(start: list[float], t: float) -> tuple[list[float], list[float], list[float]]:
+    """The circle of :func:`_circle` at ``t`` with its velocity and acceleration."""
+    w = 2 * math.pi * 0.25
+    x = min(t, 1.0)
+    if t <= 1.0:
+        phase = x**6 - 3 * x**5 + 2.5 * x**4
+        dphase = 6 * x**5 - 15 * x**4 + 10 * x**3
+        ddphase = 30 * x**4 - 60 * x**3 + 30 * x**2
+    else:
+        phase, dphase, ddphase = t - 0.5, 1.0, 0.0
+    a, da, dda = w * phase, w * dphase, w * ddphase
+    s, c, r = math.sin(a), math.cos(a), 0.05
+    return (
+        [start[0], start[1] + r * s, start[2] + r * (1 - c)],
+        [0.0, r * da * c, r * da * s],
+        [0.0, r * dda * c - r * da * da * s, r * dda * s + r * da * da * c],
+    )
+
+
+def test_a_device_streams_samples_that_the_tcp_tracks_and_rests_on_the_last(
+    tmp_path: pathlib.Path,
+) -> None:
+    """Client.stream_samples (docs/tracking.md, "Samples"): a device's samples
+    at 100 Hz with their velocity and acceleration, each sent 50 ms ahead of
+    the path; the TCP follows within 1 mm, and when the device stops sending
+    the arm comes to rest on its last sample. A sample out of reach is
+    refused naming it."""
+    from hcc import KnotsRefused
+
+    period, lead, sampled = 0.01, 0.05, 3.0
+    with (
+        sim_pair(SCENARIO, tmp_path) as (ns, prefix, ctl, plant),
+        Client(ns, file_prefix=prefix) as client,
+    ):
+        client.wait_until_converged(0, 1e-3, timeout=30.0)
+        t = client.latest_telemetry()
+        assert t is not None
+        start = t.goal_list(0)
+        stream = client.stream_samples(0, timeout=5.0)
+        n = int(round(sampled / period)) + 1
+        worst = 0.0
+        began = time.monotonic()
+        for k in range(n):
+            tk = k * period
+            wait = began + tk - lead - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            stream.send(tk, *_circle_sample(start, tk))
+            if k == 0:
+                began = time.monotonic()
+            latest = client.latest_telemetry()
+            if latest is not None and 1.0 < time.monotonic() - began < sampled - 0.1:
+                worst = max(worst, math.hypot(*latest.task_error_list(0)))
+        stream.check()
+        assert stream.sent == n
+        time.sleep(1.5)
+        last, _, _ = _circle_sample(start, (n - 1) * period)
+        t = client.latest_telemetry()
+        assert t is not None
+        rest = math.dist(t.goal_list(0)[:3], last)
+        settled = math.hypot(*t.task_error_list(0))
+        print(
+            f"samples: largest TCP error from 1 s {worst:.3e} m; the goal {rest:.1e} m from the "
+            f"last sample, the TCP {settled:.1e} m from it"
+        )
+        assert 0.0 < worst < 1e-3
+        assert rest < 1e-9 and settled < 1e-3
+
+        # A new stream whose second sample is out of reach: refused, naming it.
+        here = t.goal_list(0)[:3]
+        bad = client.stream_samples(0, timeout=5.0)
+        bad.send(0.0, here, [0.0] * 3, [0.0] * 3)
+        bad.send(0.05, [3.0, 0.0, 0.3], [0.0] * 3, [0.0] * 3)
+        deadline = time.monotonic() + 2.0
+        with pytest.raises(KnotsRefused) as e:
+            while time.monotonic() < deadline:
+                bad.check()
+                time.sleep(0.005)
+        assert e.value.knot == 1, e.value
+        assert e.value.rejection is SetpointRejection.OUTSIDE_WORKSPACE, e.value

@@ -406,6 +406,7 @@ mod tests {
             duration_s: 0.0,
             rejected: 2,
             late: 0,
+            ..hcc_msgs::SetpointAnswer::EMPTY
         };
         let names = vec!["a".to_string(), "b".to_string()];
         let remote = [RemoteAnswer {

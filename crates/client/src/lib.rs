@@ -208,6 +208,20 @@ impl Client {
         seq: u64,
         timeout: Duration,
     ) -> Result<SetpointAnswer, ClientError> {
+        let a = self.wait_for_answer(seq, timeout)?;
+        match a.code {
+            ANSWER_ACCEPTED => Ok(a),
+            code => Err(rejection(code)),
+        }
+    }
+
+    /// Waits for the controller's answer to this client's message `seq`,
+    /// whatever its code.
+    pub(crate) fn wait_for_answer(
+        &mut self,
+        seq: u64,
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, ClientError> {
         let id = self.client_id;
         let deadline = Instant::now() + timeout;
         loop {
@@ -216,10 +230,7 @@ impl Client {
                 .and_then(|t| t.answer_for(id).copied())
                 .filter(|a| a.seq >= seq);
             if let Some(a) = answer {
-                return match a.code {
-                    ANSWER_ACCEPTED => Ok(a),
-                    code => Err(rejection(code)),
-                };
+                return Ok(a);
             }
             if Instant::now() >= deadline {
                 return Err(ClientError::Timeout(format!(

@@ -11,20 +11,54 @@ use hcc_msgs::{
     MAX_KNOTS_PER_MESSAGE, PATH_EXTEND, PATH_NEW, PathKnots, PathRejection, SetpointAnswer,
 };
 
-use crate::{Client, ClientError};
+use crate::{Client, ClientError, rejection};
 
-/// A refusal of one message of a path: its knots and why.
-#[derive(Debug, thiserror::Error)]
-#[error("knots {first}..={last} (t = {t_first} s … {t_last} s): {error}")]
+/// A refusal of one message of a path: its knots, the knot refused when the
+/// refusal names one, and why.
+#[derive(Debug)]
 pub struct KnotsRefused {
     /// The message's first and last knot (0-based in what was sent).
     pub first: usize,
     pub last: usize,
-    /// Their times.
+    /// The knot refused (0-based in what was sent), when the refusal is one
+    /// knot's (its limits, workspace, order, quaternion, the start).
+    pub knot: Option<usize>,
+    /// The times of the message's first and last knot.
     pub t_first: f64,
     pub t_last: f64,
     /// The refusal.
     pub error: ClientError,
+}
+
+impl KnotsRefused {
+    /// The refused knot's time, if the refusal names a knot.
+    pub fn t_knot(&self, times: &[f64]) -> Option<f64> {
+        self.knot.and_then(|k| times.get(k).copied())
+    }
+}
+
+impl std::fmt::Display for KnotsRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(k) = self.knot {
+            write!(
+                f,
+                "knot {k} (of the message with knots {}..={}): {}",
+                self.first, self.last, self.error
+            )
+        } else {
+            write!(
+                f,
+                "knots {}..={} (t = {} s … {} s): {}",
+                self.first, self.last, self.t_first, self.t_last, self.error
+            )
+        }
+    }
+}
+
+impl std::error::Error for KnotsRefused {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&self.error)
+    }
 }
 
 impl Client {
@@ -65,13 +99,16 @@ impl Client {
         (new, start_at_state_seq): (bool, u64),
         timeout: Duration,
     ) -> Result<SetpointAnswer, KnotsRefused> {
-        let refused = |first: usize, last: usize, error: ClientError| KnotsRefused {
-            first,
-            last,
-            t_first: times.get(first).copied().unwrap_or(f64::NAN),
-            t_last: times.get(last).copied().unwrap_or(f64::NAN),
-            error,
-        };
+        let refused_at =
+            |first: usize, last: usize, knot: Option<usize>, error: ClientError| KnotsRefused {
+                first,
+                last,
+                knot: knot.map(|k| first + k),
+                t_first: times.get(first).copied().unwrap_or(f64::NAN),
+                t_last: times.get(last).copied().unwrap_or(f64::NAN),
+                error,
+            };
+        let refused = |first, last, error| refused_at(first, last, None, error);
         if times.is_empty() || times.len() != points.len() {
             let e =
                 ClientError::PathInvalid(hcc_msgs::KnotsRejection::Path(PathRejection::KnotCount));
@@ -96,17 +133,19 @@ impl Client {
                 PATH_EXTEND
             };
             m.apply_at_state_seq = start_at_state_seq;
-            for (t, p) in ts.iter().zip(ps) {
+            for (k, (t, p)) in ts.iter().zip(ps).enumerate() {
                 m.push(*t, p).map_err(|r| {
-                    refused(
+                    refused_at(
                         first,
                         last,
+                        Some(k),
                         ClientError::PathInvalid(hcc_msgs::KnotsRejection::Path(r)),
                     )
                 })?;
             }
-            m.validate()
-                .map_err(|r| refused(first, last, ClientError::PathInvalid(r)))?;
+            m.validate().map_err(|r| {
+                refused_at(first, last, r.knot, ClientError::PathInvalid(r.rejection))
+            })?;
             self.seq += 1;
             m.header.seq = self.seq;
             m.header.stamp_ns = hcc_msgs::monotonic_now_ns();
@@ -114,10 +153,13 @@ impl Client {
                 .send_copy(m)
                 .map_err(|e| refused(first, last, ClientError::Send(format!("{e:?}"))))?;
             let seq = self.seq;
-            answer = Some(
-                self.wait_until_accepted(seq, timeout)
-                    .map_err(|e| refused(first, last, e))?,
-            );
+            let a = self
+                .wait_for_answer(seq, timeout)
+                .map_err(|e| refused(first, last, e))?;
+            if a.code != hcc_msgs::ANSWER_ACCEPTED {
+                return Err(refused_at(first, last, a.refused_knot(), rejection(a.code)));
+            }
+            answer = Some(a);
         }
         answer.ok_or_else(|| refused(0, 0, ClientError::Timeout("no knots sent".into())))
     }

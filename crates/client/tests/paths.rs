@@ -1,7 +1,7 @@
 //! A path sent with the client (`Client::follow`) over real iceoryx2
 //! services to the controller's decision step running in its own thread (a
 //! stand-in for the daemon): accepted message by message; a knot out of the
-//! level's workspace refused with the knots of its message and the reason.
+//! level's workspace refused with the knot, its message's knots and the reason.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -85,7 +85,8 @@ fn a_path_is_accepted_message_by_message_and_a_bad_knot_is_named() {
     points[20] = vec![3.0, 0.0, 0.3];
     let e = client.follow(0, &times, &points, 0, timeout).unwrap_err();
     println!("{e}");
-    assert_eq!((e.first, e.last), (16, 31), "{e}");
+    assert_eq!((e.first, e.last, e.knot), (16, 31, Some(20)), "{e}");
+    assert_eq!(e.t_knot(&times), Some(times[20]));
     assert!(
         matches!(
             e.error,

@@ -17,7 +17,7 @@
 
 use hcc_control::Controller;
 use hcc_msgs::{
-    ANSWER_ACCEPTED, KnotsRejection, PATH_NEW, PathKnots, PathRejection, SetpointRejection,
+    ANSWER_ACCEPTED, KnotsRefusal, NO_KNOT, PathKnots, PathRejection, SetpointRejection,
 };
 use hcc_spec::TaskUnit;
 use hcc_spec::setpoint_limits::SetpointLimits;
@@ -165,14 +165,14 @@ impl Paths {
         setpoints: &mut SetpointHandler,
     ) -> u32 {
         let result = self.check_and_take(knots, state_seq, setpoints);
-        let code = match result {
+        let (code, knot) = match result {
             Ok(()) => {
                 self.track(controller);
-                ANSWER_ACCEPTED
+                (ANSWER_ACCEPTED, NO_KNOT)
             }
-            Err(r) => r.code(),
+            Err(r) => (r.code(), r.knot_field()),
         };
-        setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
+        setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, (code, knot));
         code
     }
 
@@ -181,36 +181,36 @@ impl Paths {
         knots: &PathKnots,
         state_seq: u64,
         setpoints: &SetpointHandler,
-    ) -> Result<(), KnotsRejection> {
-        use KnotsRejection::{Path, Setpoint as Sp};
+    ) -> Result<(), KnotsRefusal> {
         knots.validate()?;
         let i = knots.level as usize;
         let goals_now = setpoints.goals_taken(i);
         let l = self
             .levels
             .get_mut(i)
-            .ok_or(Sp(SetpointRejection::UnknownLevel))?;
+            .ok_or(SetpointRejection::UnknownLevel)?;
         if knots.columns() != l.stream.columns() {
-            return Err(Path(PathRejection::ColumnMismatch));
+            return Err(PathRejection::ColumnMismatch.into());
         }
         // Every knot against the level's limits, in its goal format.
         for k in 0..knots.count() {
             let (_, columns) = knots.knot(k);
             if !hcc_trajectory::goal_of(&l.blocks, columns, &mut l.goal) {
-                return Err(Path(PathRejection::NotUnitQuaternion));
+                return Err(KnotsRefusal::at(PathRejection::NotUnitQuaternion, k));
             }
-            setpoints.check_goal(i, &l.goal).map_err(Sp)?;
+            setpoints
+                .check_goal(i, &l.goal)
+                .map_err(|r| KnotsRefusal::at(r, k))?;
         }
-        let new = knots.flags == PATH_NEW;
-        if new {
+        if knots.is_new() {
             // Its first knot at the level's equilibrium.
             let (_, first) = knots.knot(0);
             hcc_trajectory::goal_of(&l.blocks, first, &mut l.goal);
             let here = setpoints
                 .equilibrium(i)
-                .ok_or(Sp(SetpointRejection::UnknownLevel))?;
+                .ok_or(SetpointRejection::UnknownLevel)?;
             if !starts_at(&l.blocks, &l.units, &l.goal, here) {
-                return Err(Path(PathRejection::StartsAway));
+                return Err(KnotsRefusal::at(PathRejection::StartsAway, 0));
             }
             l.spare.clear();
             push_all(&mut l.spare, knots)?;
@@ -224,13 +224,13 @@ impl Paths {
         }
         let running = l.driver == Driver::Stream && l.goals_at_start == goals_now;
         if !running || l.stream.is_empty() {
-            return Err(Path(PathRejection::NoPath));
+            return Err(PathRejection::NoPath.into());
         }
         if l.stream.state(l.stream_t) != StreamState::Running {
-            return Err(Path(PathRejection::PathEnded));
+            return Err(PathRejection::PathEnded.into());
         }
         if knots.count() > l.stream.room() {
-            return Err(Path(PathRejection::PathFull));
+            return Err(PathRejection::PathFull.into());
         }
         let before = l.stream.len();
         push_all(&mut l.stream, knots).inspect_err(|_| l.stream.truncate(before))
@@ -291,19 +291,28 @@ impl Paths {
     }
 }
 
-/// Appends every knot of `knots` to `stream`.
-fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRejection> {
+/// Appends every knot of `knots` to `stream` (with their derivatives when
+/// the message carries them); a refusal names the knot.
+fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRefusal> {
+    let dim = stream.sample_dim();
     for k in 0..knots.count() {
         let (t, columns) = knots.knot(k);
-        stream.push(t, columns).map_err(|e| {
-            KnotsRejection::Path(match e {
+        let pushed = if knots.has_derivatives() {
+            let (velocity, acceleration) = knots.derivatives(k, dim);
+            stream.push_sample(t, columns, velocity, acceleration)
+        } else {
+            stream.push(t, columns)
+        };
+        pushed.map_err(|e| {
+            let reason = match e {
                 KnotError::NotIncreasing => PathRejection::NotIncreasing,
                 KnotError::NotUnit => PathRejection::NotUnitQuaternion,
                 KnotError::Turn => PathRejection::TurnTooFar,
                 KnotError::Full => PathRejection::PathFull,
                 KnotError::Ended => PathRejection::PathEnded,
                 KnotError::Malformed => PathRejection::ColumnMismatch,
-            })
+            };
+            KnotsRefusal::at(reason, k)
         })?;
     }
     Ok(())

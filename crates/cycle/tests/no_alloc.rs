@@ -98,7 +98,8 @@ fn allocates_nothing_with(reaction: Reaction) {
         }
         let mut setpoint = Some(setpoints[k as usize]);
         // A path sent at run time (docs/tracking.md): begun from level 1's
-        // equilibrium, extended, and a refused extension (back in time).
+        // equilibrium, extended by samples (with their derivatives), and a
+        // refused extension (back in time).
         if k % 250 == 100 || k % 250 == 150 || k % 250 == 160 {
             let g = &cycle.telemetry().goal[0];
             let (x, y) = (g[0], g[1]);
@@ -110,7 +111,12 @@ fn allocates_nothing_with(reaction: Reaction) {
             };
             knots.flags = flags;
             for j in 0..8 {
-                let _ = knots.push(t0 + 0.02 * j as f64, &[x + 1e-4 * j as f64, y]);
+                let (t, p) = (t0 + 0.02 * j as f64, [x + 1e-4 * j as f64, y]);
+                let _ = if k % 250 == 150 {
+                    knots.push_sample(t, &p, &[5e-3, 0.0], &[0.0, 0.0])
+                } else {
+                    knots.push(t, &p)
+                };
             }
             // As the daemon hands them on: every message of the cycle.
             let mut once = Some(knots);

@@ -234,24 +234,40 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
         }
         m
     };
+    // The answer in the client's slot: the code and the knot it names.
+    let answer = |d: &ControlCycle| {
+        let a = d.telemetry().answer_for(0).copied().unwrap();
+        (a.code, a.refused_knot())
+    };
+    let take = |d: &mut ControlCycle, m: &PathKnots| {
+        d.take_path(m);
+        answer(d)
+    };
     // Extending with no path; starting away from the equilibrium; a knot
-    // out of the arm's reach; the wrong columns; the posture past a limit.
-    assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.0, goal)])), 207);
-    assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, [0.65, 0.2, 0.3])])), 210);
+    // out of the arm's reach (the third); the wrong columns; the posture past
+    // a limit (the second knot).
+    assert_eq!(take(&mut d, &msg(PATH_EXTEND, &[(0.0, goal)])), (207, None));
     assert_eq!(
-        d.take_path(&msg(PATH_NEW, &[(0.0, goal), (1.0, [3.0, 0.0, 0.3])])),
-        16
+        take(&mut d, &msg(PATH_NEW, &[(0.0, [0.65, 0.2, 0.3])])),
+        (210, Some(0))
     );
+    let away = [
+        (0.0, goal),
+        (0.5, goal),
+        (1.0, [3.0, 0.0, 0.3]),
+        (1.5, goal),
+    ];
+    assert_eq!(take(&mut d, &msg(PATH_NEW, &away)), (16, Some(2)));
     let mut m = PathKnots::zeroed();
     m.flags = PATH_NEW;
     m.push(0.0, &[0.5, 0.2]).unwrap();
-    assert_eq!(d.take_path(&m), 204);
+    assert_eq!(take(&mut d, &m), (204, None));
     let mut m = PathKnots::zeroed();
     m.flags = PATH_NEW;
     m.level = 2;
     m.push(0.0, &[0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]).unwrap();
     m.push(1.0, &[0.0, -0.3, 0.0, -3.2, 0.0, 2.0, 0.8]).unwrap();
-    assert_eq!(d.take_path(&m), 15);
+    assert_eq!(take(&mut d, &m), (15, Some(1)));
     // A good start, then an extension that goes back in time.
     assert_eq!(d.take_path(&msg(PATH_NEW, &[(0.0, goal), (0.5, goal)])), 0);
     assert_eq!(d.take_path(&msg(PATH_EXTEND, &[(0.4, goal)])), 203);
@@ -259,4 +275,142 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
         d.take_path(&msg(PATH_EXTEND, &[(0.6, goal), (0.7, goal)])),
         0
     );
+}
+
+/// The circle's velocity and acceleration (its phase's derivatives).
+fn circle_rates(t: f64) -> ([f64; 3], [f64; 3]) {
+    let x = t.min(1.0);
+    let (phase, dphase, ddphase) = if t <= 1.0 {
+        (
+            x.powi(6) - 3.0 * x.powi(5) + 2.5 * x.powi(4),
+            6.0 * x.powi(5) - 15.0 * x.powi(4) + 10.0 * x.powi(3),
+            30.0 * x.powi(4) - 60.0 * x.powi(3) + 30.0 * x.powi(2),
+        )
+    } else {
+        (t - 0.5, 1.0, 0.0)
+    };
+    let w = 2.0 * std::f64::consts::PI * 0.25;
+    let (r, a) = (0.05, w * phase);
+    let (s, c) = a.sin_cos();
+    let (da, dda) = (w * dphase, w * ddphase);
+    (
+        [0.0, r * da * c, r * da * s],
+        [
+            0.0,
+            r * dda * c - r * da * da * s,
+            r * dda * s + r * da * da * c,
+        ],
+    )
+}
+
+/// As [`send_circle`], but a device's samples: from 2 s, one sample per
+/// cycle with its velocity and acceleration, stamped `LEAD` s ahead of the
+/// path, for `sampled` s of path; the run lasts `seconds` from 2 s.
+fn stream_circle_samples(sampled: f64, seconds: f64) -> Sent {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    const LEAD: f64 = 0.005;
+    let (sc, mut d) = cycle_of("panda-pose-posture");
+    let mut plant = hcc_plant::plant_for(&sc).unwrap();
+    let n = sc.model.nq();
+    let (period_ns, dt) = (sc.period_ns(), sc.period_s());
+    let send_at = 2000;
+    let timing = LoopTiming {
+        control_period_s: dt,
+        substeps: 10,
+        cycles: send_at + (seconds * 1000.0) as usize,
+    };
+    let mut out = Sent {
+        err: Vec::new(),
+        desired: Vec::new(),
+        tau: Vec::new(),
+        start: [0.0; 3],
+        codes: Vec::new(),
+        stopped: 0,
+    };
+    let mut next_t = 0.0;
+    run_zoh(&mut plant, timing, |k, _t, q, qd, tau| {
+        let mut s = JointState::zeroed();
+        s.set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
+            .unwrap();
+        s.header.seq = k as u64 + 1;
+        if k == send_at {
+            let g = &d.telemetry().goal[0];
+            out.start = [g[0], g[1], g[2]];
+        }
+        // Every sample up to LEAD s past where the path is.
+        let path_t = (k as f64 - send_at as f64) * dt;
+        let mut msg = PathKnots::zeroed();
+        while k >= send_at && next_t <= path_t + LEAD + 1e-9 && next_t <= sampled + 1e-9 {
+            let (v, a) = circle_rates(next_t);
+            msg.push_sample(next_t, &circle(out.start, next_t), &v, &a)
+                .unwrap();
+            next_t += dt;
+        }
+        if msg.count() > 0 {
+            msg.flags |= if out.codes.is_empty() {
+                PATH_NEW
+            } else {
+                PATH_EXTEND
+            };
+            msg.client_id = 9;
+            msg.header.seq = out.codes.len() as u64 + 1;
+            out.codes.push(d.take_path(&msg));
+        }
+        d.decide(&s, (k as u64 + 1) * period_ns);
+        if k >= send_at {
+            let t = d.telemetry();
+            let e = t.task_error(0);
+            out.err
+                .push((e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt());
+            out.desired.push([t.goal[0][0], t.goal[0][1], t.goal[0][2]]);
+            out.tau.push(d.command().tau().to_vec());
+        }
+        tau.as_mut_slice().copy_from_slice(d.command().tau());
+        Ok(())
+    })
+    .unwrap();
+    out.stopped = d.counters().core.paths_stopped;
+    out
+}
+
+#[test]
+fn a_device_s_samples_are_tracked_and_a_stream_that_stops_rests_on_its_last() {
+    // 3 s of samples, then the device goes quiet; the run goes on to 5 s.
+    let s = stream_circle_samples(3.0, 5.0);
+    assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
+    let worst = s.err[1000..2900].iter().fold(0.0_f64, |m, e| m.max(*e));
+    let off_circle = s.desired[..2990]
+        .iter()
+        .enumerate()
+        .map(|(k, x)| {
+            let c = circle(s.start, k as f64 * 1e-3);
+            ((x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt()
+        })
+        .fold(0.0_f64, f64::max);
+    assert_eq!(s.stopped, 1);
+    let last = circle(s.start, 3.0);
+    let end = s.desired[s.desired.len() - 1];
+    let step = s
+        .tau
+        .windows(2)
+        .map(|w| {
+            w[0].iter()
+                .zip(&w[1])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0_f64, f64::max);
+    let settled = s.err[s.err.len() - 1];
+    println!(
+        "device samples: TCP error from 1 s {worst:.3e} m; the path off the circle by at most \
+         {off_circle:.1e} m; stopped: at rest {settled:.2e} m from its last sample, largest torque \
+         step {step:.3} N·m"
+    );
+    assert!(worst < 1e-3, "{worst:.3e} m");
+    assert!(off_circle < 1e-9, "{off_circle:.3e} m");
+    assert!(
+        (0..3).all(|a| (end[a] - last[a]).abs() < 1e-9),
+        "{end:?} vs {last:?}"
+    );
+    assert!(settled < 1e-4 && step <= 1.0 + 1e-9, "{settled} {step}");
 }

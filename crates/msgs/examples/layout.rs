@@ -82,7 +82,8 @@ fn main() {
         ),
         (
             "SetpointAnswer",
-            fields!(SetpointAnswer: client_id, seq, answered, code, level, duration_s, rejected, late),
+            fields!(SetpointAnswer: client_id, seq, answered, code, level, duration_s, rejected, late,
+                knot, reserved),
         ),
         (
             "Telemetry",
@@ -100,7 +101,7 @@ fn main() {
         (
             "PathKnots",
             fields!(PathKnots: header, client_id, level, flags, columns, count,
-                apply_at_state_seq, t, values),
+                apply_at_state_seq, t, values, velocity, acceleration),
         ),
     ];
     let body: Vec<String> = structs

@@ -117,7 +117,7 @@
 //! layout bumps both. The version sits in every header
 //! (`header.schema_version`, checked by [`check_schema`]) and, as
 //! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
-//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client6`), so
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client7`), so
 //! iceoryx2 itself refuses to connect peers of different versions of one
 //! part when a service is opened (`IncompatibleTypes`; size and alignment
 //! are compared too). Both parts started at 3, the single schema they were
@@ -164,8 +164,8 @@ mod types;
 
 pub use error::{MsgError, NamespaceError};
 pub use path::{
-    KnotsRejection, MAX_KNOTS_PER_MESSAGE, MAX_PATH_COLUMNS, PATH_EXTEND, PATH_FLAGS_KNOWN,
-    PATH_NEW, PathKnots, PathRejection,
+    KnotsRefusal, KnotsRejection, MAX_KNOTS_PER_MESSAGE, MAX_PATH_COLUMNS, PATH_DERIVATIVES,
+    PATH_EXTEND, PATH_FLAGS_KNOWN, PATH_NEW, PathKnots, PathRejection,
 };
 pub use sequence::{CommandFreshness, SeqEvent, SequenceChecker, command_freshness};
 pub use service::{
@@ -179,7 +179,7 @@ pub use setpoint::{
     SetpointRejection, answer_code,
 };
 pub use telemetry::{
-    MAX_SETPOINT_CLIENTS, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_CONTACT,
+    MAX_SETPOINT_CLIENTS, NO_KNOT, SetpointAnswer, TELEMETRY, TELEMETRY_FLAG_CONTACT,
     TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
     TelemetryTimings,
 };
@@ -215,8 +215,12 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// [`Telemetry`] moves by 24 bytes); client schema 6: [`Telemetry::h`],
 /// [`Telemetry::potential`], [`Telemetry::tank`] and [`Telemetry::tank_valve`]
 /// (the storage H, each level's potential in it, its energy tank and the
-/// tank's valve; appended after every older field).
-pub const CLIENT_SCHEMA_VERSION: u32 = 6;
+/// tank's valve; appended after every older field); client schema 7:
+/// [`SetpointAnswer::knot`] (the knot a path message was refused for; the
+/// slot grows by 8 bytes) and a path's knots with their derivatives
+/// ([`PATH_DERIVATIVES`], [`PathKnots::velocity`],
+/// [`PathKnots::acceleration`]).
+pub const CLIENT_SCHEMA_VERSION: u32 = 7;
 
 /// The two parts of the contract, each with its own version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -13,13 +13,24 @@
 //! two knots ahead of where it is; a path that runs out of knots stops on its
 //! last knot, at rest, and is over.
 //!
+//! **Samples.** With [`PATH_DERIVATIVES`] the knots carry their velocity and
+//! acceleration ([`PathKnots::velocity`], [`PathKnots::acceleration`]) in
+//! the level's goal-velocity coordinates (a vector's rates; an
+//! orientation's angular velocity and acceleration in the base frame, 3
+//! entries for its 4 columns): a teleoperation device's or a policy's
+//! samples, at up to the control rate. The controller interpolates between
+//! them with exactly these derivatives, and a stream of samples needs only
+//! one sample ahead of where the path is.
+//!
 //! [`PathKnots::validate`] checks what needs no model: schema, bits, the
 //! capacities, finite values, t from ≥ 0 strictly increasing. The controller
 //! checks the rest against the level (its columns, joint limits, the
 //! workspace, unit quaternions, where the path starts) and answers in the
 //! client's answer slot like a setpoint ([`crate::SetpointAnswer`]), with
 //! [`crate::ANSWER_ACCEPTED`], a [`crate::SetpointRejection`] code for what the two
-//! share, or a [`PathRejection`] code (from 201). Nothing here allocates.
+//! share, or a [`PathRejection`] code (from 201), and the knot refused
+//! ([`crate::SetpointAnswer::knot`], a [`KnotsRefusal`]'s). Nothing here
+//! allocates.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -39,8 +50,11 @@ pub const MAX_PATH_COLUMNS: usize = MAX_TASK_DIM;
 pub const PATH_NEW: u32 = 1 << 0;
 /// [`PathKnots::flags`] bit: the knots extend the level's running path.
 pub const PATH_EXTEND: u32 = 1 << 1;
+/// [`PathKnots::flags`] bit, with [`PATH_NEW`] or [`PATH_EXTEND`]: the knots
+/// carry their velocity and acceleration (module docs, "Samples").
+pub const PATH_DERIVATIVES: u32 = 1 << 2;
 /// All [`PathKnots::flags`] bits defined by this schema.
-pub const PATH_FLAGS_KNOWN: u32 = PATH_NEW | PATH_EXTEND;
+pub const PATH_FLAGS_KNOWN: u32 = PATH_NEW | PATH_EXTEND | PATH_DERIVATIVES;
 
 /// Why the controller refused a path's knots (codes from 201, apart from
 /// [`SetpointRejection`]'s, with which they share the answer slots, and from
@@ -49,7 +63,8 @@ pub const PATH_FLAGS_KNOWN: u32 = PATH_NEW | PATH_EXTEND;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum PathRejection {
-    /// `flags` is neither [`PATH_NEW`] nor [`PATH_EXTEND`] alone.
+    /// `flags` is neither [`PATH_NEW`] nor [`PATH_EXTEND`] alone (with
+    /// [`PATH_DERIVATIVES`] or without).
     BadFlags = 201,
     /// `count` is 0 or above [`MAX_KNOTS_PER_MESSAGE`].
     KnotCount = 202,
@@ -182,13 +197,75 @@ impl std::fmt::Display for KnotsRejection {
     }
 }
 
+impl From<SetpointRejection> for KnotsRejection {
+    fn from(r: SetpointRejection) -> Self {
+        Self::Setpoint(r)
+    }
+}
+
+impl From<PathRejection> for KnotsRejection {
+    fn from(r: PathRejection) -> Self {
+        Self::Path(r)
+    }
+}
+
+/// A refused path message: why, and the knot it was refused for (0-based
+/// in the message) when the reason is one knot's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KnotsRefusal {
+    /// Why.
+    pub rejection: KnotsRejection,
+    /// The knot, 0-based in the message (`None`: the message as a whole).
+    pub knot: Option<usize>,
+}
+
+impl KnotsRefusal {
+    /// A refusal of knot `knot`.
+    pub fn at(rejection: impl Into<KnotsRejection>, knot: usize) -> Self {
+        Self {
+            rejection: rejection.into(),
+            knot: Some(knot),
+        }
+    }
+
+    /// The answer code.
+    pub const fn code(&self) -> u32 {
+        self.rejection.code()
+    }
+
+    /// The knot as [`crate::SetpointAnswer::knot`] carries it.
+    pub fn knot_field(&self) -> u32 {
+        self.knot.map_or(crate::NO_KNOT, |k| k as u32)
+    }
+}
+
+impl<R: Into<KnotsRejection>> From<R> for KnotsRefusal {
+    fn from(r: R) -> Self {
+        Self {
+            rejection: r.into(),
+            knot: None,
+        }
+    }
+}
+
+impl std::fmt::Display for KnotsRefusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.knot {
+            Some(k) => write!(f, "knot {k}: {}", self.rejection),
+            None => self.rejection.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for KnotsRefusal {}
+
 /// Up to [`MAX_KNOTS_PER_MESSAGE`] knots of one level's path, published by a
 /// client on `hcc/<ns>/path` (see [`crate::ServiceNames::path`]). `header.seq`
 /// is the client's sequence number (shared with its setpoints: the answer
 /// slot is the client's), `apply_at_state_seq` as a setpoint's: a new path's
 /// t = 0 is the cycle of that state (0: on receipt).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::PathKnots@client6")]
+#[type_name("hcc_msgs::PathKnots@client7")]
 #[repr(C)]
 pub struct PathKnots {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.
@@ -210,6 +287,12 @@ pub struct PathKnots {
     pub t: [f64; MAX_KNOTS_PER_MESSAGE],
     /// The knots' values, first `count` rows of `columns` entries.
     pub values: [[f64; MAX_PATH_COLUMNS]; MAX_KNOTS_PER_MESSAGE],
+    /// With [`PATH_DERIVATIVES`]: the knots' velocities, first `count` rows
+    /// of the level's dimension (module docs, "Samples"); zero otherwise.
+    /// Client schema 7.
+    pub velocity: [[f64; MAX_TASK_DIM]; MAX_KNOTS_PER_MESSAGE],
+    /// With [`PATH_DERIVATIVES`]: the knots' accelerations, as `velocity`.
+    pub acceleration: [[f64; MAX_TASK_DIM]; MAX_KNOTS_PER_MESSAGE],
 }
 
 impl PathKnots {
@@ -225,7 +308,19 @@ impl PathKnots {
             apply_at_state_seq: 0,
             t: [0.0; MAX_KNOTS_PER_MESSAGE],
             values: [[0.0; MAX_PATH_COLUMNS]; MAX_KNOTS_PER_MESSAGE],
+            velocity: [[0.0; MAX_TASK_DIM]; MAX_KNOTS_PER_MESSAGE],
+            acceleration: [[0.0; MAX_TASK_DIM]; MAX_KNOTS_PER_MESSAGE],
         }
+    }
+
+    /// Whether the knots carry their derivatives ([`PATH_DERIVATIVES`]).
+    pub fn has_derivatives(&self) -> bool {
+        self.flags & PATH_DERIVATIVES != 0
+    }
+
+    /// Whether the message begins a new path ([`PATH_NEW`]).
+    pub fn is_new(&self) -> bool {
+        self.flags & !PATH_DERIVATIVES == PATH_NEW
     }
 
     /// `count` clamped to the capacity.
@@ -262,32 +357,65 @@ impl PathKnots {
         Ok(())
     }
 
-    /// The checks that need no model (module docs).
-    pub fn validate(&self) -> Result<(), KnotsRejection> {
-        use KnotsRejection::{Path, Setpoint as Sp};
-        if self.header.schema_version != CLIENT_SCHEMA_VERSION {
-            return Err(Sp(SetpointRejection::SchemaMismatch));
+    /// Appends a sample: a knot with its velocity and acceleration (`dim`
+    /// entries each, the level's dimension) and sets [`PATH_DERIVATIVES`].
+    pub fn push_sample(
+        &mut self,
+        t: f64,
+        values: &[f64],
+        velocity: &[f64],
+        acceleration: &[f64],
+    ) -> Result<(), PathRejection> {
+        let k = self.count();
+        if velocity.len() != acceleration.len()
+            || velocity.len() > values.len()
+            || velocity.len() > MAX_TASK_DIM
+        {
+            return Err(PathRejection::ColumnMismatch);
         }
-        if self.flags != PATH_NEW && self.flags != PATH_EXTEND {
-            return Err(Path(PathRejection::BadFlags));
+        self.push(t, values)?;
+        self.flags |= PATH_DERIVATIVES;
+        self.velocity[k][..velocity.len()].copy_from_slice(velocity);
+        self.acceleration[k][..acceleration.len()].copy_from_slice(acceleration);
+        Ok(())
+    }
+
+    /// Knot `k`'s velocity and acceleration, `dim` entries each (zero
+    /// without [`PATH_DERIVATIVES`]).
+    pub fn derivatives(&self, k: usize, dim: usize) -> (&[f64], &[f64]) {
+        let dim = dim.min(MAX_TASK_DIM);
+        (&self.velocity[k][..dim], &self.acceleration[k][..dim])
+    }
+
+    /// The checks that need no model (module docs); a refusal names the
+    /// knot when it is one knot's.
+    pub fn validate(&self) -> Result<(), KnotsRefusal> {
+        if self.header.schema_version != CLIENT_SCHEMA_VERSION {
+            return Err(SetpointRejection::SchemaMismatch.into());
+        }
+        let base = self.flags & !PATH_DERIVATIVES;
+        if base != PATH_NEW && base != PATH_EXTEND {
+            return Err(PathRejection::BadFlags.into());
         }
         if self.level as usize >= MAX_LEVELS {
-            return Err(Sp(SetpointRejection::LevelCapacity));
+            return Err(SetpointRejection::LevelCapacity.into());
         }
         if self.columns == 0 || self.columns as usize > MAX_PATH_COLUMNS {
-            return Err(Path(PathRejection::ColumnMismatch));
+            return Err(PathRejection::ColumnMismatch.into());
         }
         if self.count == 0 || self.count as usize > MAX_KNOTS_PER_MESSAGE {
-            return Err(Path(PathRejection::KnotCount));
+            return Err(PathRejection::KnotCount.into());
         }
-        let n = self.count();
-        for k in 0..n {
+        // A level's dimension is at most its columns.
+        let dim = self.columns().min(MAX_TASK_DIM);
+        for k in 0..self.count() {
             let (t, v) = self.knot(k);
-            if !t.is_finite() || v.iter().any(|x| !x.is_finite()) {
-                return Err(Sp(SetpointRejection::NonFinite));
+            let (vel, acc) = self.derivatives(k, dim);
+            if !t.is_finite() || v.iter().chain(vel).chain(acc).any(|x| !x.is_finite()) {
+                return Err(KnotsRefusal::at(SetpointRejection::NonFinite, k));
             }
             if t < 0.0 || (k > 0 && t <= self.t[k - 1]) {
-                return Err(Path(PathRejection::NotIncreasing));
+                return Err(KnotsRefusal::at(PathRejection::NotIncreasing, k));
             }
         }
         Ok(())
@@ -329,7 +457,53 @@ mod tests {
         }
         let mut p = knots();
         p.t[0] = -0.1;
-        assert_eq!(p.validate().unwrap_err().code(), 203);
+        assert_eq!(
+            p.validate().unwrap_err(),
+            KnotsRefusal::at(PathRejection::NotIncreasing, 0)
+        );
+        // The knot a refusal is about.
+        let mut p = knots();
+        p.t[2] = p.t[1];
+        assert_eq!(p.validate().unwrap_err().knot, Some(2));
+        assert_eq!(p.validate().unwrap_err().knot_field(), 2);
+        let mut p = knots();
+        p.count = 0;
+        assert_eq!(p.validate().unwrap_err().knot_field(), crate::NO_KNOT);
+    }
+
+    #[test]
+    fn samples_carry_finite_derivatives_and_either_base_flag() {
+        let mut p = PathKnots::zeroed();
+        p.flags = PATH_NEW;
+        p.push_sample(0.0, &[0.4, 0.0, 0.3], &[0.1, 0.0, 0.0], &[0.0; 3])
+            .unwrap();
+        p.push_sample(
+            0.001,
+            &[0.4001, 0.0, 0.3],
+            &[0.1, 0.0, 0.0],
+            &[1.0, 0.0, 0.0],
+        )
+        .unwrap();
+        assert!(p.has_derivatives() && p.is_new());
+        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(
+            p.derivatives(1, 3),
+            (&[0.1, 0.0, 0.0][..], &[1.0, 0.0, 0.0][..])
+        );
+        p.flags = PATH_EXTEND | PATH_DERIVATIVES;
+        assert!(!p.is_new());
+        assert_eq!(p.validate(), Ok(()));
+        p.acceleration[1][2] = f64::INFINITY;
+        assert_eq!(
+            p.validate(),
+            Err(KnotsRefusal::at(SetpointRejection::NonFinite, 1))
+        );
+        assert_eq!(
+            p.push_sample(0.002, &[0.4, 0.0, 0.3], &[0.0; 4], &[0.0; 4]),
+            Err(PathRejection::ColumnMismatch)
+        );
+        p.flags = PATH_NEW | PATH_EXTEND | PATH_DERIVATIVES;
+        assert_eq!(p.validate().unwrap_err().code(), 201);
     }
 
     #[test]

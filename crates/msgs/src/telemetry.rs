@@ -98,7 +98,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@client6")]
+    #[type_name("hcc_msgs::TelemetryCounters@client7")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -138,7 +138,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@client6")]
+#[type_name("hcc_msgs::TelemetryTimings@client7")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -156,9 +156,13 @@ pub struct TelemetryTimings {
 /// the slot of the client heard from longest ago is reused).
 pub const MAX_SETPOINT_CLIENTS: usize = 8;
 
-/// The controller's answer to the last setpoint of one client.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@client6")]
+/// [`SetpointAnswer::knot`] of an answer about no single knot.
+pub const NO_KNOT: u32 = u32::MAX;
+
+/// The controller's answer to the last setpoint (or path message) of one
+/// client.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hcc_msgs::SetpointAnswer@client7")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -179,6 +183,40 @@ pub struct SetpointAnswer {
     /// Setpoints of this client applied late so far: they arrived after the
     /// state of their [`crate::Setpoint::apply_at_state_seq`].
     pub late: u32,
+    /// The knot a refused [`crate::PathKnots`] message was refused for,
+    /// 0-based in the message; [`NO_KNOT`] when the answer is about no
+    /// single knot (accepted, a setpoint, or the message as a whole). Client
+    /// schema 7.
+    pub knot: u32,
+    /// Zero (the slot stays a multiple of 8 bytes).
+    pub reserved: u32,
+}
+
+impl SetpointAnswer {
+    /// An empty slot.
+    pub const EMPTY: SetpointAnswer = SetpointAnswer {
+        client_id: 0,
+        seq: 0,
+        answered: 0,
+        code: 0,
+        level: 0,
+        duration_s: 0.0,
+        rejected: 0,
+        late: 0,
+        knot: NO_KNOT,
+        reserved: 0,
+    };
+
+    /// The refused knot, if the answer names one.
+    pub fn refused_knot(&self) -> Option<usize> {
+        (self.knot != NO_KNOT).then_some(self.knot as usize)
+    }
+}
+
+impl Default for SetpointAnswer {
+    fn default() -> Self {
+        Self::EMPTY
+    }
 }
 
 /// Per-cycle diagnostics of the controller, published at the control rate.
@@ -187,7 +225,7 @@ pub struct SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@client6")]
+#[type_name("hcc_msgs::Telemetry@client7")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -291,16 +329,7 @@ impl Telemetry {
             stiffness_diag: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
             damping_diag: [[0.0; MAX_TASK_DIM]; MAX_LEVELS],
             transition_progress: [0.0; MAX_LEVELS],
-            setpoint_answers: [SetpointAnswer {
-                client_id: 0,
-                seq: 0,
-                answered: 0,
-                code: 0,
-                level: 0,
-                duration_s: 0.0,
-                rejected: 0,
-                late: 0,
-            }; MAX_SETPOINT_CLIENTS],
+            setpoint_answers: [SetpointAnswer::EMPTY; MAX_SETPOINT_CLIENTS],
             tau_ext: [0.0; MAX_JOINTS],
             h: 0.0,
             potential: [0.0; MAX_LEVELS],

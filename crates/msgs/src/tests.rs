@@ -56,7 +56,7 @@ fn layout_has_no_hidden_padding() {
     assert_eq!(offset_of!(Telemetry, h), telemetry_fields - appended_6);
     assert_eq!(size_of::<TelemetryCounters>(), 14 * 8);
     assert_eq!(size_of::<TelemetryTimings>(), 4 * 8);
-    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 2 * 4);
+    assert_eq!(size_of::<SetpointAnswer>(), 3 * 8 + 2 * 4 + 8 + 4 * 4);
     for a in [
         align_of::<JointState>(),
         align_of::<TorqueCommand>(),

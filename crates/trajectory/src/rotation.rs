@@ -54,6 +54,23 @@ pub(crate) fn body_rates(
     (jr * rd, jr * rdd + jr_dot * rd)
 }
 
+/// The inverse of [`body_rates`]: the rotation vector's rates (ṙ, r̈) at r
+/// for the body angular velocity `wb` and acceleration `wdb`,
+/// ṙ = J_r⁻¹ ω_b, r̈ = J_r⁻¹ (ω̇_b − J̇_r ṙ); `None` where J_r is singular
+/// (‖r‖ a multiple of 2π, beyond any path's turn).
+pub(crate) fn coordinate_rates(
+    r: &Vector3<f64>,
+    wb: &Vector3<f64>,
+    wdb: &Vector3<f64>,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let [a, b, _, _] = coefficients(r.norm());
+    let rx = r.cross_matrix();
+    let jr_inv = (Matrix3::identity() - rx * a + rx * rx * b).try_inverse()?;
+    let rd = jr_inv * wb;
+    let (_, jr_dot_rd) = body_rates(r, &rd, &Vector3::zeros());
+    Some((rd, jr_inv * (wdb - jr_dot_rd)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -89,6 +106,18 @@ mod tests {
                 (wd - fd_wd).norm() < 1e-4 * (1.0 + wd.norm()),
                 "ω̇ at scale {scale}: {wd} {fd_wd}"
             );
+        }
+    }
+
+    #[test]
+    fn coordinate_rates_invert_body_rates() {
+        for scale in [0.0, 1e-3, 0.04, 0.7, 2.5] {
+            let r = Vector3::new(0.3, -0.8, 0.5) * scale;
+            let (rd, rdd) = (Vector3::new(0.2, 0.1, -0.4), Vector3::new(-1.0, 0.5, 0.3));
+            let (wb, wdb) = body_rates(&r, &rd, &rdd);
+            let (rd2, rdd2) = coordinate_rates(&r, &wb, &wdb).unwrap();
+            assert!((rd2 - rd).norm() < 1e-12, "ṙ at scale {scale}");
+            assert!((rdd2 - rdd).norm() < 1e-12, "r̈ at scale {scale}");
         }
     }
 

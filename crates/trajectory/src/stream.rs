@@ -11,18 +11,25 @@
 //! v_k = (h₀² Δ₁ + h₁² Δ₀) / (h₀ h₁ (h₀ + h₁)),  a_k = 2 (h₀ Δ₁ − h₁ Δ₀) / (h₀ h₁ (h₀ + h₁)),
 //!
 //! Δ₀ = y_k − y_{k−1}, Δ₁ = y_{k+1} − y_k, h₀, h₁ the two intervals. The
-//! first knot is at rest. Each segment is the quintic Hermite polynomial
+//! first knot is at rest. A **sample** ([`PathStream::push_sample`]) brings
+//! its own velocity and acceleration instead (an orientation's angular
+//! velocity ω and acceleration ω̇ in the base frame, turned into the rotation
+//! vector's rates by the inverse right Jacobian: ṙ = J_r⁻¹ Rᵀω,
+//! r̈ = J_r⁻¹ (Rᵀω̇ − J̇_r ṙ)). Each segment is the quintic Hermite polynomial
 //! between the states (y, v, a) of its two knots (C² across knots), and is
 //! fixed when the path enters it: later knots change only segments not yet
 //! begun.
 //!
 //! **Lookahead and the stop.** Entering the segment from knot k to k + 1
-//! needs knot k + 2 (for k + 1's derivatives). Without it the path stops: the
-//! segment ends at rest on knot k + 1, stretched to at least
-//! 3 max|v_k| / `stop_deceleration` s so that it decelerates smoothly (it may
-//! pass the knot and come back to it), and the path has ended — further
-//! knots are refused. A stream therefore keeps two knots ahead of where the
-//! path is. Allocation-free after [`PathStream::new`].
+//! needs knot k + 2 (for k + 1's derivatives) unless k + 1 is a sample.
+//! Without it the path stops: the segment ends at rest on knot k + 1,
+//! stretched to at least 3 max|v_k| / `stop_deceleration` s so that it
+//! decelerates smoothly (it may pass the knot and come back to it), and the
+//! path has ended — further knots are refused. Past its last knot with
+//! nothing after (a stream of samples that stops, or a path of one knot), the
+//! path comes to rest on that knot the same way. A stream therefore keeps two
+//! knots, or one sample, ahead of where the path is. Allocation-free after
+//! [`PathStream::new`].
 
 use crate::{Block, MAX_TURN, PathSample, spline};
 use nalgebra::UnitQuaternion;
@@ -63,6 +70,9 @@ pub enum StreamState {
     Done,
 }
 
+/// The shortest stop, s (a stop from rest on the knot it is at).
+const MIN_STOP_S: f64 = 1e-3;
+
 /// The segment being executed.
 #[derive(Clone, Debug)]
 struct Segment {
@@ -81,9 +91,13 @@ pub struct PathStream {
     /// Interpolated coordinates per knot.
     c: usize,
     capacity: usize,
-    /// The ring: time, coordinates (c per knot).
+    /// The ring: time, coordinates (c per knot), a sample's velocity and
+    /// acceleration in the coordinates (c per knot) and whether it is one.
     t: Vec<f64>,
     y: Vec<f64>,
+    yd: Vec<f64>,
+    ydd: Vec<f64>,
+    given: Vec<bool>,
     /// Absolute index of the oldest knot kept, and how many are kept.
     first: u64,
     len: usize,
@@ -114,6 +128,9 @@ impl PathStream {
             capacity,
             t: vec![0.0; capacity],
             y: vec![0.0; capacity * c],
+            yd: vec![0.0; capacity * c],
+            ydd: vec![0.0; capacity * c],
+            given: vec![false; capacity],
             first: 0,
             len: 0,
             references: vec![UnitQuaternion::identity(); rotations],
@@ -191,6 +208,41 @@ impl PathStream {
     /// Appends a knot at path time `t` with `columns` (a vector's values, an
     /// orientation's unit quaternion w x y z). Allocation-free.
     pub fn push(&mut self, t: f64, columns: &[f64]) -> Result<(), KnotError> {
+        self.push_knot(t, columns, None)
+    }
+
+    /// Appends a sample: a knot with its `velocity` and `acceleration` in
+    /// the goal's coordinates (a vector's rates, an orientation's ω and ω̇
+    /// in the base frame; [`PathSample`]'s layout). Allocation-free.
+    pub fn push_sample(
+        &mut self,
+        t: f64,
+        columns: &[f64],
+        velocity: &[f64],
+        acceleration: &[f64],
+    ) -> Result<(), KnotError> {
+        let m = self.sample_dim();
+        if velocity.len() != m
+            || acceleration.len() != m
+            || velocity.iter().chain(acceleration).any(|x| !x.is_finite())
+        {
+            return Err(KnotError::Malformed);
+        }
+        self.push_knot(t, columns, Some((velocity, acceleration)))
+    }
+
+    /// The goal's dimension (a [`PathSample`]'s vectors, a sample's
+    /// velocity and acceleration).
+    pub fn sample_dim(&self) -> usize {
+        self.c
+    }
+
+    fn push_knot(
+        &mut self,
+        t: f64,
+        columns: &[f64],
+        rates: Option<(&[f64], &[f64])>,
+    ) -> Result<(), KnotError> {
         if self.segment.as_ref().is_some_and(|s| s.stop) {
             return Err(KnotError::Ended);
         }
@@ -237,9 +289,52 @@ impl PathStream {
             col += b.columns();
         }
         let s = self.slot(self.first + self.len as u64);
+        let range = s * self.c..(s + 1) * self.c;
+        if let Some((velocity, acceleration)) = rates {
+            self.coordinate_rates(velocity, acceleration, range.clone())?;
+        }
         self.t[s] = t;
-        self.y[s * self.c..(s + 1) * self.c].copy_from_slice(&self.scratch);
+        self.y[range].copy_from_slice(&self.scratch);
+        self.given[s] = rates.is_some();
         self.len += 1;
+        Ok(())
+    }
+
+    /// A sample's rates in the interpolated coordinates (the knot's
+    /// coordinates in `scratch`) into the ring's `range`.
+    fn coordinate_rates(
+        &mut self,
+        velocity: &[f64],
+        acceleration: &[f64],
+        range: std::ops::Range<usize>,
+    ) -> Result<(), KnotError> {
+        let (mut i, mut rot) = (0, 0);
+        let (yd, ydd) = (&mut self.yd[range.clone()], &mut self.ydd[range]);
+        for b in &self.blocks {
+            match b {
+                Block::Vector(n) => {
+                    yd[i..i + n].copy_from_slice(&velocity[i..i + n]);
+                    ydd[i..i + n].copy_from_slice(&acceleration[i..i + n]);
+                    i += n;
+                }
+                Block::Rotation => {
+                    let r = nalgebra::Vector3::from_column_slice(&self.scratch[i..i + 3]);
+                    let rotation = self.references[rot] * UnitQuaternion::from_scaled_axis(r);
+                    let w = rotation.inverse_transform_vector(
+                        &nalgebra::Vector3::from_column_slice(&velocity[i..i + 3]),
+                    );
+                    let wd = rotation.inverse_transform_vector(
+                        &nalgebra::Vector3::from_column_slice(&acceleration[i..i + 3]),
+                    );
+                    let (rd, rdd) =
+                        crate::rotation::coordinate_rates(&r, &w, &wd).ok_or(KnotError::Turn)?;
+                    yd[i..i + 3].copy_from_slice(rd.as_slice());
+                    ydd[i..i + 3].copy_from_slice(rdd.as_slice());
+                    i += 3;
+                    rot += 1;
+                }
+            }
+        }
         Ok(())
     }
 
@@ -252,24 +347,43 @@ impl PathStream {
         self.t[self.slot(k)]
     }
 
+    /// Knot k's velocity and acceleration in coordinate i, if it is a sample.
+    fn rates(&self, k: u64, i: usize) -> Option<(f64, f64)> {
+        let s = self.slot(k);
+        self.given[s].then(|| (self.yd[s * self.c + i], self.ydd[s * self.c + i]))
+    }
+
     /// Enters the segment from knot `k` (kept) to k + 1, starting from
-    /// `start_v`, `start_a`; its end state from k + 2, or a stop.
+    /// `start_v`, `start_a`; its end state from k + 1's sample, from k + 2,
+    /// or a stop (to rest on k + 1, or on k itself when it is the last).
     fn enter(&mut self, k: u64) {
         // Knots before k are no longer needed.
         let drop = k.saturating_sub(self.first) as usize;
         self.first += drop as u64;
         self.len -= drop.min(self.len);
         let last = self.first + self.len as u64 - 1;
-        let (t0, t1) = (self.tk(k), self.tk(k + 1));
-        let mut h = t1 - t0;
-        let stop = k + 1 == last;
-        if stop {
+        let end = (k + 1).min(last);
+        let t0 = self.tk(k);
+        let mut h = self.tk(end) - t0;
+        let sample = end > k && self.given[self.slot(end)];
+        let stop = !sample && end + 1 > last;
+        if sample {
+            for i in 0..self.c {
+                (self.end_v[i], self.end_a[i]) = self.rates(end, i).unwrap_or((0.0, 0.0));
+            }
+        } else if stop {
             self.end_v.fill(0.0);
             self.end_a.fill(0.0);
             let v = self.start_v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-            h = h.max(3.0 * v / self.stop_deceleration);
+            let a = self.start_a.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+            // Long enough to shed the velocity and the acceleration at about
+            // the stop's deceleration, and never empty.
+            h = h
+                .max(3.0 * v / self.stop_deceleration)
+                .max(a / self.stop_deceleration)
+                .max(MIN_STOP_S);
         } else {
-            let (h0, h1) = (h, self.tk(k + 2) - t1);
+            let (h0, h1) = (h, self.tk(k + 2) - self.tk(k + 1));
             for i in 0..self.c {
                 let (d0, d1) = (
                     self.yk(k + 1, i) - self.yk(k, i),
@@ -284,7 +398,7 @@ impl PathStream {
             self.coeffs[i] = spline::hermite(
                 h,
                 [self.yk(k, i), self.start_v[i], self.start_a[i]],
-                [self.yk(k + 1, i), self.end_v[i], self.end_a[i]],
+                [self.yk(end, i), self.end_v[i], self.end_a[i]],
             );
         }
         self.segment = Some(Segment { k, t0, h, stop });
@@ -298,9 +412,14 @@ impl PathStream {
         if self.len == 0 {
             return;
         }
-        if self.segment.is_none() && self.len >= 2 && t >= self.tk(self.first) {
-            self.start_v.fill(0.0);
-            self.start_a.fill(0.0);
+        // The first segment: from the first knot at rest, or with its
+        // sample's rates; a path of one knot that time has passed stops.
+        let single_passed = self.len == 1 && t > self.tk(self.first);
+        if self.segment.is_none() && (self.len >= 2 || single_passed) && t >= self.tk(self.first) {
+            for i in 0..self.c {
+                (self.start_v[i], self.start_a[i]) =
+                    self.rates(self.first, i).unwrap_or((0.0, 0.0));
+            }
             self.enter(self.first);
         }
         while let Some(s) = &self.segment {

@@ -33,7 +33,7 @@
 use hcc_control::transition::{GoalKind, Target, Transition};
 use hcc_control::{Controller, TaskSpec};
 use hcc_msgs::{
-    ANSWER_ACCEPTED, MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, SETPOINT_DAMPING,
+    ANSWER_ACCEPTED, MAX_LEVELS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, NO_KNOT, SETPOINT_DAMPING,
     SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, Setpoint, SetpointAnswer,
     SetpointRejection, Telemetry, answer_code,
 };
@@ -188,7 +188,7 @@ impl SetpointHandler {
         };
         let code = answer_code(result);
         self.accepted += u64::from(code == ANSWER_ACCEPTED);
-        self.record(setpoint, code, duration, late);
+        self.record(setpoint, (code, NO_KNOT), duration, late);
         code
     }
 
@@ -204,7 +204,7 @@ impl SetpointHandler {
         controller: &mut Controller,
     ) -> Option<u32> {
         if let Err(r) = setpoint.validate() {
-            self.record(setpoint, r.code(), 0.0, false);
+            self.record(setpoint, (r.code(), NO_KNOT), 0.0, false);
             return Some(r.code());
         }
         let at = setpoint.apply_at_state_seq;
@@ -216,7 +216,7 @@ impl SetpointHandler {
             return None;
         }
         let code = SetpointRejection::PendingFull.code();
-        self.record(setpoint, code, 0.0, false);
+        self.record(setpoint, (code, NO_KNOT), 0.0, false);
         Some(code)
     }
 
@@ -330,8 +330,9 @@ impl SetpointHandler {
         duration
     }
 
-    /// Keeps the answer in the client's slot (or the least recently heard one).
-    fn record(&mut self, sp: &Setpoint, code: u32, duration_s: f64, late: bool) {
+    /// Keeps the answer (its code and the knot refused, `NO_KNOT` for a
+    /// setpoint) in the client's slot (or the least recently heard one).
+    fn record(&mut self, sp: &Setpoint, (code, knot): (u32, u32), duration_s: f64, late: bool) {
         self.count += 1;
         let slot = self
             .answers
@@ -358,6 +359,8 @@ impl SetpointHandler {
             duration_s,
             rejected: rejected.saturating_add(u32::from(code != ANSWER_ACCEPTED)),
             late: late_count.saturating_add(u32::from(late)),
+            knot,
+            reserved: 0,
         };
         self.heard[slot] = self.count;
     }
@@ -441,12 +444,18 @@ impl SetpointHandler {
 
     /// Records an answer for a client's message that is not a setpoint (a
     /// path's knots) in the client's answer slot.
-    pub(crate) fn record_answer(&mut self, client_id: u64, seq: u64, level: u32, code: u32) {
+    pub(crate) fn record_answer(
+        &mut self,
+        client_id: u64,
+        seq: u64,
+        level: u32,
+        (code, knot): (u32, u32),
+    ) {
         let mut sp = Setpoint::zeroed();
         sp.client_id = client_id;
         sp.header.seq = seq;
         sp.level = level;
-        self.record(&sp, code, 0.0, false);
+        self.record(&sp, (code, knot), 0.0, false);
     }
 
     /// Level `i`'s equilibrium is at `goal` now (a path moves it; crate

@@ -289,6 +289,14 @@ pub struct AnswerMsg {
     pub rejected: u32,
     #[serde(default)]
     pub late: u32,
+    /// The knot a path message was refused for (absent in recordings
+    /// before client schema 7: no knot).
+    #[serde(default = "no_knot")]
+    pub knot: u32,
+}
+
+fn no_knot() -> u32 {
+    hcc_msgs::NO_KNOT
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -362,6 +370,7 @@ impl From<&Telemetry> for TelemetryMsg {
                     duration_s: a.duration_s,
                     rejected: a.rejected,
                     late: a.late,
+                    knot: a.knot,
                 })
                 .collect(),
         }
@@ -432,6 +441,8 @@ impl TelemetryMsg {
                 duration_s: a.duration_s,
                 rejected: a.rejected,
                 late: a.late,
+                knot: a.knot,
+                reserved: 0,
             };
         }
         Ok(t)

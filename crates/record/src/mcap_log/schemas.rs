@@ -120,6 +120,7 @@ fn telemetry() -> Value {
             "duration_s": number("transition duration in force, s"),
             "rejected": integer("setpoints of this client rejected so far"),
             "late": integer("setpoints of this client applied after their state"),
+            "knot": integer("the knot a path message was refused for, 0-based in it; 4294967295: none"),
         }
     });
     object(
