@@ -3,11 +3,13 @@
 //! TCP level while it runs; from 3 s after it began the TCP stays within
 //! 1 mm of the path; a path that does not start at the level's equilibrium
 //! is refused with its knots and reason, and the controller keeps running.
+//! `hcc record` attached for the whole run: `hcc replay` repeats it bit for
+//! bit, the path messages taken again in their cycles.
 
 mod monitor;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use hcc_system_tests::*;
@@ -71,6 +73,7 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
     let goal = [0.55, 0.20, 0.30];
     let circle = dir.path().join("circle.csv");
     std::fs::write(&circle, circle_csv(goal, 9.0)).unwrap();
+    let recording = dir.path().join("follow.mcap");
     let away = dir.path().join("away.csv");
     std::fs::write(&away, circle_csv([0.70, 0.20, 0.30], 2.0)).unwrap();
     {
@@ -83,6 +86,33 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
             "ctl",
             &[],
         );
+        let mut rec = ChildGuard::spawn(
+            Command::new(bin("hcc"))
+                .env(FILE_PREFIX_ENV, &prefix)
+                .args([
+                    "record",
+                    "--namespace",
+                    &ns,
+                    "--quiet",
+                    "--idle-timeout",
+                    "60",
+                ])
+                .arg("--out")
+                .arg(&recording)
+                .stdout(std::fs::File::create(dir.path().join("record.out")).unwrap())
+                .stderr(Stdio::inherit()),
+        );
+        // From the first cycle on (the simulator starts after it), so that
+        // the replay starts where the controller did.
+        let attached = Instant::now();
+        while !recording.exists() {
+            assert!(
+                attached.elapsed() < Duration::from_secs(20),
+                "hcc record wrote nothing"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(300));
         let mut sim = Daemon::start(
             "hcc-sim",
             &config(),
@@ -135,7 +165,32 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
             out.log()
         );
         assert!(tcp_error(&ns, &prefix, dir.path()) < 1e-3);
+        // SAFETY: a signal to our own child, by pid.
+        unsafe { libc::kill(rec.pid() as libc::pid_t, libc::SIGTERM) };
+        let status = rec
+            .wait_timeout(Duration::from_secs(30))
+            .expect("hcc record did not stop on SIGTERM");
+        assert!(status.success(), "hcc record: {status}");
         ctl.stop();
         sim.stop();
     }
+    // The run with its paths, replayed from the recording bit for bit.
+    let out = run_with_timeout(
+        Command::new(bin("hcc")).arg("replay").arg(&recording),
+        dir.path(),
+        "replay",
+        Duration::from_secs(120),
+    );
+    let log = out.log();
+    println!("{log}");
+    assert!(out.status.success(), "{log}");
+    let paths: u64 = log
+        .split(" path messages")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no path count in: {log}"));
+    // The circle's 451 knots in messages of 16, and the refused one.
+    assert!(paths >= 29, "{paths} path messages replayed: {log}");
+    assert!(log.contains("bit-identical"), "{log}");
 }

@@ -1,6 +1,6 @@
 //! Capturing a namespace's streams into an MCAP recording, as a pure
 //! subscriber: the receiver thread copies every joint state, torque command,
-//! telemetry sample and setpoint out of the iceoryx2 queues (the largest
+//! telemetry sample, setpoint and path message out of the iceoryx2 queues (the largest
 //! queues the services allow, [`MAX_SUBSCRIBER_BUFFER`] samples, i.e. 128 ms
 //! at 1 kHz, drained every [`POLL`] — at once again when a drain found half a
 //! queue, as in lockstep runs faster than real time — so that publishers,
@@ -23,7 +23,8 @@
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
 use hcc_msgs::{
-    JointState, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry, TorqueCommand,
+    JointState, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry,
+    TorqueCommand,
 };
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use iceoryx2::prelude::SignalHandlingMode;
@@ -39,6 +40,7 @@ pub enum Received {
     Command(Box<TorqueCommand>),
     Telemetry(Box<Telemetry>),
     Setpoint(Box<Setpoint>),
+    Path(Box<PathKnots>),
     /// The receiver failed and stopped.
     Failed(String),
 }
@@ -98,20 +100,35 @@ struct Subscribers {
     commands: ipc::CommandSubscriber,
     telemetry: ipc::TelemetrySubscriber,
     setpoints: ipc::SetpointSubscriber,
+    paths: ipc::PathSubscriber,
 }
 
 impl Subscribers {
     /// Reads every queued sample into `tx`; returns how many.
     fn drain_into(&self, tx: &Sink) -> Result<usize, String> {
-        let mut k = 0;
-        // Setpoints and states first: a command or telemetry always follows them.
+        // Setpoints, paths and states first: a command or telemetry always
+        // follows them. A client numbers its setpoints and path messages
+        // together: they are handed on in that order (a message of either
+        // queue seen here was sent before any later one of the other).
+        let mut clients = Vec::new();
         while let Some(s) = self
             .setpoints
             .receive()
             .map_err(|e| format!("receive setpoint: {e:?}"))?
         {
-            tx.send(Received::Setpoint(Box::new(*s)));
-            k += 1;
+            clients.push((s.header.seq, Received::Setpoint(Box::new(*s))));
+        }
+        while let Some(p) = self
+            .paths
+            .receive()
+            .map_err(|e| format!("receive path: {e:?}"))?
+        {
+            clients.push((p.header.seq, Received::Path(Box::new(*p))));
+        }
+        clients.sort_by_key(|(seq, _)| *seq);
+        let mut k = clients.len();
+        for (_, m) in clients {
+            tx.send(m);
         }
         while let Some(s) = self
             .states
@@ -187,6 +204,7 @@ impl Receiver {
                         commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
                         telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
                         setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
+                        paths: services.path_subscriber(SETPOINT_BUFFER)?,
                     };
                     Ok((node, services, subs))
                 };
@@ -319,9 +337,10 @@ pub struct StreamRecorder {
     states: Stream,
     commands: Stream,
     telemetry: Stream,
-    /// Setpoints are numbered per client.
+    /// Setpoints and path messages are numbered per client, together.
     setpoints: BTreeMap<u64, Stream>,
     setpoint_stats: StreamStats,
+    path_stats: StreamStats,
     started: Instant,
     next_report: Instant,
 }
@@ -338,6 +357,7 @@ impl StreamRecorder {
             telemetry: Stream::default(),
             setpoints: BTreeMap::new(),
             setpoint_stats: StreamStats::default(),
+            path_stats: StreamStats::default(),
             started: now,
             next_report: now + Duration::from_secs(1),
         })
@@ -362,27 +382,38 @@ impl StreamRecorder {
                 self.telemetry.stats.recorded += 1;
             }
             Received::Setpoint(s) => {
-                // A bounded map: ids beyond 64 clients share one checker.
-                let key = if self.setpoints.len() < 64 || self.setpoints.contains_key(&s.client_id)
-                {
-                    s.client_id
-                } else {
-                    u64::MAX
-                };
-                let stream = self.setpoints.entry(key).or_default();
-                stream.observe(s.header.seq);
+                self.client(s.client_id).observe(s.header.seq);
                 self.writer.setpoint(s)?;
                 self.setpoint_stats.recorded += 1;
+            }
+            Received::Path(p) => {
+                self.client(p.client_id).observe(p.header.seq);
+                self.writer.path_knots(p)?;
+                self.path_stats.received += 1;
+                self.path_stats.recorded += 1;
             }
             Received::Failed(_) => {}
         }
         Ok(())
     }
 
-    /// The counts so far.
+    /// A client's sequence (setpoints and paths); a bounded map: ids beyond
+    /// 64 clients share one checker.
+    fn client(&mut self, id: u64) -> &mut Stream {
+        let key = if self.setpoints.len() < 64 || self.setpoints.contains_key(&id) {
+            id
+        } else {
+            u64::MAX
+        };
+        self.setpoints.entry(key).or_default()
+    }
+
+    /// The counts so far: `setpoint` counts a client's setpoints and path
+    /// messages as one sequence (its gaps are either's), `path` the path
+    /// messages received and recorded.
     pub fn stats(&self) -> RecorderMsg {
         let mut sp = StreamStats {
-            recorded: self.setpoint_stats.recorded,
+            recorded: self.setpoint_stats.recorded + self.path_stats.recorded,
             ..StreamStats::default()
         };
         for s in self.setpoints.values() {
@@ -399,6 +430,7 @@ impl StreamRecorder {
             torque_command: self.commands.stats,
             telemetry: self.telemetry.stats,
             setpoint: sp,
+            path: self.path_stats,
             total_gaps: 0,
             last: false,
         };

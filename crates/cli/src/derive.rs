@@ -197,6 +197,7 @@ pub struct Recording {
     commands: Stream,
     telemetry: Stream,
     setpoints: u64,
+    paths: u64,
     pub last_state: Option<JointState>,
     pub last_telemetry: Option<Box<Telemetry>>,
     latencies_ns: Vec<u64>,
@@ -211,6 +212,7 @@ impl Recording {
             commands: Stream::default(),
             telemetry: Stream::default(),
             setpoints: 0,
+            paths: 0,
             last_state: None,
             last_telemetry: None,
             latencies_ns: Vec::new(),
@@ -380,6 +382,10 @@ pub fn derive<'a>(
                     replay.on_telemetry(t);
                 }
             }
+            Entry::Path(p) => {
+                rec.paths += 1;
+                replay.on_path(p.to_msg().map_err(bad)?);
+            }
             Entry::Setpoint(s) => {
                 rec.setpoints += 1;
                 replay.on_setpoint(s.to_msg().map_err(bad)?);
@@ -526,6 +532,9 @@ impl Derived<'_> {
         );
         if rec.setpoints > 0 {
             println!("  setpoints recorded: {}", rec.setpoints);
+        }
+        if rec.paths > 0 {
+            println!("  path messages recorded: {}", rec.paths);
         }
         if self.replayed.controller_restarts > 0 {
             println!(

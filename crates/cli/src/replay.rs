@@ -9,8 +9,10 @@
 //! and the state's stamp that its command echoes: the two tell a restarted
 //! driver's states from the old one's, whose sequence numbers start again),
 //! when it woke (`state.stamp_ns + telemetry.timings.wakeup_latency_ns`,
-//! which the sequence plausibility uses), which setpoints it took (the
-//! answers counted in its telemetry), and where the controller reported a
+//! which the sequence plausibility uses), which setpoints and path messages
+//! it took (the answers counted in its telemetry: a client numbers both
+//! together; the cycle takes its setpoints, then its paths, as the daemon
+//! does), and where the controller reported a
 //! lost peer (a telemetry sample flagged `TELEMETRY_FLAG_PEER_LOST`): the
 //! replay repeats exactly that. The streams are drained one after the other
 //! into the file, so a cycle is replayed once its inputs have been read: its
@@ -43,7 +45,8 @@ use anyhow::anyhow;
 use hcc_config::Scenario;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{
-    JointState, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
+    JointState, PathKnots, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry,
+    TorqueCommand,
 };
 
 /// The most telemetry samples held back waiting for their inputs. The
@@ -63,6 +66,8 @@ pub struct ReplayCounts {
     pub stale: u64,
     /// Setpoints taken again.
     pub setpoints_taken: u64,
+    /// Path messages taken again.
+    pub paths_taken: u64,
     /// Setpoints the controller answered that the recording does not hold.
     pub setpoints_missing: u64,
     /// Recorded setpoints answered before the first replayed cycle (history
@@ -115,6 +120,22 @@ pub struct Replayed<'a> {
     /// A cycle at the start of a recording that began mid-run: its state or
     /// command precedes the first recorded one (module docs); not replayed.
     pub before_recording: bool,
+}
+
+/// A client's message: a setpoint or a path message (numbered together).
+#[derive(Clone, Debug)]
+enum ClientMessage {
+    Setpoint(Box<Setpoint>),
+    Path(Box<PathKnots>),
+}
+
+impl ClientMessage {
+    fn seq(&self) -> u64 {
+        match self {
+            Self::Setpoint(s) => s.header.seq,
+            Self::Path(p) => p.header.seq,
+        }
+    }
 }
 
 /// A client's setpoints answered so far (count, last seq).
@@ -176,8 +197,12 @@ pub struct Replay {
     ctl: ControllerStreams,
     /// A restarted controller's, read before the replay reached them.
     next: Option<ControllerStreams>,
-    /// Recorded setpoints per client, not yet taken.
-    setpoints: BTreeMap<u64, VecDeque<Setpoint>>,
+    /// Recorded setpoints and path messages per client, not yet taken, in
+    /// the client's order.
+    setpoints: BTreeMap<u64, VecDeque<ClientMessage>>,
+    /// The path messages of the cycle being replayed (taken after its
+    /// setpoints, with its state).
+    paths_due: Vec<PathKnots>,
     /// Per client, the setpoints answered so far, as the telemetry counts
     /// them, and the seq of the last one answered.
     answered: BTreeMap<u64, Answered>,
@@ -208,6 +233,7 @@ impl Replay {
             ctl: ControllerStreams::default(),
             next: None,
             setpoints: BTreeMap::new(),
+            paths_due: Vec::new(),
             answered: BTreeMap::new(),
             last_state: None,
             latest_stamp: 0,
@@ -269,15 +295,28 @@ impl Replay {
     /// answered before its first cycle — read after it, its stream drained
     /// later — is history and dropped).
     pub fn on_setpoint(&mut self, s: Setpoint) {
+        self.on_client_message(s.client_id, ClientMessage::Setpoint(Box::new(s)));
+    }
+
+    /// A recorded path message (as a setpoint: the client numbers both).
+    pub fn on_path(&mut self, p: PathKnots) {
+        self.on_client_message(p.client_id, ClientMessage::Path(Box::new(p)));
+    }
+
+    fn on_client_message(&mut self, client_id: u64, m: ClientMessage) {
         if self
             .answered
-            .get(&s.client_id)
-            .is_some_and(|a| s.header.seq <= a.seq)
+            .get(&client_id)
+            .is_some_and(|a| m.seq() <= a.seq)
         {
             self.counts.setpoints_before_first_cycle += 1;
             return;
         }
-        self.setpoints.entry(s.client_id).or_default().push_back(s);
+        let q = self.setpoints.entry(client_id).or_default();
+        // In the client's order (the recorder writes them so; a message
+        // read late goes where its seq puts it).
+        let at = q.len() - q.iter().rev().take_while(|o| o.seq() > m.seq()).count();
+        q.insert(at, m);
     }
 
     /// A recorded telemetry sample (a cycle, or a stale event); one
@@ -418,7 +457,7 @@ impl Replay {
             Some(known) => known.count,
             None if !self.started => {
                 let recorded = self.setpoints.get(&a.client_id).map_or(0, |q| {
-                    q.iter().take_while(|s| s.header.seq <= a.seq).count() as u64
+                    q.iter().take_while(|s| s.seq() <= a.seq).count() as u64
                 });
                 a.answered.saturating_sub(recorded)
             }
@@ -457,7 +496,7 @@ impl Replay {
         self.counts.cycles_before_recording += 1;
         for a in tel.setpoint_answers.iter().filter(|a| a.answered > 0) {
             if let Some(q) = self.setpoints.get_mut(&a.client_id) {
-                while q.front().is_some_and(|s| s.header.seq <= a.seq) {
+                while q.front().is_some_and(|s| s.seq() <= a.seq) {
                     q.pop_front();
                 }
             }
@@ -522,6 +561,16 @@ impl Replay {
             Some(_) => self.states.pop_front(),
             None => None,
         };
+        // The cycle's paths, after its setpoints, in the cycle of its state.
+        let mut due = std::mem::take(&mut self.paths_due);
+        self.counts.paths_taken += due.len() as u64;
+        let mut next = due.drain(..);
+        match &state {
+            Some(s) => self.cycle.take_paths_at(s, || next.next()),
+            None => self.cycle.take_paths(|| next.next()),
+        }
+        drop(next);
+        self.paths_due = due;
         let answer = state.map(|s| {
             let wake = s
                 .header
@@ -561,10 +610,11 @@ impl Replay {
                     .get_mut(&a.client_id)
                     .and_then(|q| q.pop_front())
                 {
-                    Some(s) => {
+                    Some(ClientMessage::Setpoint(s)) => {
                         self.cycle.take_setpoint_now(&s);
                         self.counts.setpoints_taken += 1;
                     }
+                    Some(ClientMessage::Path(p)) => self.paths_due.push(*p),
                     None => missing += 1,
                 }
             }

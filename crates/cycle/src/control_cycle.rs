@@ -370,6 +370,21 @@ impl ControlCycle {
         code
     }
 
+    /// [`ControlCycle::take_paths`] in the cycle of `state` (its sequence
+    /// number, when well-formed, times a new path's start as
+    /// [`ControlCycle::take_setpoints`] does): what a replay does with the
+    /// path messages a recording says were taken in a cycle.
+    pub fn take_paths_at(
+        &mut self,
+        state: &JointState,
+        next_knots: impl FnMut() -> Option<PathKnots>,
+    ) {
+        if self.stream.well_formed(state) {
+            self.clock_seq = state.header.seq;
+        }
+        self.take_paths(next_knots);
+    }
+
     /// Takes every path message `next_knots` yields (at most
     /// [`SETPOINT_BUFFER`]), as [`ControlCycle::take_path`] does, and writes
     /// the answers into the telemetry once. What the controller daemon calls

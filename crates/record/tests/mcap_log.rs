@@ -85,6 +85,17 @@ fn messages_read_back_bit_for_bit() {
         w.telemetry(&telemetry(k)).unwrap();
     }
     w.setpoint(&setpoint).unwrap();
+    let mut knots = hcc_msgs::PathKnots::zeroed();
+    knots.flags = hcc_msgs::PATH_NEW;
+    knots.client_id = 42;
+    knots.header.seq = 8;
+    knots
+        .push_sample(0.0, &[0.3, 0.4], &[0.1 / 3.0, -0.0], &[1e-310, 2.0])
+        .unwrap();
+    knots
+        .push_sample(0.25, &[0.31, 0.4], &[0.0, 0.0], &[0.0, 0.0])
+        .unwrap();
+    w.path_knots(&knots).unwrap();
     w.finish(&RecorderMsg::default(), BTreeMap::new()).unwrap();
 
     let mut k = 0;
@@ -123,6 +134,10 @@ fn messages_read_back_bit_for_bit() {
                 let back = s.to_msg().unwrap();
                 assert_eq!(bytes_of(&back), bytes_of(&setpoint));
             }
+            Entry::Path(p) => {
+                let back = p.to_msg().unwrap();
+                assert_eq!(bytes_of(&back), bytes_of(&knots));
+            }
             Entry::Metadata(name, map) => {
                 metadata.insert(name, map);
             }
@@ -134,6 +149,7 @@ fn messages_read_back_bit_for_bit() {
     assert_eq!(k, 50);
     assert!(summary.truncated.is_none(), "{:?}", summary.truncated);
     assert_eq!(summary.messages["/telemetry"], 50);
+    assert_eq!(summary.messages["/path"], 1);
     assert_eq!(metadata["hcc_run"]["recorder"], "test");
     assert!(metadata.contains_key(mcap_log::META_END));
 }

@@ -6,13 +6,14 @@
 //! | `/torque_command`    | `hcc.TorqueCommand` (JSON)                | the command answering a published state |
 //! | `/telemetry`         | `hcc.Telemetry` (JSON)                    | the cycle of a published state         |
 //! | `/setpoint`          | `hcc.Setpoint` (JSON)                     | every setpoint                         |
+//! | `/path`              | `hcc.PathKnots` (JSON)                    | every path message                     |
 //! | `/tf`                | `foxglove.FrameTransforms` (protobuf)     | the chain's links, TCP and goal frames |
 //! | `/chain`            | `foxglove.SceneUpdate` (protobuf)         | the chain as a stick figure (joint origins) |
 //! | `/joint_limits`      | `hcc.JointLimits` (JSON)                  | q, q̇, τ against the URDF's limits     |
 //! | `/robot_description` | `hcc.RobotDescription` (JSON, `data`)     | the URDF text                          |
 //! | `/view`              | `hcc.View` (JSON)                         | what the server received, published and lost |
 //!
-//! The first four use the channel names and JSON schemas of the recordings
+//! The first five use the channel names and JSON schemas of the recordings
 //! (`hcc_record::mcap_log`), so one Foxglove layout opens a live server and
 //! a recording alike. Log times are the messages' own stamps
 //! (CLOCK_MONOTONIC) shifted to Unix time, as in a recording.
@@ -25,7 +26,7 @@ use foxglove::messages::{
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use hcc_record::mcap_log::schemas::{integer, number, numbers, object};
 use hcc_record::mcap_log::{
-    self, TOPIC_JOINT_STATE, TOPIC_SETPOINT, TOPIC_TELEMETRY, TOPIC_TORQUE_COMMAND,
+    self, TOPIC_JOINT_STATE, TOPIC_PATH, TOPIC_SETPOINT, TOPIC_TELEMETRY, TOPIC_TORQUE_COMMAND,
 };
 use serde::Serialize;
 use serde_json::json;
@@ -45,11 +46,12 @@ pub const TOPIC_ROBOT_DESCRIPTION: &str = "/robot_description";
 pub const TOPIC_VIEW: &str = "/view";
 
 /// The recording's topics that the server carries too.
-pub const RECORDED_TOPICS: [&str; 4] = [
+pub const RECORDED_TOPICS: [&str; 5] = [
     TOPIC_JOINT_STATE,
     TOPIC_TORQUE_COMMAND,
     TOPIC_TELEMETRY,
     TOPIC_SETPOINT,
+    TOPIC_PATH,
 ];
 
 /// Counts of one stream of the server.
@@ -79,6 +81,7 @@ pub struct ViewMsg {
     pub torque_command: StreamCounts,
     pub telemetry: StreamCounts,
     pub setpoint: StreamCounts,
+    pub path: StreamCounts,
     /// Transform sets published on `/tf`.
     pub tf_published: u64,
     /// Joint states not drawn (wrong size or a non-finite position).
@@ -127,6 +130,7 @@ pub fn view_schema() -> String {
             "torque_command": counts_schema(),
             "telemetry": counts_schema(),
             "setpoint": counts_schema(),
+            "path": counts_schema(),
             "tf_published": integer("transform sets published"),
             "bad_states": integer("joint states not drawn (bad size or value)"),
         }),
@@ -167,7 +171,7 @@ pub fn robot_description_schema() -> String {
 
 /// The channels of one server, on their own context.
 pub struct Channels {
-    recorded: [Arc<RawChannel>; 4],
+    recorded: [Arc<RawChannel>; RECORDED_TOPICS.len()],
     tf: Channel<FrameTransforms>,
     chain: Channel<SceneUpdate>,
     joint_limits: Arc<RawChannel>,
@@ -196,6 +200,7 @@ pub enum Stream {
     TorqueCommand = 1,
     Telemetry = 2,
     Setpoint = 3,
+    Path = 4,
 }
 
 impl Channels {
@@ -205,9 +210,9 @@ impl Channels {
             let (name, schema) = mcap_log::schema(topic);
             json_channel(ctx, topic, name, schema)
         });
-        let [a, b, c, d] = recorded;
+        let [a, b, c, d, e] = recorded;
         Ok(Channels {
-            recorded: [a?, b?, c?, d?],
+            recorded: [a?, b?, c?, d?, e?],
             tf: ctx.channel_builder(TOPIC_TF).build::<FrameTransforms>(),
             chain: ctx.channel_builder(TOPIC_CHAIN).build::<SceneUpdate>(),
             joint_limits: json_channel(

@@ -10,7 +10,9 @@ use anyhow::Context as _;
 use hcc_config::ToolScenarioError;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
-use hcc_record::mcap_log::{self, JointStateMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
+use hcc_record::mcap_log::{
+    self, JointStateMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
+};
 use iceoryx2::prelude::SignalHandlingMode;
 use std::time::{Duration, Instant};
 
@@ -29,6 +31,7 @@ struct Subscribers {
     commands: ipc::CommandSubscriber,
     telemetry: ipc::TelemetrySubscriber,
     setpoints: ipc::SetpointSubscriber,
+    paths: ipc::PathSubscriber,
 }
 
 /// Monotonic stamps onto Unix time (the offset measured at the start).
@@ -65,6 +68,12 @@ impl Subscribers {
             .map_err(|e| format!("setpoint: {e:?}"))?
         {
             v.setpoint(clock.unix(s.header.stamp_ns), &SetpointMsg::from(&*s));
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(p) = self.paths.receive().map_err(|e| format!("path: {e:?}"))? {
+            v.path(clock.unix(p.header.stamp_ns), &PathMsg::from(&*p));
             k += 1;
         }
         most = most.max(k);
@@ -147,6 +156,7 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
         commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
         telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
         setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
+        paths: services.path_subscriber(SETPOINT_BUFFER)?,
     };
     let mut server = crate::start(args, scenario.as_ref(), &format!("namespace {namespace}"))?;
     let clock = Clock::new();

@@ -127,6 +127,7 @@ pub fn run(args: &Args, file: &Path) -> anyhow::Result<()> {
             Entry::TorqueCommand(m) => v.torque_command(m.seq, m.state_seq, log_time, || m),
             Entry::Telemetry(m) => v.telemetry(m.seq, m.state_seq, log_time, || *m),
             Entry::Setpoint(m) => v.setpoint(log_time, &m),
+            Entry::Path(m) => v.path(log_time, &m),
             Entry::Recorder(_) | Entry::Metadata(..) => {}
         }
         between(&mut server, log_time);

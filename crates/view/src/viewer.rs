@@ -10,7 +10,7 @@
 //! Setpoints are always published.
 
 use hcc_msgs::{SeqEvent, SequenceChecker};
-use hcc_record::mcap_log::{JointStateMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
+use hcc_record::mcap_log::{JointStateMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -307,6 +307,13 @@ impl Viewer {
         self.goals = m.levels.into_iter().map(|l| (l.goal, l.error)).collect();
     }
 
+    /// A path message (always published, as a setpoint).
+    pub fn path(&mut self, log_time: u64, msg: &PathMsg) {
+        self.counts.path.received += 1;
+        self.channels.recorded(Stream::Path, msg, log_time);
+        self.counts.path.published += 1;
+    }
+
     /// A setpoint (always published; numbered per client, so not checked).
     pub fn setpoint(&mut self, log_time: u64, msg: &SetpointMsg) {
         self.counts.setpoint.received += 1;
@@ -349,12 +356,13 @@ pub fn stats_line(m: &ViewMsg) -> String {
         t
     };
     format!(
-        "{} client(s); published/received: joint_state {}, torque_command {}, telemetry {}, setpoint {}",
+        "{} client(s); published/received: joint_state {}, torque_command {}, telemetry {}, setpoint {}, path {}",
         m.clients,
         s(&m.joint_state),
         s(&m.torque_command),
         s(&m.telemetry),
-        s(&m.setpoint)
+        s(&m.setpoint),
+        s(&m.path)
     )
 }
 

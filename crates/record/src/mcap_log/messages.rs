@@ -29,7 +29,7 @@ fn num<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
 }
 
 /// Reads an array of numbers or `null`s (NaN).
-fn nums<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+pub(super) fn nums<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
     Ok(Vec::<Option<f64>>::deserialize(d)?
         .into_iter()
         .map(|v| v.unwrap_or(f64::NAN))
@@ -562,6 +562,9 @@ pub struct RecorderMsg {
     pub torque_command: StreamStats,
     pub telemetry: StreamStats,
     pub setpoint: StreamStats,
+    /// Path messages (absent in recordings made before they were recorded).
+    #[serde(default)]
+    pub path: StreamStats,
     /// Samples lost on all streams.
     pub total_gaps: u64,
     /// Whether this is the final count (the recording ended cleanly).
@@ -574,6 +577,7 @@ impl RecorderMsg {
         self.total_gaps = self.joint_state.gaps
             + self.torque_command.gaps
             + self.telemetry.gaps
-            + self.setpoint.gaps;
+            + self.setpoint.gaps
+            + self.path.gaps;
     }
 }

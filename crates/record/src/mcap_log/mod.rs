@@ -12,6 +12,7 @@
 //! | `/telemetry`      | [`TelemetryMsg`] (per level: `error`, `S`, `tau`, …; `tau_mu`, `P_mu`) | controller cycle |
 //! | `/setpoint`       | [`SetpointMsg`]                  | client setpoint             |
 //! | `/recorder`       | [`RecorderMsg`] (received, gaps) | second, and the last one    |
+//! | `/path`           | [`PathMsg`]                      | client path message         |
 //!
 //! Metadata records: [`META_RUN`] (hcc and iceoryx2 versions, the recorder,
 //! namespace, start time, control rate), [`META_SCENARIO`] (the scenario
@@ -35,15 +36,17 @@
 //! of the run's length for any practical run: ~100 B per flushed chunk).
 
 mod messages;
+mod path_msg;
 pub mod schemas;
 
 pub use messages::{
     AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
     TimingsMsg, TorqueCommandMsg, mode_name, status_name,
 };
+pub use path_msg::PathMsg;
 pub use schemas::schema;
 
-use hcc_msgs::{JointState, Setpoint, Telemetry, TorqueCommand};
+use hcc_msgs::{JointState, PathKnots, Setpoint, Telemetry, TorqueCommand};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use std::collections::BTreeMap;
@@ -62,13 +65,16 @@ pub const TOPIC_TELEMETRY: &str = "/telemetry";
 pub const TOPIC_SETPOINT: &str = "/setpoint";
 /// Topic of the recorder's own counts (drops, gaps).
 pub const TOPIC_RECORDER: &str = "/recorder";
+/// Topic of the clients' path knots (after the others: added later).
+pub const TOPIC_PATH: &str = "/path";
 /// Every topic, in channel order.
-pub const TOPICS: [&str; 5] = [
+pub const TOPICS: [&str; 6] = [
     TOPIC_JOINT_STATE,
     TOPIC_TORQUE_COMMAND,
     TOPIC_TELEMETRY,
     TOPIC_SETPOINT,
     TOPIC_RECORDER,
+    TOPIC_PATH,
 ];
 
 /// Metadata record of the run (versions, recorder, namespace, start time).
@@ -202,15 +208,15 @@ pub fn clock_pair() -> (u64, u64) {
     (unix, hcc_msgs::monotonic_now_ns())
 }
 
-/// Channel ids of the five topics, in [`TOPICS`] order.
-type Channels = [u16; 5];
+/// Channel ids of the topics, in [`TOPICS`] order.
+type Channels = [u16; TOPICS.len()];
 
 /// Streams messages into an MCAP file (see the module documentation).
 pub struct McapWriter {
     path: PathBuf,
     writer: Option<mcap::Writer<BufWriter<File>>>,
     channels: Channels,
-    sequence: [u32; 5],
+    sequence: [u32; TOPICS.len()],
     /// Unix ns minus monotonic ns at the start.
     offset_ns: i128,
     last_flush: Instant,
@@ -244,7 +250,7 @@ impl McapWriter {
             .chunk_size(Some(CHUNK_SIZE))
             .create(BufWriter::with_capacity(1 << 16, file))
             .map_err(mcap_err)?;
-        let mut channels = [0; 5];
+        let mut channels = [0; TOPICS.len()];
         for (k, topic) in TOPICS.iter().enumerate() {
             let (name, schema) = schemas::schema(topic);
             let schema_id = writer
@@ -271,7 +277,7 @@ impl McapWriter {
             path: path.to_path_buf(),
             writer: Some(writer),
             channels,
-            sequence: [0; 5],
+            sequence: [0; TOPICS.len()],
             offset_ns: clock.0 as i128 - clock.1 as i128,
             last_flush: Instant::now(),
             buf: Vec::with_capacity(8192),
@@ -367,6 +373,11 @@ impl McapWriter {
         self.write(3, s.header.stamp_ns, &SetpointMsg::from(s))
     }
 
+    /// Appends a client's path message.
+    pub fn path_knots(&mut self, p: &PathKnots) -> Result<(), LogError> {
+        self.write(5, p.header.stamp_ns, &PathMsg::from(p))
+    }
+
     /// The recorder's counts, stamped `now_ns` (monotonic).
     pub fn recorder(&mut self, r: &RecorderMsg, now_ns: u64) -> Result<(), LogError> {
         self.write(4, now_ns, r)
@@ -430,6 +441,7 @@ pub enum Entry {
     TorqueCommand(TorqueCommandMsg),
     Telemetry(Box<TelemetryMsg>),
     Setpoint(Box<SetpointMsg>),
+    Path(Box<PathMsg>),
     Recorder(RecorderMsg),
     /// A metadata record: its name and entries.
     Metadata(String, BTreeMap<String, String>),
@@ -529,6 +541,9 @@ pub fn read<E: From<LogError>>(
                             }
                             TOPIC_SETPOINT => {
                                 Entry::Setpoint(serde_json::from_slice(&data).map_err(decode)?)
+                            }
+                            TOPIC_PATH => {
+                                Entry::Path(serde_json::from_slice(&data).map_err(decode)?)
                             }
                             TOPIC_RECORDER => {
                                 Entry::Recorder(serde_json::from_slice(&data).map_err(decode)?)

@@ -184,6 +184,29 @@ fn setpoint() -> Value {
     )
 }
 
+fn path() -> Value {
+    object(
+        "hcc.PathKnots",
+        "A client's path knots to the controller (hcc-msgs PathKnots)",
+        json!({
+            "seq": integer("the client's sequence number"),
+            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
+            "schema_version": integer("hcc-msgs schema"),
+            "n_joints": integer("header n_joints"),
+            "client_id": integer("the client"),
+            "level": integer("target level, 0-based"),
+            "flags": integer("PATH_* bits: 1 new, 2 extend, 4 derivatives"),
+            "columns": integer("columns per knot"),
+            "count": integer("knots in the message"),
+            "apply_at_state_seq": integer("a new path starts in the cycle of the first state with seq ≥ this (0: on receipt)"),
+            "t": numbers("the knots' times, s of the path's own time"),
+            "values": {"type": "array", "items": numbers("a knot's columns"), "description": "the knots' values"},
+            "velocity": {"type": "array", "items": numbers("a sample's velocity"), "description": "with PATH_DERIVATIVES: the knots' velocities"},
+            "acceleration": {"type": "array", "items": numbers("a sample's acceleration"), "description": "with PATH_DERIVATIVES: the knots' accelerations"},
+        }),
+    )
+}
+
 fn recorder() -> Value {
     object(
         "hcc.Recorder",
@@ -194,6 +217,7 @@ fn recorder() -> Value {
             "torque_command": stream_stats(),
             "telemetry": stream_stats(),
             "setpoint": stream_stats(),
+            "path": stream_stats(),
             "total_gaps": integer("samples lost on all streams"),
             "last": {"type": "boolean", "description": "the final count of a clean end"},
         }),
@@ -208,6 +232,7 @@ pub fn schema(topic: &str) -> (&'static str, String) {
         super::TOPIC_TORQUE_COMMAND => ("hcc.TorqueCommand", torque_command()),
         super::TOPIC_TELEMETRY => ("hcc.Telemetry", telemetry()),
         super::TOPIC_SETPOINT => ("hcc.Setpoint", setpoint()),
+        super::TOPIC_PATH => ("hcc.PathKnots", path()),
         _ => ("hcc.Recorder", recorder()),
     };
     (name, value.to_string())
