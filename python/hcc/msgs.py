@@ -1014,6 +1014,7 @@ _PATH_REJECTION_TEXT: dict[int, str] = {
     208: "the path ran out of knots and stopped: send a new path",
     209: "the level's path holds as many knots ahead as it can",
     210: "the path's first knot is too far from the level's equilibrium",
+    211: "the path moves faster than the level's max_speed",
 }
 
 
@@ -1032,6 +1033,7 @@ class PathRejection(enum.IntEnum):
     PATH_ENDED = 208
     PATH_FULL = 209
     STARTS_AWAY = 210
+    TOO_FAST = 211
 
     @property
     def label(self) -> str:

@@ -4,7 +4,8 @@
 //! refuses at the initial configuration (Sec. II: a Jacobian or an augmented
 //! Jacobian singular at q0, an algorithmic singularity, a lowest level that
 //! does not fill the remaining null space, gains the control rate cannot
-//! carry, a path that does not start at the arm). The scenario reader checks
+//! carry, a path that does not start at the arm or moves faster than its
+//! level's `max_speed`). The scenario reader checks
 //! what needs no configuration (`hcc_spec::ControllerSpec::validate`); these
 //! checks are the law's.
 
@@ -31,7 +32,42 @@ pub fn controller_for(scenario: &Scenario) -> Result<Controller, ConfigError> {
             scenario.error_at(&field, format!("rejected by the controller: {e}"))
         })?;
     check_path_starts(scenario, &controller)?;
+    check_path_speeds(scenario)?;
     Ok(controller)
+}
+
+/// Every path's speed, √(|ẋ|² + |ω|²) sampled every control period, within
+/// its level's `[setpoint_limits] max_speed` (as a path sent at run time).
+fn check_path_speeds(scenario: &Scenario) -> Result<(), ConfigError> {
+    let dt = scenario.period_s();
+    for (i, path) in scenario.tracking.paths.iter().enumerate() {
+        let Some(path) = path else { continue };
+        let Some(limits) = scenario.setpoint_limits.levels.get(i) else {
+            continue;
+        };
+        let trajectory = &path.trajectory;
+        let mut sample = trajectory.sample_buffer();
+        let steps = (trajectory.duration() / dt).ceil() as usize;
+        let (mut worst, mut at) = (0.0_f64, 0.0);
+        for k in 0..=steps {
+            let t = k as f64 * dt;
+            trajectory.sample(t, &mut sample);
+            let speed = sample.velocity.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if speed > worst {
+                (worst, at) = (speed, t);
+            }
+        }
+        if worst > limits.max_speed * (1.0 + 1e-9) {
+            return Err(scenario.error_at(
+                &format!("level[{i}].trajectory"),
+                format!(
+                    "{}: the path moves at {worst:.4} at t = {at:.3} s, faster than the level's setpoint_limits max_speed {}: slow the path down or raise max_speed",
+                    path.file, limits.max_speed
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Every path starts within [`MAX_PATH_START_OFFSET_M`] /

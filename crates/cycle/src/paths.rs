@@ -53,8 +53,12 @@ struct LevelPath {
     blocks: Vec<Block>,
     units: Vec<TaskUnit>,
     sample: PathSample,
-    /// A knot in the goal format (checks).
+    /// A knot in the goal format (checks), the one before it, and the
+    /// running path's last knot and its time (the speed check).
     goal: Vec<f64>,
+    previous: Vec<f64>,
+    last: Vec<f64>,
+    last_t: f64,
     feed_forward: bool,
     /// Hand the law ẋ_{i,d} (with the feed-forward always; without it as a
     /// transition does, `[setpoint_limits] relative_damping`).
@@ -109,6 +113,9 @@ impl Paths {
             levels.push(LevelPath {
                 sample: stream.sample_buffer(),
                 goal: vec![0.0; controller.task_dim(i)],
+                previous: vec![0.0; controller.task_dim(i)],
+                last: vec![0.0; controller.task_dim(i)],
+                last_t: 0.0,
                 spare: stream.clone(),
                 stream,
                 units: spec.units(n),
@@ -192,16 +199,42 @@ impl Paths {
         if knots.columns() != l.stream.columns() {
             return Err(PathRejection::ColumnMismatch.into());
         }
-        // Every knot against the level's limits, in its goal format.
+        let max_speed = setpoints
+            .max_speed(i)
+            .ok_or(SetpointRejection::UnknownLevel)?;
+        // Every knot against the level's limits, in its goal format, and
+        // against its speed limit from the knot before (an extension's
+        // first from the running path's last).
+        let running = l.driver == Driver::Stream && l.goals_at_start == goals_now;
+        let mut before = (!knots.is_new() && running && !l.stream.is_empty()).then_some(l.last_t);
+        l.previous.copy_from_slice(&l.last);
+        let dim = l.goal.len();
         for k in 0..knots.count() {
-            let (_, columns) = knots.knot(k);
+            let (t, columns) = knots.knot(k);
             if !hcc_trajectory::goal_of(&l.blocks, columns, &mut l.goal) {
                 return Err(KnotsRefusal::at(PathRejection::NotUnitQuaternion, k));
             }
             setpoints
                 .check_goal(i, &l.goal)
                 .map_err(|r| KnotsRefusal::at(r, k))?;
+            let chord = before
+                .filter(|t0| t > *t0)
+                .map(|t0| distance(&l.blocks, &l.previous, &l.goal) / (t - t0));
+            let own = knots
+                .has_derivatives()
+                .then(|| norm(knots.derivatives(k, dim).0));
+            if chord
+                .into_iter()
+                .chain(own)
+                .any(|v| v > max_speed * SPEED_TOLERANCE)
+            {
+                return Err(KnotsRefusal::at(PathRejection::TooFast, k));
+            }
+            std::mem::swap(&mut l.previous, &mut l.goal);
+            before = Some(t);
         }
+        // Taken from here on: the last knot, for the next extension's check.
+        let last_t = knots.knot(knots.count() - 1).0;
         if knots.is_new() {
             // Its first knot at the level's equilibrium.
             let (_, first) = knots.knot(0);
@@ -215,6 +248,8 @@ impl Paths {
             l.spare.clear();
             push_all(&mut l.spare, knots)?;
             std::mem::swap(&mut l.stream, &mut l.spare);
+            l.last.copy_from_slice(&l.previous);
+            l.last_t = last_t;
             l.driver = Driver::Stream;
             let start = knots.apply_at_state_seq.max(state_seq);
             l.stream_t = -((start - state_seq) as f64) * self.period_s;
@@ -222,7 +257,6 @@ impl Paths {
             l.stopping = false;
             return Ok(());
         }
-        let running = l.driver == Driver::Stream && l.goals_at_start == goals_now;
         if !running || l.stream.is_empty() {
             return Err(PathRejection::NoPath.into());
         }
@@ -232,8 +266,11 @@ impl Paths {
         if knots.count() > l.stream.room() {
             return Err(PathRejection::PathFull.into());
         }
-        let before = l.stream.len();
-        push_all(&mut l.stream, knots).inspect_err(|_| l.stream.truncate(before))
+        let held = l.stream.len();
+        push_all(&mut l.stream, knots).inspect_err(|_| l.stream.truncate(held))?;
+        l.last.copy_from_slice(&l.previous);
+        l.last_t = last_t;
+        Ok(())
     }
 
     /// Hands every driving path's value at this state's time to the law and
@@ -316,6 +353,35 @@ fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRefus
         })?;
     }
     Ok(())
+}
+
+/// A path's speed may exceed the level's `max_speed` by this factor (the
+/// rounding of a chord computed from knots sent at that speed).
+const SPEED_TOLERANCE: f64 = 1.0 + 1e-9;
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// The distance between two knots `a`, `b` (goal format) as a transition
+/// measures it: √(|Δx|² + θ²), θ the angle between their orientations.
+fn distance(blocks: &[Block], a: &[f64], b: &[f64]) -> f64 {
+    let (mut g, mut d2) = (0, 0.0);
+    for block in blocks {
+        match block {
+            Block::Vector(n) => {
+                d2 += (g..g + n).map(|r| (a[r] - b[r]).powi(2)).sum::<f64>();
+            }
+            Block::Rotation => {
+                let rpy = |v: &[f64]| {
+                    nalgebra::UnitQuaternion::from_euler_angles(v[g], v[g + 1], v[g + 2])
+                };
+                d2 += rpy(a).angle_to(&rpy(b)).powi(2);
+            }
+        }
+        g += block.dim();
+    }
+    d2.sqrt()
 }
 
 /// Whether a path's first knot `first` (goal format) is within the start

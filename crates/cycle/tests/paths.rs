@@ -275,6 +275,27 @@ fn knots_the_level_cannot_take_are_refused_and_change_nothing() {
         d.take_path(&msg(PATH_EXTEND, &[(0.6, goal), (0.7, goal)])),
         0
     );
+    // Faster than the level's max_speed (0.25 m/s by default): 3 cm in
+    // 0.1 s between the third knot and the second; an extension whose first
+    // knot is 3 cm from the path's last in 0.1 s; a sample's own velocity.
+    let step = |dy: f64| [goal[0], goal[1] + dy, goal[2]];
+    let fast = [(0.0, goal), (0.1, step(0.01)), (0.2, step(0.04))];
+    assert_eq!(take(&mut d, &msg(PATH_NEW, &fast)), (211, Some(2)));
+    let ok = [(0.0, goal), (0.1, step(0.01)), (0.2, step(0.02))];
+    assert_eq!(take(&mut d, &msg(PATH_NEW, &ok)), (0, None));
+    assert_eq!(
+        take(&mut d, &msg(PATH_EXTEND, &[(0.3, step(0.05))])),
+        (211, Some(0))
+    );
+    assert_eq!(
+        take(&mut d, &msg(PATH_EXTEND, &[(0.3, step(0.04))])),
+        (0, None)
+    );
+    let mut m = PathKnots::zeroed();
+    m.flags = PATH_EXTEND;
+    m.push_sample(0.4, &step(0.045), &[0.0, 0.3, 0.0], &[0.0; 3])
+        .unwrap();
+    assert_eq!(take(&mut d, &m), (211, Some(0)));
 }
 
 /// The circle's velocity and acceleration (its phase's derivatives).

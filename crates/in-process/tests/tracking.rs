@@ -191,6 +191,24 @@ fn a_path_that_does_not_start_at_the_arm_is_refused() {
     );
 }
 
+#[test]
+fn a_path_faster_than_its_level_s_max_speed_is_refused() {
+    let mut s = scenario();
+    // The figure-eight's TCP peaks at ≈ 0.22 m/s; level 1's limit to 0.1 m/s.
+    s.setpoint_limits.levels[0].max_speed = 0.1;
+    let Err(e) = hcc_cycle::controller_for(&s) else {
+        panic!("a path faster than max_speed is refused");
+    };
+    let e = e.to_string();
+    println!("{e}");
+    assert!(
+        e.contains("level[0].trajectory") && e.contains("faster than the level's"),
+        "{e}"
+    );
+    // The shipped limits pass.
+    assert!(hcc_cycle::controller_for(&scenario()).is_ok());
+}
+
 /// With `HCC_TRACKING_PLOTS=<dir>` set: the TCP's y and z, desired and
 /// actual, tracking and pulled along (D ẋ), and the TCP error of both, as
 /// `<dir>/tracking-figure-eight.png` (the figure of docs/tracking.md).

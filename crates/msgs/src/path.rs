@@ -87,11 +87,15 @@ pub enum PathRejection {
     /// A new path's first knot is farther from the level's equilibrium than
     /// a path may start (5 cm, 0.2 rad).
     StartsAway = 210,
+    /// The path moves faster than the level's `max_speed` between a knot and
+    /// the one before (√(|Δp|² + θ²) / Δt, as a transition's), or a sample's
+    /// own velocity does.
+    TooFast = 211,
 }
 
 impl PathRejection {
     /// Every rejection, in code order.
-    pub const ALL: [PathRejection; 10] = [
+    pub const ALL: [PathRejection; 11] = [
         Self::BadFlags,
         Self::KnotCount,
         Self::NotIncreasing,
@@ -102,6 +106,7 @@ impl PathRejection {
         Self::PathEnded,
         Self::PathFull,
         Self::StartsAway,
+        Self::TooFast,
     ];
 
     /// The stable code.
@@ -131,6 +136,7 @@ impl PathRejection {
             Self::PathEnded => "path_ended",
             Self::PathFull => "path_full",
             Self::StartsAway => "starts_away",
+            Self::TooFast => "too_fast",
         }
     }
 
@@ -149,6 +155,7 @@ impl PathRejection {
             Self::PathEnded => "the path ran out of knots and stopped: send a new path",
             Self::PathFull => "the level's path holds as many knots ahead as it can",
             Self::StartsAway => "the path's first knot is too far from the level's equilibrium",
+            Self::TooFast => "the path moves faster than the level's max_speed",
         }
     }
 }
@@ -512,7 +519,7 @@ mod tests {
             assert_eq!(PathRejection::from_code(r.code()), Some(r));
         }
         assert_eq!(PathRejection::from_code(200), None);
-        assert_eq!(PathRejection::from_code(211), None);
+        assert_eq!(PathRejection::from_code(212), None);
         let mut p = knots();
         assert_eq!(p.push(1.0, &[0.0; 2]), Err(PathRejection::ColumnMismatch));
         for k in 4..MAX_KNOTS_PER_MESSAGE {

@@ -417,6 +417,11 @@ impl SetpointHandler {
         self.levels.get(i).map(|l| l.transition.goal())
     }
 
+    /// Level `i`'s speed limit (`[setpoint_limits] max_speed`: m/s, rad/s).
+    pub(crate) fn max_speed(&self, i: usize) -> Option<f64> {
+        self.levels.get(i).map(|l| l.max_speed)
+    }
+
     /// A goal `goal` (m_i values, the level's goal format) for level `i`
     /// against the joint limits of a joint level and the level's workspace
     /// (a path's knots; [`SetpointHandler::check`] for a setpoint's goal).
