@@ -33,8 +33,45 @@ pub fn controller_for(scenario: &Scenario) -> Result<Controller, ConfigError> {
         })?;
     check_path_starts(scenario, &controller)?;
     check_path_speeds(scenario)?;
+    check_path_feasibility(scenario, &controller)?;
     Ok(controller)
 }
+
+/// The hierarchy can follow the scenario's paths from q0: no level singular
+/// and no path level left behind along them (crate `feasibility`).
+fn check_path_feasibility(scenario: &Scenario, controller: &Controller) -> Result<(), ConfigError> {
+    if !scenario.tracking.any() {
+        return Ok(());
+    }
+    let paths: Vec<_> = scenario
+        .tracking
+        .paths
+        .iter()
+        .map(|p| p.as_ref().map(|p| &p.trajectory))
+        .collect();
+    let q0 = scenario.q0.as_slice();
+    match crate::feasibility::check_paths(controller, q0, &paths, FEASIBILITY_STEP_S) {
+        Ok(_) => Ok(()),
+        Err(e) => {
+            // Name the level's path when it has one, else the first path.
+            let i = if paths.get(e.level).is_some_and(Option::is_some) {
+                e.level
+            } else {
+                paths.iter().position(Option::is_some).unwrap_or(0)
+            };
+            let file = scenario.tracking.paths[i]
+                .as_ref()
+                .map_or("", |p| p.file.as_str());
+            Err(scenario.error_at(
+                &format!("level[{i}].trajectory"),
+                format!("{file}: the paths cannot be followed from initial.q0: {e}"),
+            ))
+        }
+    }
+}
+
+/// The feasibility rollout's step, s.
+const FEASIBILITY_STEP_S: f64 = 0.005;
 
 /// Every path's speed, √(|ẋ|² + |ω|²) sampled every control period, within
 /// its level's `[setpoint_limits] max_speed` (as a path sent at run time).

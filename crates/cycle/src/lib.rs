@@ -48,6 +48,7 @@
 mod contact;
 pub mod control_cycle;
 pub mod counters;
+pub mod feasibility;
 mod law;
 mod output_tank;
 mod paths;

@@ -209,6 +209,49 @@ fn a_path_faster_than_its_level_s_max_speed_is_refused() {
     assert!(hcc_cycle::controller_for(&scenario()).is_ok());
 }
 
+#[test]
+fn a_path_the_hierarchy_cannot_follow_is_refused_where_it_fails() {
+    // The TCP from where it is straight out along x to 0.95 m at its height
+    // (the Panda reaches ≈ 0.86 m from the shoulder): slow enough for the
+    // speed limit, inside the workspace ball, but the arm stretches and the
+    // law turns singular, or the TCP falls behind, before the end.
+    let mut s = scenario();
+    let start = [0.484046815, 0.0, 0.412629775];
+    let mut csv = String::from("t,x,y,z\n");
+    for k in 0..=80 {
+        let t = k as f64 * 0.1;
+        let x = start[0] + (0.95 - start[0]) * (t / 8.0);
+        csv += &format!("{t:.1},{x},{},{}\n", start[1], start[2]);
+    }
+    let path = s.tracking.paths[0].as_mut().unwrap();
+    path.trajectory = hcc_trajectory::Trajectory::parse(&csv, path.trajectory.blocks()).unwrap();
+    let Err(e) = hcc_cycle::controller_for(&s) else {
+        panic!("a path out of reach is refused");
+    };
+    let e = e.to_string();
+    println!("{e}");
+    assert!(
+        e.contains("level[0].trajectory") && e.contains("cannot be followed from initial.q0"),
+        "{e}"
+    );
+    // The shipped figure-eight is followed: the rollout's smallest
+    // conditioning per level.
+    let sc = scenario();
+    let c = hcc_cycle::controller_for(&sc).unwrap();
+    let paths: Vec<_> = sc
+        .tracking
+        .paths
+        .iter()
+        .map(|p| p.as_ref().map(|p| &p.trajectory))
+        .collect();
+    let r = hcc_cycle::feasibility::check_paths(&c, sc.q0.as_slice(), &paths, 0.005).unwrap();
+    println!(
+        "figure-eight rollout: {} steps, smallest conditioning {:?}",
+        r.steps, r.conditioning
+    );
+    assert!(r.steps > 1000);
+}
+
 /// With `HCC_TRACKING_PLOTS=<dir>` set: the TCP's y and z, desired and
 /// actual, tracking and pulled along (D ẋ), and the TCP error of both, as
 /// `<dir>/tracking-figure-eight.png` (the figure of docs/tracking.md).
