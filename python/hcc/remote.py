@@ -231,30 +231,49 @@ def encode_trajectory(
     points: Sequence[Sequence[float]],
     joint_names: Sequence[str] = (),
     stamp_ns: int = 0,
+    velocities: Sequence[Sequence[float]] | None = None,
+    accelerations: Sequence[Sequence[float]] | None = None,
 ) -> bytes:
     """A path message of ``ros_type`` (docs/tracking.md): a
     ``JointTrajectory`` of positions, or a ``MultiDOFJointTrajectory`` of one
     transform per point, each point x, y, z, qx, qy, qz, qw; ``times`` are the
-    points' ``time_from_start`` (s)."""
+    points' ``time_from_start`` (s). ``velocities`` and ``accelerations``,
+    one per point when given: a joint trajectory's values, a multi-DOF
+    point's twist (linear x y z, angular x y z)."""
+    if (velocities is None) != (accelerations is None):
+        raise ValueError("give both velocities and accelerations, or neither")
     w = CdrWriter().header(stamp_ns)
     w.u32(len(joint_names))
     for n in joint_names:
         w.string(n)
     w.u32(len(points))
-    for t, p in zip(times, points):
+    for k, (t, p) in enumerate(zip(times, points)):
         v = [float(x) for x in p]
+        rates = [] if velocities is None or accelerations is None else [
+            [float(x) for x in velocities[k]],
+            [float(x) for x in accelerations[k]],
+        ]
         if ros_type == JOINT_TRAJECTORY:
             w.u32(len(v))
             for x in v:
                 w.f64(x)
-            w.u32(0).u32(0).u32(0)  # velocities, accelerations, effort
+            for r in rates or [[], []]:  # velocities, accelerations
+                w.u32(len(r))
+                for x in r:
+                    w.f64(x)
+            w.u32(0)  # effort
         else:
             if len(v) != 7:
                 raise ValueError(f"a multi-DOF point is x, y, z, qx, qy, qz, qw, not {len(v)} values")
             w.u32(1)
             for x in v:
                 w.f64(x)
-            w.u32(0).u32(0)  # velocities, accelerations
+            for r in rates or [[], []]:  # one twist each, or none
+                if r and len(r) != 6:
+                    raise ValueError(f"a twist is linear x y z, angular x y z, not {len(r)} values")
+                w.u32(1 if r else 0)
+                for x in r:
+                    w.f64(x)
         sec = math.floor(t)
         w.i32(int(sec)).u32(int(round((t - sec) * 1e9)) % 1_000_000_000)
     return bytes(w.buf)
@@ -671,12 +690,17 @@ class Client:
         points: Sequence[Sequence[float]],
         joint_names: Sequence[str] = (),
         timeout: float = 2.0,
+        velocities: Sequence[Sequence[float]] | None = None,
+        accelerations: Sequence[Sequence[float]] | None = None,
     ) -> int:
         """Sends ``level`` a path on its path topic (docs/tracking.md): a
         ``MultiDOFJointTrajectory`` for a Cartesian level (each point x, y, z,
         qx, qy, qz, qw), a ``JointTrajectory`` for the others (the level's
-        values); ``times`` from when the controller accepts it. Returns the
-        sequence number for :meth:`wait_until_accepted`."""
+        values); ``times`` from when the controller accepts it. With
+        ``velocities`` and ``accelerations`` (one per point: a twist, linear
+        then angular, for a Cartesian level) the bridge sends the points as
+        samples with those rates. Returns the sequence number for
+        :meth:`wait_until_accepted`."""
         key = ("path", level)
         if key not in self._publishers:
             t = self.latest_telemetry(timeout)
@@ -691,7 +715,7 @@ class Client:
         pub, gid, ty = self._publishers[key]
         self._seq += 1
         now = time.time_ns()
-        pub.put(encode_trajectory(ty, times, points, joint_names, now),
+        pub.put(encode_trajectory(ty, times, points, joint_names, now, velocities, accelerations),
                 attachment=attachment(self._seq, now, gid))
         self._sent[self._seq] = gid
         return self._seq

@@ -184,9 +184,10 @@ def test_remote_goals_move_the_arm_and_a_killed_bridge_changes_nothing(tmp_path:
 def test_a_ros_trajectory_through_the_bridge_is_followed(tmp_path: pathlib.Path) -> None:
     """A ROS 2-style peer (rmw_zenoh's wire) sends the Panda's TCP pose level
     a ``MultiDOFJointTrajectory`` on its path topic: a 5 cm circle at 0.25 Hz
-    from the TCP's goal, the orientation held; the bridge forwards it as path
-    knots, the controller answers, and the TCP follows the circle within 1 mm
-    from 3 s on (docs/tracking.md)."""
+    from the TCP's goal, the orientation held, as a planner sends it — a point
+    every 0.1 s with its twist and acceleration; the bridge forwards the
+    points as samples with those rates, the controller answers, and the TCP
+    follows the circle within 1 mm from 3 s on (docs/tracking.md)."""
     with (
         router(tmp_path) as port,
         sim_pair(SCENARIO, tmp_path, duration=120.0) as (ns, prefix, ctl, plant),
@@ -204,15 +205,26 @@ def test_a_ros_trajectory_through_the_bridge_is_followed(tmp_path: pathlib.Path)
             # The scenario's level 1 is the TCP pose: its orientation held.
             goal = list(start.goal_list(0))
             c, q = goal[:3], rpy_to_quaternion(*goal[3:6])
-            times, points = [], []
-            w = 2 * math.pi * 0.25
-            for k in range(251):
-                t = k * 0.02
+            times, points, twists, accels = [], [], [], []
+            w, r = 2 * math.pi * 0.25, 0.05
+            for k in range(51):
+                t = k * 0.1
                 x = min(t, 1.0)
-                a = w * (x**6 - 3 * x**5 + 2.5 * x**4 if t <= 1.0 else t - 0.5)
+                if t <= 1.0:
+                    phase = x**6 - 3 * x**5 + 2.5 * x**4
+                    dphase = 6 * x**5 - 15 * x**4 + 10 * x**3
+                    ddphase = 30 * x**4 - 60 * x**3 + 30 * x**2
+                else:
+                    phase, dphase, ddphase = t - 0.5, 1.0, 0.0
+                a, da, dda = w * phase, w * dphase, w * ddphase
+                s, co = math.sin(a), math.cos(a)
                 times.append(t)
-                points.append([c[0], c[1] + 0.05 * math.sin(a), c[2] + 0.05 * (1 - math.cos(a)), *q])
-            seq = arm.follow(0, times, points)
+                points.append([c[0], c[1] + r * s, c[2] + r * (1 - co), *q])
+                twists.append([0.0, r * da * co, r * da * s, 0.0, 0.0, 0.0])
+                accels.append(
+                    [0.0, r * dda * co - r * da * da * s, r * dda * s + r * da * da * co, 0.0, 0.0, 0.0]
+                )
+            seq = arm.follow(0, times, points, velocities=twists, accelerations=accels)
             answer = arm.wait_until_accepted(seq, timeout=10.0)
             began = time.monotonic()
             assert answer.accepted(), answer

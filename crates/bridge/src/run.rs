@@ -585,24 +585,28 @@ impl Goals {
                 )
                 .map_err(|e| e.to_string())
             });
-        let (times, points) = knots
+        let knots = knots
             .inspect_err(|_| bump(&c.goals_refused_bad))
             .map_err(|e| (ros::REFUSED_BAD_MESSAGE, e))?;
         bump(&c.goals_forwarded);
-        client
-            .follow(g.level, &times, &points, 0, Duration::from_millis(500))
-            .map(|_| ())
-            .map_err(|e| {
-                bump(&c.goals_rejected);
-                let code = match &e.error {
-                    ClientError::Rejected(r) => r.code(),
-                    ClientError::PathRejected(r) => r.code(),
-                    ClientError::PathInvalid(r) => r.code(),
-                    ClientError::Invalid(r) => r.code(),
-                    _ => ros::REFUSED_UNREACHABLE,
-                };
-                (code, e.to_string())
-            })
+        let timeout = Duration::from_millis(500);
+        let (times, points) = (&knots.times, &knots.points);
+        match &knots.rates {
+            Some((v, a)) => client.follow_samples(g.level, times, points, (v, a), 0, timeout),
+            None => client.follow(g.level, times, points, 0, timeout),
+        }
+        .map(|_| ())
+        .map_err(|e| {
+            bump(&c.goals_rejected);
+            let code = match &e.error {
+                ClientError::Rejected(r) => r.code(),
+                ClientError::PathRejected(r) => r.code(),
+                ClientError::PathInvalid(r) => r.code(),
+                ClientError::Invalid(r) => r.code(),
+                _ => ros::REFUSED_UNREACHABLE,
+            };
+            (code, e.to_string())
+        })
     }
 
     /// Keeps `answer` as the last of its publisher.

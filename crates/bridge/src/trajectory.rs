@@ -11,9 +11,14 @@
 //! `joint_trajectory_controller` already send (`FollowJointTrajectory`), and
 //! `MultiDOFJointTrajectory` is the standard message (`common_interfaces`,
 //! no extra package) that MoveIt uses for multi-DOF joints: one "joint" —
-//! the level's frame — with a transform per point. `velocities`,
-//! `accelerations` and `effort` are not used: the controller interpolates
-//! its own from the knots. `time_from_start` is the knot's time from when
+//! the level's frame — with a transform per point. When every point carries
+//! its `velocities` and `accelerations` (a time-parameterised MoveIt or
+//! planner trajectory: a joint level's m values; a Cartesian level's first
+//! twist, linear then angular, in the trajectory's frame), the points go as
+//! samples with those derivatives (`hcc_msgs::PATH_DERIVATIVES`), so the
+//! path keeps the planner's timing law between sparse points; otherwise
+//! the controller interpolates its own from the knots. `effort` is not
+//! used. `time_from_start` is the knot's time from when
 //! the controller accepts the path; a trajectory whose first point comes
 //! later than 0 (as a `joint_trajectory_controller` trajectory usually
 //! does) starts from the level's equilibrium at 0. Joint names, when given,
@@ -38,13 +43,36 @@ pub const MULTI_DOF_JOINT_TRAJECTORY: RosType = RosType {
     hash: "RIHS01_3a18fd095292a65cfde8833c72985a30af981f3ec44494655c6267262b443a4a",
 };
 
-/// A trajectory as read: its frame, joint names and, per point, its time (s)
-/// and values (positions; or the first transform's x y z, qx qy qz qw).
+/// A trajectory as read: its frame, joint names and points.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrajectoryMsg {
     pub frame: String,
     pub joint_names: Vec<String>,
-    pub points: Vec<(f64, Vec<f64>)>,
+    pub points: Vec<Point>,
+}
+
+/// One point: its time (s), values (positions; or the first transform's
+/// x y z, qx qy qz qw) and rates as sent (velocities, accelerations; or the
+/// first twist of each: linear x y z, angular x y z; empty when not sent).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Point {
+    pub t: f64,
+    pub values: Vec<f64>,
+    pub velocities: Vec<f64>,
+    pub accelerations: Vec<f64>,
+}
+
+/// Per knot: its velocity and its acceleration.
+pub type Rates = (Vec<Vec<f64>>, Vec<Vec<f64>>);
+
+/// A level's path from a trajectory: knot times, columns and, when every
+/// point carries them, the knots' velocities and accelerations in the
+/// level's goal-velocity coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Knots {
+    pub times: Vec<f64>,
+    pub points: Vec<Vec<f64>>,
+    pub rates: Option<Rates>,
 }
 
 /// The path type of a level of `kind`.
@@ -77,13 +105,18 @@ pub fn read_trajectory(ty: &RosType, payload: &[u8]) -> Result<TrajectoryMsg, Cd
     let mut points = Vec::with_capacity(n.min(4096));
     for _ in 0..n {
         if *ty == JOINT_TRAJECTORY {
-            let mut positions = Vec::new();
-            r.seq_f64("points.positions", &mut positions)?;
-            let mut skip = Vec::new();
-            for field in ["points.velocities", "points.accelerations", "points.effort"] {
-                r.seq_f64(field, &mut skip)?;
-            }
-            points.push((duration(&mut r)?, positions));
+            let (mut values, mut velocities, mut accelerations, mut effort) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            r.seq_f64("points.positions", &mut values)?;
+            r.seq_f64("points.velocities", &mut velocities)?;
+            r.seq_f64("points.accelerations", &mut accelerations)?;
+            r.seq_f64("points.effort", &mut effort)?;
+            points.push(Point {
+                t: duration(&mut r)?,
+                values,
+                velocities,
+                accelerations,
+            });
         } else {
             let transforms = r.seq_len("points.transforms")?;
             let mut first = Vec::new();
@@ -96,13 +129,26 @@ pub fn read_trajectory(ty: &RosType, payload: &[u8]) -> Result<TrajectoryMsg, Cd
                     first = v;
                 }
             }
-            for field in ["points.velocities", "points.accelerations"] {
+            let mut rates = [Vec::new(), Vec::new()];
+            for (field, first_twist) in ["points.velocities", "points.accelerations"]
+                .into_iter()
+                .zip(&mut rates)
+            {
                 let twists = r.seq_len(field)?;
-                for _ in 0..6 * twists {
-                    r.f64(field)?;
+                for k in 0..6 * twists {
+                    let v = r.f64(field)?;
+                    if k < 6 {
+                        first_twist.push(v);
+                    }
                 }
             }
-            points.push((duration(&mut r)?, first));
+            let [velocities, accelerations] = rates;
+            points.push(Point {
+                t: duration(&mut r)?,
+                values: first,
+                velocities,
+                accelerations,
+            });
         }
     }
     Ok(TrajectoryMsg {
@@ -147,7 +193,7 @@ pub fn knots(
     joints: &[String],
     root: &str,
     equilibrium: &[f64],
-) -> Result<(Vec<f64>, Vec<Vec<f64>>), PathError> {
+) -> Result<Knots, PathError> {
     if !(msg.frame.is_empty() || msg.frame == root) {
         return Err(PathError::Frame {
             got: msg.frame.clone(),
@@ -180,17 +226,43 @@ pub fn knots(
             LevelKind::Pose => Ok([&v[..3], &quat(v)[..]].concat()),
         }
     };
-    let mut times = Vec::with_capacity(msg.points.len() + 1);
-    let mut points = Vec::with_capacity(msg.points.len() + 1);
-    if msg.points[0].0 > 0.0 {
+    // One point's rates in the level's goal-velocity coordinates, if sent.
+    let rates = |v: &[f64]| -> Option<Vec<f64>> {
+        match kind {
+            LevelKind::Vector { dim } => (v.len() == *dim).then(|| v.to_vec()),
+            _ if v.len() < 6 => None,
+            LevelKind::Position { axes } => Some(axes.iter().map(|&a| v[a]).collect()),
+            LevelKind::Orientation => Some(v[3..6].to_vec()),
+            LevelKind::Pose => Some(v[..6].to_vec()),
+        }
+    };
+    let n = msg.points.len() + 1;
+    let (mut times, mut points) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut velocities, mut accelerations) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut all_rates = true;
+    if msg.points[0].t > 0.0 {
         times.push(0.0);
         points.push(goal_columns(kind, equilibrium));
+        let zeros = vec![0.0; equilibrium.len()];
+        velocities.push(zeros.clone());
+        accelerations.push(zeros);
     }
-    for (k, (t, v)) in msg.points.iter().enumerate() {
-        times.push(*t);
-        points.push(columns(k, v)?);
+    for (k, p) in msg.points.iter().enumerate() {
+        times.push(p.t);
+        points.push(columns(k, &p.values)?);
+        match (rates(&p.velocities), rates(&p.accelerations)) {
+            (Some(v), Some(a)) => {
+                velocities.push(v);
+                accelerations.push(a);
+            }
+            _ => all_rates = false,
+        }
     }
-    Ok((times, points))
+    Ok(Knots {
+        times,
+        points,
+        rates: all_rates.then_some((velocities, accelerations)),
+    })
 }
 
 /// A goal (the level's goal format: roll, pitch, yaw for orientations) in
@@ -229,15 +301,14 @@ mod tests {
         }
         let msg = read_trajectory(&JOINT_TRAJECTORY, w.bytes()).unwrap();
         assert_eq!(msg.joint_names, ["j1", "j2"]);
-        assert_eq!(
-            msg.points,
-            vec![(0.5, vec![0.1, 0.2]), (1.5, vec![0.3, 0.4])]
-        );
+        let tv: Vec<_> = msg.points.iter().map(|p| (p.t, p.values.clone())).collect();
+        assert_eq!(tv, vec![(0.5, vec![0.1, 0.2]), (1.5, vec![0.3, 0.4])]);
         let kind = LevelKind::Vector { dim: 2 };
         let names = ["j1".to_string(), "j2".to_string()];
-        let (t, p) = knots(&msg, &kind, &names, "base", &[0.0, 0.1]).unwrap();
-        assert_eq!(t, [0.0, 0.5, 1.5]);
-        assert_eq!(p, [vec![0.0, 0.1], vec![0.1, 0.2], vec![0.3, 0.4]]);
+        let k = knots(&msg, &kind, &names, "base", &[0.0, 0.1]).unwrap();
+        assert_eq!(k.times, [0.0, 0.5, 1.5]);
+        assert_eq!(k.points, [vec![0.0, 0.1], vec![0.1, 0.2], vec![0.3, 0.4]]);
+        assert_eq!(k.rates, None, "no velocities sent: knots");
         let other = ["a".to_string(), "b".to_string()];
         assert!(matches!(
             knots(&msg, &kind, &other, "base", &[0.0; 2]),
@@ -256,10 +327,10 @@ mod tests {
         w.seq_len(0).seq_len(0);
         w.i32(0).u32(0);
         let msg = read_trajectory(&MULTI_DOF_JOINT_TRAJECTORY, w.bytes()).unwrap();
-        let (t, p) = knots(&msg, &LevelKind::Pose, &[], "base", &[0.0; 6]).unwrap();
-        assert_eq!(t, [0.0]);
-        assert_eq!(p, [vec![0.5, 0.1, 0.3, 1.0, 0.0, 0.0, 0.0]]);
-        let (_, p) = knots(
+        let k = knots(&msg, &LevelKind::Pose, &[], "base", &[0.0; 6]).unwrap();
+        assert_eq!(k.times, [0.0]);
+        assert_eq!(k.points, [vec![0.5, 0.1, 0.3, 1.0, 0.0, 0.0, 0.0]]);
+        let k = knots(
             &msg,
             &LevelKind::Position { axes: vec![0, 2] },
             &[],
@@ -267,10 +338,75 @@ mod tests {
             &[0.0; 2],
         )
         .unwrap();
-        assert_eq!(p, [vec![0.5, 0.3]]);
+        assert_eq!(k.points, [vec![0.5, 0.3]]);
         assert!(matches!(
             knots(&msg, &LevelKind::Pose, &[], "world", &[0.0; 6]),
             Err(PathError::Frame { .. })
         ));
+    }
+
+    #[test]
+    fn points_with_their_rates_become_samples() {
+        // A joint trajectory whose points carry velocities and accelerations
+        // (a time-parameterised plan), the first later than 0.
+        let mut w = CdrWriter::new();
+        w.start();
+        header(&mut w, "");
+        w.seq_string::<&str>(&[]);
+        w.seq_len(2);
+        for (k, (p, v, a)) in [
+            ([0.1, 0.2], [0.3, 0.0], [1.0, 0.0]),
+            ([0.2, 0.2], [0.0; 2], [0.0; 2]),
+        ]
+        .iter()
+        .enumerate()
+        {
+            w.seq_f64(p).seq_f64(v).seq_f64(a).seq_f64(&[]);
+            w.i32(k as i32 + 1).u32(0);
+        }
+        let msg = read_trajectory(&JOINT_TRAJECTORY, w.bytes()).unwrap();
+        let kind = LevelKind::Vector { dim: 2 };
+        let k = knots(&msg, &kind, &[], "base", &[0.1, 0.2]).unwrap();
+        assert_eq!(k.times, [0.0, 1.0, 2.0]);
+        let (v, a) = k.rates.unwrap();
+        assert_eq!(v, [vec![0.0, 0.0], vec![0.3, 0.0], vec![0.0, 0.0]]);
+        assert_eq!(a, [vec![0.0, 0.0], vec![1.0, 0.0], vec![0.0, 0.0]]);
+
+        // A pose trajectory with twists: linear then angular.
+        let mut w = CdrWriter::new();
+        w.start();
+        header(&mut w, "base");
+        w.seq_string(&["tcp"]);
+        w.seq_len(1);
+        w.seq_len(1);
+        for x in [0.5, 0.1, 0.3, 0.0, 0.0, 0.0, 1.0] {
+            w.f64(x);
+        }
+        for twist in [
+            [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        ] {
+            w.seq_len(1);
+            for x in twist {
+                w.f64(x);
+            }
+        }
+        w.i32(0).u32(0);
+        let msg = read_trajectory(&MULTI_DOF_JOINT_TRAJECTORY, w.bytes()).unwrap();
+        let k = knots(&msg, &LevelKind::Pose, &[], "base", &[0.0; 6]).unwrap();
+        let (v, a) = k.rates.unwrap();
+        assert_eq!(v, [vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6]]);
+        assert_eq!(a, [vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]]);
+        let k = knots(&msg, &LevelKind::Orientation, &[], "base", &[0.0; 3]).unwrap();
+        assert_eq!(k.rates.unwrap().0, [vec![0.4, 0.5, 0.6]]);
+        let k = knots(
+            &msg,
+            &LevelKind::Position { axes: vec![1] },
+            &[],
+            "base",
+            &[0.0],
+        )
+        .unwrap();
+        assert_eq!(k.rates.unwrap().1, [vec![2.0]]);
     }
 }

@@ -13,6 +13,9 @@ use hcc_msgs::{
 
 use crate::{Client, ClientError, rejection};
 
+/// Knots' velocities and accelerations, one entry per knot each.
+type Rates<'a> = (&'a [Vec<f64>], &'a [Vec<f64>]);
+
 /// A refusal of one message of a path: its knots, the knot refused when the
 /// refusal names one, and why.
 #[derive(Debug)]
@@ -77,7 +80,38 @@ impl Client {
         start_at_state_seq: u64,
         timeout: Duration,
     ) -> Result<SetpointAnswer, KnotsRefused> {
-        self.send_knots(level, times, points, (true, start_at_state_seq), timeout)
+        self.send_knots(
+            level,
+            times,
+            points,
+            None,
+            (true, start_at_state_seq),
+            timeout,
+        )
+    }
+
+    /// [`Client::follow`] with the knots' own velocities and accelerations
+    /// (samples, `hcc_msgs::PATH_DERIVATIVES`: the level's goal-velocity
+    /// coordinates, an orientation's ω and ω̇ in the base frame; one entry
+    /// per knot each).
+    pub fn follow_samples(
+        &mut self,
+        level: usize,
+        times: &[f64],
+        points: &[Vec<f64>],
+        (velocities, accelerations): (&[Vec<f64>], &[Vec<f64>]),
+        start_at_state_seq: u64,
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, KnotsRefused> {
+        let rates = Some((velocities, accelerations));
+        self.send_knots(
+            level,
+            times,
+            points,
+            rates,
+            (true, start_at_state_seq),
+            timeout,
+        )
     }
 
     /// Extends `level`'s running path with the knots (later than its last).
@@ -88,7 +122,7 @@ impl Client {
         points: &[Vec<f64>],
         timeout: Duration,
     ) -> Result<SetpointAnswer, KnotsRefused> {
-        self.send_knots(level, times, points, (false, 0), timeout)
+        self.send_knots(level, times, points, None, (false, 0), timeout)
     }
 
     fn send_knots(
@@ -96,6 +130,7 @@ impl Client {
         level: usize,
         times: &[f64],
         points: &[Vec<f64>],
+        rates: Option<Rates<'_>>,
         (new, start_at_state_seq): (bool, u64),
         timeout: Duration,
     ) -> Result<SetpointAnswer, KnotsRefused> {
@@ -109,7 +144,8 @@ impl Client {
                 error,
             };
         let refused = |first, last, error| refused_at(first, last, None, error);
-        if times.is_empty() || times.len() != points.len() {
+        let rates_fit = rates.is_none_or(|(v, a)| v.len() == times.len() && a.len() == times.len());
+        if times.is_empty() || times.len() != points.len() || !rates_fit {
             let e =
                 ClientError::PathInvalid(hcc_msgs::KnotsRejection::Path(PathRejection::KnotCount));
             return Err(refused(0, times.len().saturating_sub(1), e));
@@ -134,7 +170,11 @@ impl Client {
             };
             m.apply_at_state_seq = start_at_state_seq;
             for (k, (t, p)) in ts.iter().zip(ps).enumerate() {
-                m.push(*t, p).map_err(|r| {
+                let pushed = match rates {
+                    Some((v, a)) => m.push_sample(*t, p, &v[first + k], &a[first + k]),
+                    None => m.push(*t, p),
+                };
+                pushed.map_err(|r| {
                     refused_at(
                         first,
                         last,
