@@ -31,6 +31,7 @@ from hcc import Client
 from hcc.remote import REFUSED_READ_ONLY, Client as RemoteClient, GoalRefused, rpy_to_quaternion
 
 from bridge_procs import bridge, router, wait_for, zenoh_config
+from circle import circle_sample
 from conftest import ROOT
 from procs import sim_pair
 
@@ -206,24 +207,13 @@ def test_a_ros_trajectory_through_the_bridge_is_followed(tmp_path: pathlib.Path)
             goal = list(start.goal_list(0))
             c, q = goal[:3], rpy_to_quaternion(*goal[3:6])
             times, points, twists, accels = [], [], [], []
-            w, r = 2 * math.pi * 0.25, 0.05
             for k in range(51):
                 t = k * 0.1
-                x = min(t, 1.0)
-                if t <= 1.0:
-                    phase = x**6 - 3 * x**5 + 2.5 * x**4
-                    dphase = 6 * x**5 - 15 * x**4 + 10 * x**3
-                    ddphase = 30 * x**4 - 60 * x**3 + 30 * x**2
-                else:
-                    phase, dphase, ddphase = t - 0.5, 1.0, 0.0
-                a, da, dda = w * phase, w * dphase, w * ddphase
-                s, co = math.sin(a), math.cos(a)
+                p, v, a = circle_sample(c, t)
                 times.append(t)
-                points.append([c[0], c[1] + r * s, c[2] + r * (1 - co), *q])
-                twists.append([0.0, r * da * co, r * da * s, 0.0, 0.0, 0.0])
-                accels.append(
-                    [0.0, r * dda * co - r * da * da * s, r * dda * s + r * da * da * co, 0.0, 0.0, 0.0]
-                )
+                points.append([*p, *q])
+                twists.append([*v, 0.0, 0.0, 0.0])
+                accels.append([*a, 0.0, 0.0, 0.0])
             seq = arm.follow(0, times, points, velocities=twists, accelerations=accels)
             answer = arm.wait_until_accepted(seq, timeout=10.0)
             began = time.monotonic()

@@ -17,6 +17,7 @@ import pytest
 from hcc import Client, SetpointError, SetpointRejected, SetpointRejection
 
 from hcc import ipc
+from circle import circle_knots, circle_sample
 from conftest import ROOT, unique
 from procs import remove_ipc_files, sim_pair
 
@@ -118,21 +119,6 @@ def test_the_scenario_of_a_namespace_without_a_controller_says_which(tmp_path: p
         remove_ipc_files(prefix)
 
 
-def _circle(start: list[float], seconds: float) -> tuple[list[float], list[list[float]]]:
-    """A 5 cm circle at 0.25 Hz in the y-z plane through ``start``, its phase
-    rising smoothly from rest over the first second; a knot every 20 ms."""
-    times, points = [], []
-    w = 2 * math.pi * 0.25
-    for k in range(int(round(seconds / 0.02)) + 1):
-        t = k * 0.02
-        x = min(t, 1.0)
-        phase = x**6 - 3 * x**5 + 2.5 * x**4 if t <= 1.0 else t - 0.5
-        a = w * phase
-        times.append(t)
-        points.append([start[0], start[1] + 0.05 * math.sin(a), start[2] + 0.05 * (1 - math.cos(a))])
-    return times, points
-
-
 def test_follow_sends_a_path_that_the_tcp_tracks(tmp_path: pathlib.Path) -> None:
     """Client.follow (docs/tracking.md): a circle the TCP follows within 1 mm
     from 3 s on; a path that starts away from the level is refused, naming
@@ -147,7 +133,7 @@ def test_follow_sends_a_path_that_the_tcp_tracks(tmp_path: pathlib.Path) -> None
         t = client.latest_telemetry()
         assert t is not None
         start = t.goal_list(0)
-        times, points = _circle(start, 5.0)
+        times, points = circle_knots(start, 5.0)
         answer = client.follow(0, times, points, timeout=5.0)
         assert answer.accepted()
         began = time.monotonic()
@@ -166,25 +152,6 @@ def test_follow_sends_a_path_that_the_tcp_tracks(tmp_path: pathlib.Path) -> None
             client.follow(0, [0.0, 0.5], [far, far], timeout=5.0)
         assert (e.value.first, e.value.last, e.value.knot) == (0, 1, 0)
         assert e.value.cause.path_rejection is PathRejection.STARTS_AWAY, e.value
-
-
-def _circle_sample(start: list[float], t: float) -> tuple[list[float], list[float], list[float]]:
-    """The circle of :func:`_circle` at ``t`` with its velocity and acceleration."""
-    w = 2 * math.pi * 0.25
-    x = min(t, 1.0)
-    if t <= 1.0:
-        phase = x**6 - 3 * x**5 + 2.5 * x**4
-        dphase = 6 * x**5 - 15 * x**4 + 10 * x**3
-        ddphase = 30 * x**4 - 60 * x**3 + 30 * x**2
-    else:
-        phase, dphase, ddphase = t - 0.5, 1.0, 0.0
-    a, da, dda = w * phase, w * dphase, w * ddphase
-    s, c, r = math.sin(a), math.cos(a), 0.05
-    return (
-        [start[0], start[1] + r * s, start[2] + r * (1 - c)],
-        [0.0, r * da * c, r * da * s],
-        [0.0, r * dda * c - r * da * da * s, r * dda * s + r * da * da * c],
-    )
 
 
 def test_a_device_streams_samples_that_the_tcp_tracks_and_rests_on_the_last(
@@ -215,7 +182,7 @@ def test_a_device_streams_samples_that_the_tcp_tracks_and_rests_on_the_last(
             wait = began + tk - lead - time.monotonic()
             if wait > 0:
                 time.sleep(wait)
-            stream.send(tk, *_circle_sample(start, tk))
+            stream.send(tk, *circle_sample(start, tk))
             if k == 0:
                 began = time.monotonic()
             latest = client.latest_telemetry()
@@ -224,7 +191,7 @@ def test_a_device_streams_samples_that_the_tcp_tracks_and_rests_on_the_last(
         stream.check()
         assert stream.sent == n
         time.sleep(1.5)
-        last, _, _ = _circle_sample(start, (n - 1) * period)
+        last, _, _ = circle_sample(start, (n - 1) * period)
         t = client.latest_telemetry()
         assert t is not None
         rest = math.dist(t.goal_list(0)[:3], last)

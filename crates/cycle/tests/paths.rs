@@ -107,8 +107,13 @@ struct Sent {
     stopped: u64,
 }
 
-fn send_circle(knots: usize, seconds: f64) -> Sent {
-    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+/// Runs the Panda regulating its pose for 2 s, then `seconds` more: from
+/// then on `send(cycle_from_2s, path_start, cycle)` hands the cycle its path
+/// messages (their answers kept) before each decision.
+fn run_sending(
+    seconds: f64,
+    mut send: impl FnMut(usize, [f64; 3], &mut ControlCycle) -> Vec<u32>,
+) -> Sent {
     let (sc, mut d) = cycle_of("panda-pose-posture");
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
@@ -136,21 +141,9 @@ fn send_circle(knots: usize, seconds: f64) -> Sent {
             // From the level's equilibrium (its goal).
             let g = &d.telemetry().goal[0];
             out.start = [g[0], g[1], g[2]];
-            let mut msg = PathKnots::zeroed();
-            for j in 0..knots {
-                if msg.count() == hcc_msgs::MAX_KNOTS_PER_MESSAGE {
-                    out.codes.push(d.take_path(&msg));
-                    msg = PathKnots::zeroed();
-                }
-                if msg.count() == 0 {
-                    msg.flags = if j == 0 { PATH_NEW } else { PATH_EXTEND };
-                    msg.client_id = 9;
-                    msg.header.seq = out.codes.len() as u64 + 1;
-                }
-                let t = j as f64 * 0.02;
-                msg.push(t, &circle(out.start, t)).unwrap();
-            }
-            out.codes.push(d.take_path(&msg));
+        }
+        if k >= send_at {
+            out.codes.extend(send(k - send_at, out.start, &mut d));
         }
         d.decide(&s, (k as u64 + 1) * period_ns);
         if k >= send_at {
@@ -167,6 +160,34 @@ fn send_circle(knots: usize, seconds: f64) -> Sent {
     .unwrap();
     out.stopped = d.counters().core.paths_stopped;
     out
+}
+
+/// The circle's first `knots` knots (every 20 ms), all sent at 2 s in
+/// messages of 16.
+fn send_circle(knots: usize, seconds: f64) -> Sent {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    run_sending(seconds, |k, start, d| {
+        let mut codes = Vec::new();
+        if k > 0 {
+            return codes;
+        }
+        let mut msg = PathKnots::zeroed();
+        for j in 0..knots {
+            if msg.count() == hcc_msgs::MAX_KNOTS_PER_MESSAGE {
+                codes.push(d.take_path(&msg));
+                msg = PathKnots::zeroed();
+            }
+            if msg.count() == 0 {
+                msg.flags = if j == 0 { PATH_NEW } else { PATH_EXTEND };
+                msg.client_id = 9;
+                msg.header.seq = codes.len() as u64 + 1;
+            }
+            let t = j as f64 * 0.02;
+            msg.push(t, &circle(start, t)).unwrap();
+        }
+        codes.push(d.take_path(&msg));
+        codes
+    })
 }
 
 #[test]
@@ -330,68 +351,27 @@ fn circle_rates(t: f64) -> ([f64; 3], [f64; 3]) {
 fn stream_circle_samples(sampled: f64, seconds: f64) -> Sent {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
     const LEAD: f64 = 0.005;
-    let (sc, mut d) = cycle_of("panda-pose-posture");
-    let mut plant = hcc_plant::plant_for(&sc).unwrap();
-    let n = sc.model.nq();
-    let (period_ns, dt) = (sc.period_ns(), sc.period_s());
-    let send_at = 2000;
-    let timing = LoopTiming {
-        control_period_s: dt,
-        substeps: 10,
-        cycles: send_at + (seconds * 1000.0) as usize,
-    };
-    let mut out = Sent {
-        err: Vec::new(),
-        desired: Vec::new(),
-        tau: Vec::new(),
-        start: [0.0; 3],
-        codes: Vec::new(),
-        stopped: 0,
-    };
-    let mut next_t = 0.0;
-    run_zoh(&mut plant, timing, |k, _t, q, qd, tau| {
-        let mut s = JointState::zeroed();
-        s.set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
-            .unwrap();
-        s.header.seq = k as u64 + 1;
-        if k == send_at {
-            let g = &d.telemetry().goal[0];
-            out.start = [g[0], g[1], g[2]];
-        }
+    const DT: f64 = 1e-3;
+    let (mut next_t, mut sent) = (0.0, 0);
+    run_sending(seconds, |k, start, d| {
         // Every sample up to LEAD s past where the path is.
-        let path_t = (k as f64 - send_at as f64) * dt;
+        let path_t = k as f64 * DT;
         let mut msg = PathKnots::zeroed();
-        while k >= send_at && next_t <= path_t + LEAD + 1e-9 && next_t <= sampled + 1e-9 {
+        while next_t <= path_t + LEAD + 1e-9 && next_t <= sampled + 1e-9 {
             let (v, a) = circle_rates(next_t);
-            msg.push_sample(next_t, &circle(out.start, next_t), &v, &a)
+            msg.push_sample(next_t, &circle(start, next_t), &v, &a)
                 .unwrap();
-            next_t += dt;
+            next_t += DT;
         }
-        if msg.count() > 0 {
-            msg.flags |= if out.codes.is_empty() {
-                PATH_NEW
-            } else {
-                PATH_EXTEND
-            };
-            msg.client_id = 9;
-            msg.header.seq = out.codes.len() as u64 + 1;
-            out.codes.push(d.take_path(&msg));
+        if msg.count() == 0 {
+            return Vec::new();
         }
-        d.decide(&s, (k as u64 + 1) * period_ns);
-        if k >= send_at {
-            let t = d.telemetry();
-            let e = t.task_error(0);
-            out.err
-                .push((e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt());
-            out.desired.push([t.goal[0][0], t.goal[0][1], t.goal[0][2]]);
-            out.tau.push(d.command().tau().to_vec());
-        }
-        tau.as_mut_slice().copy_from_slice(d.command().tau());
-        Ok(())
+        msg.flags |= if sent == 0 { PATH_NEW } else { PATH_EXTEND };
+        msg.client_id = 9;
+        sent += 1;
+        msg.header.seq = sent;
+        vec![d.take_path(&msg)]
     })
-    .unwrap();
-    out.stopped = d.counters().core.paths_stopped;
-    out
 }
 
 #[test]
