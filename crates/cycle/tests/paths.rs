@@ -164,6 +164,21 @@ fn run_sending(
 
 /// The circle's first `knots` knots (every 20 ms), all sent at 2 s in
 /// messages of 16.
+impl Sent {
+    /// The largest change of a joint torque from one cycle to the next, N·m.
+    fn largest_torque_step(&self) -> f64 {
+        self.tau
+            .windows(2)
+            .map(|w| {
+                w[0].iter()
+                    .zip(&w[1])
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max)
+            })
+            .fold(0.0_f64, f64::max)
+    }
+}
+
 fn send_circle(knots: usize, seconds: f64) -> Sent {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
     run_sending(seconds, |k, start, d| {
@@ -226,16 +241,7 @@ fn a_stream_that_stops_mid_path_comes_to_rest_on_its_last_knot() {
     );
     let settled = s.err[s.err.len() - 1];
     // No torque step above the filter's rate (1000 N·m/s: 1 N·m per cycle).
-    let step = s
-        .tau
-        .windows(2)
-        .map(|w| {
-            w[0].iter()
-                .zip(&w[1])
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0_f64, f64::max);
+    let step = s.largest_torque_step();
     println!(
         "stopped stream: at rest {settled:.2e} m from its last knot; largest torque step {step:.3} N·m"
     );
@@ -391,16 +397,7 @@ fn a_device_s_samples_are_tracked_and_a_stream_that_stops_rests_on_its_last() {
     assert_eq!(s.stopped, 1);
     let last = circle(s.start, 3.0);
     let end = s.desired[s.desired.len() - 1];
-    let step = s
-        .tau
-        .windows(2)
-        .map(|w| {
-            w[0].iter()
-                .zip(&w[1])
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0_f64, f64::max);
+    let step = s.largest_torque_step();
     let settled = s.err[s.err.len() - 1];
     println!(
         "device samples: TCP error from 1 s {worst:.3e} m; the path off the circle by at most \
