@@ -77,64 +77,87 @@ impl std::fmt::Display for Infeasible {
 
 /// What the rollout saw along feasible paths.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Rollout {
+pub struct Summary {
     /// Steps taken.
     pub steps: usize,
     /// The smallest conditioning of each level (the law's measure).
     pub conditioning: Vec<f64>,
 }
 
-/// Rolls `controller`'s hierarchy out from `q0` along `paths` (one per
-/// level, `None`: the level holds its goal) every `dt` s until the last
-/// path ends; the first step where a level is singular or a path level
-/// lags (module docs).
-pub fn check_paths(
-    controller: &Controller,
-    q0: &[f64],
-    paths: &[Option<&Trajectory>],
-    dt: f64,
-) -> Result<Rollout, Infeasible> {
-    let mut probe = controller.clone();
-    let n = probe.nq();
-    let levels = probe.levels();
-    let units: Vec<Vec<TaskUnit>> = (0..levels)
-        .map(|i| probe.spec().levels[i].units(n))
-        .collect();
-    let duration = paths
-        .iter()
-        .flatten()
-        .map(|p| p.duration())
-        .fold(0.0, f64::max);
-    let steps = (duration / dt).ceil() as usize;
-    let mut samples: Vec<_> = paths
-        .iter()
-        .map(|p| p.map(Trajectory::sample_buffer))
-        .collect();
-    let mut q = DVector::from_column_slice(q0);
-    let zeros = vec![0.0; n];
-    // Per level and coordinate: the error at the start (the allowance's base).
-    let mut start_error: Vec<Vec<f64>> = Vec::new();
-    let mut rollout = Rollout {
-        steps: 0,
-        conditioning: vec![f64::INFINITY; levels],
-    };
-    for k in 0..=steps {
-        let t = k as f64 * dt;
-        for (i, (path, sample)) in paths.iter().zip(&mut samples).enumerate() {
-            if let (Some(p), Some(s)) = (path, sample.as_mut()) {
-                p.sample(t, s);
-                probe.set_goal(i, &s.goal).map_err(|e| Infeasible {
-                    t,
-                    level: i,
-                    reason: Reason::Refused(e.to_string()),
-                })?;
+/// One level's desired value and velocity at a rollout step (the level's
+/// goal format and goal-velocity coordinates).
+pub type Target<'a> = (&'a [f64], &'a [f64]);
+
+/// A rollout in progress: the hierarchy's configuration moved step by step
+/// along the targets it is handed (module docs). Built once, stepped as the
+/// targets come — a whole path at once ([`check_paths`]), or a stream's
+/// knots as they arrive.
+pub struct Rollout {
+    probe: Controller,
+    q: DVector<f64>,
+    units: Vec<Vec<TaskUnit>>,
+    /// Per level and coordinate: the error at the first step (the lag
+    /// allowance's base).
+    start_error: Vec<Vec<f64>>,
+    summary: Summary,
+}
+
+impl Rollout {
+    /// A rollout of `controller`'s hierarchy from `q0`.
+    pub fn new(controller: &Controller, q0: &[f64]) -> Rollout {
+        let probe = controller.clone();
+        let n = probe.nq();
+        let levels = probe.levels();
+        let units = (0..levels)
+            .map(|i| probe.spec().levels[i].units(n))
+            .collect();
+        Rollout {
+            probe,
+            q: DVector::from_column_slice(q0),
+            units,
+            start_error: Vec::new(),
+            summary: Summary {
+                steps: 0,
+                conditioning: vec![f64::INFINITY; levels],
+            },
+        }
+    }
+
+    /// The configuration reached.
+    pub fn q(&self) -> &[f64] {
+        self.q.as_slice()
+    }
+
+    /// What it saw so far.
+    pub fn summary(&self) -> &Summary {
+        &self.summary
+    }
+
+    /// One step at time `t` (for the report) of `dt` s: the law at q with
+    /// `targets` as goals (one per level; `None`: the level holds), the
+    /// checks, then q moved by the prioritised resolved rates.
+    pub fn step(
+        &mut self,
+        t: f64,
+        targets: &[Option<Target<'_>>],
+        dt: f64,
+    ) -> Result<(), Infeasible> {
+        let refused = |level: usize, e: &dyn std::fmt::Display| Infeasible {
+            t,
+            level,
+            reason: Reason::Refused(e.to_string()),
+        };
+        for (i, target) in targets.iter().enumerate() {
+            if let Some((goal, _)) = target {
+                self.probe.set_goal(i, goal).map_err(|e| refused(i, &e))?;
             }
         }
-        let out = probe.step(q.as_slice(), &zeros).map_err(|e| Infeasible {
-            t,
-            level: 0,
-            reason: Reason::Refused(e.to_string()),
-        })?;
+        let n = self.probe.nq();
+        let zeros = vec![0.0; n];
+        let out = self
+            .probe
+            .step(self.q.as_slice(), &zeros)
+            .map_err(|e| refused(0, &e))?;
         if let Some(level) = out.singular.iter().position(|s| *s) {
             return Err(Infeasible {
                 t,
@@ -142,21 +165,25 @@ pub fn check_paths(
                 reason: Reason::Singular,
             });
         }
-        for (c, o) in rollout.conditioning.iter_mut().zip(&out.conditioning) {
+        let conditioning = self.summary.conditioning.iter_mut();
+        for (c, o) in conditioning.zip(&out.conditioning) {
             *c = c.min(*o);
         }
         let errors: Vec<DVector<f64>> = out.task_error.clone();
-        if start_error.is_empty() {
-            start_error = errors
+        if self.start_error.is_empty() {
+            self.start_error = errors
                 .iter()
                 .map(|e| e.iter().map(|x| x.abs()).collect())
                 .collect();
         }
-        for (i, sample) in samples.iter().enumerate() {
-            if sample.is_none() {
+        for (i, target) in targets.iter().enumerate() {
+            if target.is_none() {
                 continue;
             }
-            let coordinates = errors[i].iter().zip(&units[i]).zip(&start_error[i]);
+            let coordinates = errors[i]
+                .iter()
+                .zip(&self.units[i])
+                .zip(&self.start_error[i]);
             for ((e, unit), e0) in coordinates {
                 let limit = e0
                     + match unit {
@@ -176,10 +203,10 @@ pub fn check_paths(
         let mut qd = DVector::zeros(n);
         let mut null = DMatrix::identity(n, n);
         for (i, e) in errors.iter().enumerate() {
-            let j = probe.task_jacobian(i).clone();
+            let j = self.probe.task_jacobian(i).clone();
             let mut u = -ROLLOUT_GAIN * e;
-            if let Some(s) = &samples[i] {
-                u += DVector::from_column_slice(&s.velocity);
+            if let Some(Some((_, velocity))) = targets.get(i) {
+                u += DVector::from_column_slice(velocity);
             }
             let jn = &j * &null;
             let Ok(pinv) = jn.clone().pseudo_inverse(1e-9) else {
@@ -188,8 +215,45 @@ pub fn check_paths(
             qd += &pinv * (u - &j * &qd);
             null -= &pinv * jn;
         }
-        q += qd * dt;
-        rollout.steps = k + 1;
+        self.q += qd * dt;
+        self.summary.steps += 1;
+        Ok(())
     }
-    Ok(rollout)
+}
+
+/// Rolls `controller`'s hierarchy out from `q0` along `paths` (one per
+/// level, `None`: the level holds its goal) every `dt` s until the last
+/// path ends; the first step where a level is singular or a path level
+/// lags (module docs).
+pub fn check_paths(
+    controller: &Controller,
+    q0: &[f64],
+    paths: &[Option<&Trajectory>],
+    dt: f64,
+) -> Result<Summary, Infeasible> {
+    let duration = paths
+        .iter()
+        .flatten()
+        .map(|p| p.duration())
+        .fold(0.0, f64::max);
+    let steps = (duration / dt).ceil() as usize;
+    let mut samples: Vec<_> = paths
+        .iter()
+        .map(|p| p.map(Trajectory::sample_buffer))
+        .collect();
+    let mut rollout = Rollout::new(controller, q0);
+    for k in 0..=steps {
+        let t = k as f64 * dt;
+        for (path, sample) in paths.iter().zip(&mut samples) {
+            if let (Some(p), Some(s)) = (path, sample.as_mut()) {
+                p.sample(t, s);
+            }
+        }
+        let targets: Vec<Option<Target<'_>>> = samples
+            .iter()
+            .map(|s| s.as_ref().map(|s| (&s.goal[..], &s.velocity[..])))
+            .collect();
+        rollout.step(t, &targets, dt)?;
+    }
+    Ok(rollout.summary().clone())
 }
