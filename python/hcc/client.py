@@ -472,10 +472,11 @@ class SampleStream:
     stops comes to rest on its last sample and is over (counted as a stopped
     path); begin a new stream then.
 
-    :meth:`send` begins the path with the first sample and waits for the
-    answer; later samples are sent one message each without waiting, and a
-    refusal of any of them raises :class:`KnotsRefused` at the next
-    :meth:`send` or :meth:`check`."""
+    The first sample is held and goes with the second, which begins the
+    path (a path of one knot would be over as soon as its time passed) and
+    waits for the answer; later samples are sent one message each without
+    waiting, and a refusal of any of them raises :class:`KnotsRefused` at the
+    next :meth:`send` or :meth:`check`."""
 
     def __init__(self, client: "Client", level: int, start_at_state_seq: int = 0, timeout: float = 2.0) -> None:
         self._client = client
@@ -485,10 +486,11 @@ class SampleStream:
         self._times: list[float] = []
         self._seqs: dict[int, int] = {}
         self._rejected_before = 0
+        self._first: PathKnots | None = None
 
     @property
     def sent(self) -> int:
-        """Samples sent so far."""
+        """Samples handed to :meth:`send` so far (the first is sent with the second)."""
         return len(self._times)
 
     def send(
@@ -498,35 +500,43 @@ class SampleStream:
         velocity: Sequence[float],
         acceleration: Sequence[float],
     ) -> None:
-        """Sends one sample (the first begins the path and waits for its answer)."""
+        """Sends one sample (the first with the second, which begins the
+        path and waits for its answer)."""
         self.check()
-        msg = PathKnots.zeroed()
-        msg.level = self.level
-        msg.flags = PATH_EXTEND if self._times else PATH_NEW
-        msg.apply_at_state_seq = self._start_at
         k = len(self._times)
         times = self._times + [float(t)]
+        # The first sample waits in the message that begins the path.
+        msg = self._first if k == 1 and self._first is not None else PathKnots.zeroed()
+        msg.level = self.level
+        msg.flags = PATH_NEW if k <= 1 else PATH_EXTEND
+        msg.apply_at_state_seq = self._start_at
         try:
             msg.push_sample(t, values, velocity, acceleration)
         except Exception as e:
             raise KnotsRefused(k, k, times, e, k) from e
-        found, _ = msg.check_knot()
+        found, at = msg.check_knot()
         if found is not None:
-            raise KnotsRefused(k, k, times, SetpointError(found, str(found)), k)
-        seq = self._client._send_path(msg)
+            knot = k if at is None else k - (msg.count - 1) + at
+            raise KnotsRefused(k, k, times, SetpointError(found, str(found)), knot)
         self._times.append(float(t))
-        self._seqs[seq] = k
         if k == 0:
+            self._first = msg
+            return
+        seq = self._client._send_path(msg)
+        self._seqs[seq] = k
+        if k == 1:
+            self._first = None
             try:
                 answer = self._client.wait_until_accepted(seq, self._timeout)
             except SetpointRejected as e:
                 self._times.clear()
-                raise KnotsRefused(0, 0, times, e, 0) from e
+                knot = e.answer.refused_knot()
+                raise KnotsRefused(0, 1, times, e, knot) from e
             self._rejected_before = answer.rejected
 
     def check(self) -> None:
         """Raises :class:`KnotsRefused` if the controller refused a sample sent so far."""
-        if not self._times:
+        if not self._seqs:
             return
         t = self._client._poll_telemetry()
         answer = t.answer_for(self._client._client_id) if t is not None else None
