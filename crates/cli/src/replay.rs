@@ -562,15 +562,12 @@ impl Replay {
             None => None,
         };
         // The cycle's paths, after its setpoints, in the cycle of its state.
-        let mut due = std::mem::take(&mut self.paths_due);
-        self.counts.paths_taken += due.len() as u64;
-        let mut next = due.drain(..);
+        self.counts.paths_taken += self.paths_due.len() as u64;
+        let mut next = std::mem::take(&mut self.paths_due).into_iter();
         match &state {
             Some(s) => self.cycle.take_paths_at(s, || next.next()),
             None => self.cycle.take_paths(|| next.next()),
         }
-        drop(next);
-        self.paths_due = due;
         let answer = state.map(|s| {
             let wake = s
                 .header

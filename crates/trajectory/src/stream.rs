@@ -72,6 +72,9 @@ pub enum StreamState {
 
 /// The shortest stop, s (a stop from rest on the knot it is at).
 const MIN_STOP_S: f64 = 1e-3;
+/// A stop sheds an acceleration as large as its deceleration over this
+/// long, s (a jerk of at most `stop_deceleration` per s).
+const SHED_S: f64 = 1.0;
 
 /// The segment being executed.
 #[derive(Clone, Debug)]
@@ -376,11 +379,11 @@ impl PathStream {
             self.end_a.fill(0.0);
             let v = self.start_v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
             let a = self.start_a.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-            // Long enough to shed the velocity and the acceleration at about
-            // the stop's deceleration, and never empty.
+            // Long enough to shed the velocity at about the stop's
+            // deceleration and the acceleration at its jerk, never empty.
             h = h
                 .max(3.0 * v / self.stop_deceleration)
-                .max(a / self.stop_deceleration)
+                .max(SHED_S * a / self.stop_deceleration)
                 .max(MIN_STOP_S);
         } else {
             let (h0, h1) = (h, self.tk(k + 2) - self.tk(k + 1));
