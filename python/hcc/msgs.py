@@ -1015,6 +1015,8 @@ _PATH_REJECTION_TEXT: dict[int, str] = {
     209: "the level's path holds as many knots ahead as it can",
     210: "the path's first knot is too far from the level's equilibrium",
     211: "the path moves faster than the level's max_speed",
+    212: "the hierarchy cannot follow the path from where the arm is (singular, or out of reach)",
+    213: "the feasibility check did not answer in time: nothing was taken",
 }
 
 
@@ -1034,6 +1036,8 @@ class PathRejection(enum.IntEnum):
     PATH_FULL = 209
     STARTS_AWAY = 210
     TOO_FAST = 211
+    INFEASIBLE = 212
+    UNCHECKED = 213
 
     @property
     def label(self) -> str:

@@ -5,6 +5,7 @@
 //! [setpoint_limits]
 //! relative_damping = true        # damp ẋ_i − ẋ_{i,d} while a goal moves (default true)
 //! path_knots = 256               # knots a level's run-time path holds ahead (docs/tracking.md)
+//! path_check_timeout_ms = 100.0  # a path message waits this long for its feasibility check at most
 //!
 //! [[setpoint_limits.level]]          # one per [[level]], in order; all optional
 //! max_stiffness = 3000.0         # largest eigenvalue of K_i a setpoint may ask for
@@ -25,8 +26,9 @@ use serde::Deserialize;
 
 use crate::error::{ConfigError, invalid};
 use hcc_spec::setpoint_limits::{
-    DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED, DEFAULT_PATH_KNOTS,
-    DEFAULT_STIFFNESS_FACTOR, LevelSetpointLimits, MAX_PATH_KNOTS, SetpointLimits,
+    DEFAULT_MAX_ANGULAR_SPEED, DEFAULT_MAX_LINEAR_SPEED, DEFAULT_PATH_CHECK_TIMEOUT_MS,
+    DEFAULT_PATH_KNOTS, DEFAULT_STIFFNESS_FACTOR, LevelSetpointLimits, MAX_PATH_KNOTS,
+    SetpointLimits,
 };
 
 /// `[setpoint_limits]` as written.
@@ -37,6 +39,8 @@ pub struct SetpointLimitsSection {
     pub relative_damping: Option<bool>,
     /// Knots a level's run-time path holds ahead at most (default 256).
     pub path_knots: Option<usize>,
+    /// How long a path message waits for its feasibility check (default 100 ms).
+    pub path_check_timeout_ms: Option<f64>,
     /// Per-level limits, in level order.
     #[serde(default, rename = "level")]
     pub levels: Vec<LevelSetpointLimitsSection>,
@@ -152,9 +156,14 @@ pub(crate) fn resolve(
             format!("{path_knots} must be from 3 to {MAX_PATH_KNOTS}"),
         ));
     }
+    let path_check_timeout_ms = match section.path_check_timeout_ms {
+        Some(ms) => positive(file, text, "setpoint_limits.path_check_timeout_ms", ms)?,
+        None => DEFAULT_PATH_CHECK_TIMEOUT_MS,
+    };
     Ok(SetpointLimits {
         relative_damping: section.relative_damping.unwrap_or(true),
         path_knots,
+        path_check_timeout_ms,
         levels: out,
     })
 }

@@ -134,3 +134,24 @@ fn the_path_window_defaults_to_256_knots_and_is_checked() {
         );
     }
 }
+
+#[test]
+fn the_path_check_timeout_defaults_to_100_ms_and_is_checked() {
+    let limits = |text: &str| load(text).map(|s| s.setpoint_limits.path_check_timeout_ms);
+    assert_eq!(limits("").unwrap(), 100.0);
+    assert_eq!(
+        limits("\n[setpoint_limits]\npath_check_timeout_ms = 250.0\n").unwrap(),
+        250.0
+    );
+    for bad in ["0.0", "-5.0", "nan"] {
+        let e = limits(&format!(
+            "\n[setpoint_limits]\npath_check_timeout_ms = {bad}\n"
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("setpoint_limits.path_check_timeout_ms") && e.contains("positive"),
+            "{e}"
+        );
+    }
+}

@@ -49,14 +49,17 @@
 use hcc_control::Controller;
 use hcc_msgs::ipc::SETPOINT_BUFFER;
 use hcc_msgs::{
-    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, PathKnots, Setpoint,
-    TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry,
-    TelemetryTimings, TorqueCommand, monotonic_now_ns,
+    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, KnotsRefusal, MAX_JOINTS, NO_KNOT,
+    PathKnots, PathRejection, Setpoint, SetpointRejection, TELEMETRY_FLAG_CONTACT,
+    TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
+    TorqueCommand, monotonic_now_ns,
 };
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
 use crate::output_tank::OutputTank;
+use crate::path_check::PathChecker;
+use crate::path_gate::{PathCheckWorker, PathGate, Turn};
 use crate::paths::Paths;
 use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
@@ -91,6 +94,12 @@ pub struct ControlCycle {
     setpoints: SetpointHandler,
     /// The levels' desired paths (module `paths`).
     paths: Paths,
+    /// Run-time path messages waiting for their feasibility check (module
+    /// `path_gate`); `None`: taken at once.
+    gate: Option<PathGate>,
+    /// `[setpoint_limits]` path_knots and path_check_timeout_ms (the gate's).
+    path_knots: usize,
+    path_check_timeout_s: f64,
     filter: TorqueFilter,
     /// The discrete-time velocity limit on the torque sent (module
     /// `velocity_limit`; behind a rate limit, the brake certificate).
@@ -175,6 +184,9 @@ impl ControlCycle {
             stream: StreamCheck::new(n, settings.gravity_compensation, settings.period_ns),
             setpoints,
             paths,
+            gate: None,
+            path_knots: settings.setpoint_limits.path_knots,
+            path_check_timeout_s: settings.setpoint_limits.path_check_timeout_ms * 1e-3,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
             velocity_limit: VelocityLimit::new(&controller, &limits, settings.period_s()),
             velocity_limit_largest: 0.0,
@@ -335,8 +347,21 @@ impl ControlCycle {
             let Some(setpoint) = next_setpoint() else {
                 break;
             };
-            self.setpoints
-                .receive(&setpoint, clock, &mut self.controller);
+            match self.gate.as_mut() {
+                // Behind its client's path messages (module `path_gate`).
+                Some(gate) if gate.holds_client(setpoint.client_id) => {
+                    if !gate.defer(&setpoint) {
+                        let code = (SetpointRejection::PendingFull.code(), NO_KNOT);
+                        let (client, seq) = (setpoint.client_id, setpoint.header.seq);
+                        self.setpoints
+                            .record_answer(client, seq, setpoint.level, code);
+                    }
+                }
+                _ => {
+                    self.setpoints
+                        .receive(&setpoint, clock, &mut self.controller);
+                }
+            }
             changed = true;
         }
         if changed {
@@ -381,6 +406,9 @@ impl ControlCycle {
     ) {
         if self.stream.well_formed(state) {
             self.clock_seq = state.header.seq;
+            if let Some(gate) = self.gate.as_mut() {
+                gate.note_q(state.q());
+            }
         }
         self.take_paths(next_knots);
     }
@@ -390,6 +418,10 @@ impl ControlCycle {
     /// the answers into the telemetry once. What the controller daemon calls
     /// each cycle after [`ControlCycle::take_setpoints`]. Allocation-free.
     pub fn take_paths(&mut self, mut next_knots: impl FnMut() -> Option<PathKnots>) {
+        if self.gate.is_some() {
+            self.take_paths_checked(next_knots);
+            return;
+        }
         let mut taken = false;
         for _ in 0..SETPOINT_BUFFER {
             let Some(knots) = next_knots() else {
@@ -406,6 +438,89 @@ impl ControlCycle {
         if taken {
             self.setpoints.fill(&mut self.telemetry);
         }
+    }
+
+    /// [`ControlCycle::take_paths`] with the feasibility check (module
+    /// `path_gate`): the verdicts that came in, the new messages handed to
+    /// the worker, then the messages whose turn has come, in arrival order.
+    fn take_paths_checked(&mut self, mut next_knots: impl FnMut() -> Option<PathKnots>) {
+        let Some(gate) = self.gate.as_mut() else {
+            return;
+        };
+        let setpoints = &mut self.setpoints;
+        let core = &mut self.counters.core;
+        let mut answered = false;
+        gate.begin_cycle();
+        for _ in 0..SETPOINT_BUFFER {
+            let Some(knots) = next_knots() else {
+                break;
+            };
+            let prechecked = self.paths.precheck(&knots, setpoints).is_ok();
+            if !gate.submit(&knots, prechecked, |i| setpoints.equilibrium(i)) {
+                let code = (PathRejection::Unchecked.code(), NO_KNOT);
+                setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
+                core.paths_unchecked += 1;
+                answered = true;
+            }
+        }
+        while let Some(turn) = gate.next() {
+            answered = true;
+            match turn {
+                Turn::Take(knots) => {
+                    self.paths
+                        .take(&knots, self.clock_seq, &mut self.controller, setpoints);
+                }
+                Turn::Setpoint(setpoint) => {
+                    setpoints.receive(&setpoint, self.clock_seq, &mut self.controller);
+                }
+                Turn::Refuse(knots, refusal) => {
+                    let code = (refusal.code(), refusal.knot_field());
+                    setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
+                    if refusal.code() == PathRejection::Infeasible.code() {
+                        core.paths_infeasible += 1;
+                    } else {
+                        core.paths_unchecked += 1;
+                    }
+                    // The last answer its client sees in this cycle.
+                    break;
+                }
+            }
+        }
+        if answered {
+            setpoints.fill(&mut self.telemetry);
+        }
+    }
+
+    /// From now on, the path messages [`ControlCycle::take_paths`] takes
+    /// wait for a feasibility check (module `path_gate`): returns the worker
+    /// that checks them, to run on a thread of its own
+    /// ([`PathCheckWorker::run_pending`]). Allocates (start-up only).
+    pub fn check_paths_at_run_time(&mut self) -> PathCheckWorker {
+        let checker = PathChecker::new(
+            &self.controller,
+            self.path_knots,
+            crate::feasibility::ROLLOUT_STEP_S,
+        );
+        let timeout_cycles = (self.path_check_timeout_s / self.period_s).ceil() as u64;
+        let (gate, worker) = PathGate::new(checker, timeout_cycles);
+        self.gate = Some(gate);
+        worker
+    }
+
+    /// Refuses a client's path message as `refusal` without taking it: what
+    /// a replay does with a message the recording says the feasibility
+    /// check refused.
+    pub fn refuse_path(&mut self, knots: &PathKnots, refusal: KnotsRefusal) {
+        let code = (refusal.code(), refusal.knot_field());
+        self.setpoints
+            .record_answer(knots.client_id, knots.header.seq, knots.level, code);
+        self.setpoints.fill(&mut self.telemetry);
+    }
+
+    /// Path messages (and setpoints behind them) waiting for their
+    /// feasibility check.
+    pub fn paths_in_check(&self) -> usize {
+        self.gate.as_ref().map_or(0, PathGate::len)
     }
 
     /// Setpoints waiting for their state.

@@ -29,6 +29,12 @@ hcc_msgs::define_counters! {
         /// Paths sent at run time that reached their last knot and stopped
         /// there at rest (module `paths`).
         paths_stopped: "run-time paths that stopped on their last knot",
+        /// Run-time path messages the feasibility check refused
+        /// (`infeasible`; module `path_gate`).
+        paths_infeasible: "run-time path messages refused as infeasible",
+        /// Run-time path messages refused `unchecked`: no verdict within the
+        /// timeout, or the check's queue full (module `path_gate`).
+        paths_unchecked: "run-time path messages refused unchecked (the check too slow or full)",
         /// Setpoint streams (goal and velocity) that stopped: their velocity
         /// feed-forward faded to zero (module `setpoints`).
         streams_stopped: "setpoint streams that stopped (feed-forward faded)",

@@ -26,6 +26,8 @@ use hcc_spec::TaskUnit;
 use hcc_trajectory::Trajectory;
 use nalgebra::{DMatrix, DVector};
 
+/// The rollout's step, s (scenario paths and paths sent at run time alike).
+pub const ROLLOUT_STEP_S: f64 = 0.005;
 /// The rollout's error feedback, 1/s.
 pub const ROLLOUT_GAIN: f64 = 20.0;
 /// The largest error of a path level's length coordinate in the rollout, m.
@@ -92,6 +94,7 @@ pub type Target<'a> = (&'a [f64], &'a [f64]);
 /// along the targets it is handed (module docs). Built once, stepped as the
 /// targets come — a whole path at once ([`check_paths`]), or a stream's
 /// knots as they arrive.
+#[derive(Clone)]
 pub struct Rollout {
     probe: Controller,
     q: DVector<f64>,
@@ -121,6 +124,12 @@ impl Rollout {
                 conditioning: vec![f64::INFINITY; levels],
             },
         }
+    }
+
+    /// Sets level `i`'s goal (its goal format): what the level holds at the
+    /// steps that hand it no target.
+    pub fn hold(&mut self, i: usize, goal: &[f64]) -> Result<(), hcc_control::ControlError> {
+        self.probe.set_goal(i, goal)
     }
 
     /// The configuration reached.

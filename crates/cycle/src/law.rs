@@ -50,7 +50,12 @@ fn check_path_feasibility(scenario: &Scenario, controller: &Controller) -> Resul
         .map(|p| p.as_ref().map(|p| &p.trajectory))
         .collect();
     let q0 = scenario.q0.as_slice();
-    match crate::feasibility::check_paths(controller, q0, &paths, FEASIBILITY_STEP_S) {
+    match crate::feasibility::check_paths(
+        controller,
+        q0,
+        &paths,
+        crate::feasibility::ROLLOUT_STEP_S,
+    ) {
         Ok(_) => Ok(()),
         Err(e) => {
             // Name the level's path when it has one, else the first path.
@@ -69,9 +74,6 @@ fn check_path_feasibility(scenario: &Scenario, controller: &Controller) -> Resul
         }
     }
 }
-
-/// The feasibility rollout's step, s.
-const FEASIBILITY_STEP_S: f64 = 0.005;
 
 /// Every path's speed, √(|ẋ|² + |ω|²) sampled every control period, within
 /// its level's `[setpoint_limits] max_speed` (as a path sent at run time).

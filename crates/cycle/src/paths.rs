@@ -208,26 +208,13 @@ impl Paths {
         let running = l.driver == Driver::Stream && l.goals_at_start == goals_now;
         let mut before = (!knots.is_new() && running && !l.stream.is_empty()).then_some(l.last_t);
         l.previous.copy_from_slice(&l.last);
-        let dim = l.goal.len();
         for k in 0..knots.count() {
-            let (t, columns) = knots.knot(k);
-            if !hcc_trajectory::goal_of(&l.blocks, columns, &mut l.goal) {
-                return Err(KnotsRefusal::at(PathRejection::NotUnitQuaternion, k));
-            }
-            setpoints
-                .check_goal(i, &l.goal)
-                .map_err(|r| KnotsRefusal::at(r, k))?;
+            l.check_knot(knots, k, i, setpoints)?;
+            let t = knots.knot(k).0;
             let chord = before
                 .filter(|t0| t > *t0)
                 .map(|t0| distance(&l.blocks, &l.previous, &l.goal) / (t - t0));
-            let own = knots
-                .has_derivatives()
-                .then(|| norm(knots.derivatives(k, dim).0));
-            if chord
-                .into_iter()
-                .chain(own)
-                .any(|v| v > max_speed * SPEED_TOLERANCE)
-            {
+            if chord.is_some_and(|v| v > max_speed * SPEED_TOLERANCE) {
                 return Err(KnotsRefusal::at(PathRejection::TooFast, k));
             }
             std::mem::swap(&mut l.previous, &mut l.goal);
@@ -271,6 +258,27 @@ impl Paths {
         l.last.copy_from_slice(&l.previous);
         l.last_t = last_t;
         Ok(())
+    }
+
+    /// The checks of `knots` that do not depend on the level's running
+    /// path: the message, the level's columns, and each knot on its own
+    /// ([`LevelPath::check_knot`]). What the feasibility check's gate asks
+    /// before it hands a message to the worker. Allocation-free.
+    pub(crate) fn precheck(
+        &mut self,
+        knots: &PathKnots,
+        setpoints: &SetpointHandler,
+    ) -> Result<(), KnotsRefusal> {
+        knots.validate()?;
+        let i = knots.level as usize;
+        let l = self
+            .levels
+            .get_mut(i)
+            .ok_or(SetpointRejection::UnknownLevel)?;
+        if knots.columns() != l.stream.columns() {
+            return Err(PathRejection::ColumnMismatch.into());
+        }
+        (0..knots.count()).try_for_each(|k| l.check_knot(knots, k, i, setpoints))
     }
 
     /// Hands every driving path's value at this state's time to the law and
@@ -328,9 +336,40 @@ impl Paths {
     }
 }
 
+impl LevelPath {
+    /// Knot `k` of `knots` for level `i` on its own, into `self.goal` (the
+    /// goal format): a unit quaternion per orientation, the level's joint
+    /// limits and workspace, a sample's own velocity within `max_speed`.
+    fn check_knot(
+        &mut self,
+        knots: &PathKnots,
+        k: usize,
+        i: usize,
+        setpoints: &SetpointHandler,
+    ) -> Result<(), KnotsRefusal> {
+        let columns = knots.knot(k).1;
+        if !hcc_trajectory::goal_of(&self.blocks, columns, &mut self.goal) {
+            return Err(KnotsRefusal::at(PathRejection::NotUnitQuaternion, k));
+        }
+        setpoints
+            .check_goal(i, &self.goal)
+            .map_err(|r| KnotsRefusal::at(r, k))?;
+        let max_speed = setpoints
+            .max_speed(i)
+            .ok_or(SetpointRejection::UnknownLevel)?;
+        let own = knots
+            .has_derivatives()
+            .then(|| norm(knots.derivatives(k, self.goal.len()).0));
+        if own.is_some_and(|v| v > max_speed * SPEED_TOLERANCE) {
+            return Err(KnotsRefusal::at(PathRejection::TooFast, k));
+        }
+        Ok(())
+    }
+}
+
 /// Appends every knot of `knots` to `stream` (with their derivatives when
 /// the message carries them); a refusal names the knot.
-fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRefusal> {
+pub(crate) fn push_all(stream: &mut PathStream, knots: &PathKnots) -> Result<(), KnotsRefusal> {
     let dim = stream.sample_dim();
     for k in 0..knots.count() {
         let (t, columns) = knots.knot(k);

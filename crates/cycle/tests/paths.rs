@@ -95,26 +95,37 @@ fn circle(start: [f64; 3], t: f64) -> [f64; 3] {
 }
 
 /// The Panda regulating its pose (`config/panda-pose-posture.toml`); at 2 s
-/// a client sends level 1 (TCP position) the circle's knots every 20 ms up
-/// to `knots`, in messages of 16. Per cycle from then: the TCP's error to
-/// the path's desired value, the desired value, the commanded torque.
+/// a client sends level 1 (TCP position) path messages. Per cycle from then:
+/// the TCP's error to the path's desired value, the desired value, the
+/// commanded torque; the answers the client saw.
 struct Sent {
     err: Vec<f64>,
     desired: Vec<[f64; 3]>,
     tau: Vec<Vec<f64>>,
     start: [f64; 3],
+    /// The answers' codes (each message's, or as they showed in telemetry
+    /// when checked).
     codes: Vec<u32>,
+    /// The answers in telemetry: (seq, code, knot) as each showed.
+    answers: Vec<(u64, u32, Option<usize>)>,
+    /// Messages sent, and how many the client's slot counts answered.
+    sent: u64,
+    answered: u64,
     stopped: u64,
+    counters: hcc_cycle::CoreCounters,
 }
 
 /// Runs the Panda regulating its pose for 2 s, then `seconds` more: from
-/// then on `send(cycle_from_2s, path_start, cycle)` hands the cycle its path
-/// messages (their answers kept) before each decision.
+/// then on the messages `send(cycle_from_2s, path_start)` returns are handed
+/// to the cycle before each decision — taken at once, or, `checked`, through
+/// the feasibility check (its worker run between cycles).
 fn run_sending(
     seconds: f64,
-    mut send: impl FnMut(usize, [f64; 3], &mut ControlCycle) -> Vec<u32>,
+    checked: bool,
+    mut send: impl FnMut(usize, [f64; 3]) -> Vec<hcc_msgs::PathKnots>,
 ) -> Sent {
     let (sc, mut d) = cycle_of("panda-pose-posture");
+    let mut worker = checked.then(|| d.check_paths_at_run_time());
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
     let period_ns = sc.period_ns();
@@ -130,7 +141,11 @@ fn run_sending(
         tau: Vec::new(),
         start: [0.0; 3],
         codes: Vec::new(),
+        answers: Vec::new(),
+        sent: 0,
+        answered: 0,
         stopped: 0,
+        counters: Default::default(),
     };
     run_zoh(&mut plant, timing, |k, _t, q, qd, tau| {
         let mut s = JointState::zeroed();
@@ -143,9 +158,28 @@ fn run_sending(
             out.start = [g[0], g[1], g[2]];
         }
         if k >= send_at {
-            out.codes.extend(send(k - send_at, out.start, &mut d));
+            let msgs = send(k - send_at, out.start);
+            out.sent += msgs.len() as u64;
+            if checked {
+                let mut msgs = msgs.into_iter();
+                d.take_paths_at(&s, || msgs.next());
+            } else {
+                out.codes.extend(msgs.iter().map(|m| d.take_path(m)));
+            }
         }
         d.decide(&s, (k as u64 + 1) * period_ns);
+        if let Some(w) = worker.as_mut() {
+            w.run_pending();
+        }
+        if let Some(a) = d.telemetry().answer_for(9)
+            && out.answers.last().is_none_or(|l| l.0 != a.seq)
+        {
+            out.answers.push((a.seq, a.code, a.refused_knot()));
+            out.answered = a.answered;
+            if checked {
+                out.codes.push(a.code);
+            }
+        }
         if k >= send_at {
             let t = d.telemetry();
             let e = t.task_error(0);
@@ -159,6 +193,7 @@ fn run_sending(
     })
     .unwrap();
     out.stopped = d.counters().core.paths_stopped;
+    out.counters = d.counters().core;
     out
 }
 
@@ -181,27 +216,27 @@ impl Sent {
 
 fn send_circle(knots: usize, seconds: f64) -> Sent {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
-    run_sending(seconds, |k, start, d| {
-        let mut codes = Vec::new();
+    run_sending(seconds, false, |k, start| {
+        let mut msgs = Vec::new();
         if k > 0 {
-            return codes;
+            return msgs;
         }
         let mut msg = PathKnots::zeroed();
         for j in 0..knots {
             if msg.count() == hcc_msgs::MAX_KNOTS_PER_MESSAGE {
-                codes.push(d.take_path(&msg));
+                msgs.push(msg);
                 msg = PathKnots::zeroed();
             }
             if msg.count() == 0 {
                 msg.flags = if j == 0 { PATH_NEW } else { PATH_EXTEND };
                 msg.client_id = 9;
-                msg.header.seq = codes.len() as u64 + 1;
+                msg.header.seq = msgs.len() as u64 + 1;
             }
             let t = j as f64 * 0.02;
             msg.push(t, &circle(start, t)).unwrap();
         }
-        codes.push(d.take_path(&msg));
-        codes
+        msgs.push(msg);
+        msgs
     })
 }
 
@@ -354,12 +389,12 @@ fn circle_rates(t: f64) -> ([f64; 3], [f64; 3]) {
 /// As [`send_circle`], but a device's samples: from 2 s, one sample per
 /// cycle with its velocity and acceleration, stamped `LEAD` s ahead of the
 /// path, for `sampled` s of path; the run lasts `seconds` from 2 s.
-fn stream_circle_samples(sampled: f64, seconds: f64) -> Sent {
+fn stream_circle_samples(sampled: f64, seconds: f64, checked: bool) -> Sent {
     use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
     const LEAD: f64 = 0.005;
     const DT: f64 = 1e-3;
     let (mut next_t, mut sent) = (0.0, 0);
-    run_sending(seconds, |k, start, d| {
+    run_sending(seconds, checked, |k, start| {
         // Every sample up to LEAD s past where the path is.
         let path_t = k as f64 * DT;
         let mut msg = PathKnots::zeroed();
@@ -376,14 +411,14 @@ fn stream_circle_samples(sampled: f64, seconds: f64) -> Sent {
         msg.client_id = 9;
         sent += 1;
         msg.header.seq = sent;
-        vec![d.take_path(&msg)]
+        vec![msg]
     })
 }
 
 #[test]
 fn a_device_s_samples_are_tracked_and_a_stream_that_stops_rests_on_its_last() {
     // 3 s of samples, then the device goes quiet; the run goes on to 5 s.
-    let s = stream_circle_samples(3.0, 5.0);
+    let s = stream_circle_samples(3.0, 5.0, false);
     assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
     let worst = s.err[1000..2900].iter().fold(0.0_f64, |m, e| m.max(*e));
     let off_circle = s.desired[..2990]
@@ -411,4 +446,73 @@ fn a_device_s_samples_are_tracked_and_a_stream_that_stops_rests_on_its_last() {
         "{end:?} vs {last:?}"
     );
     assert!(settled < 1e-4 && step <= 1.0 + 1e-9, "{settled} {step}");
+}
+
+#[test]
+fn samples_every_cycle_pass_the_feasibility_check_and_are_tracked() {
+    // The device's stream through the check (its worker between cycles):
+    // every message waits one cycle for its verdict, which the 5 ms lead
+    // absorbs.
+    let s = stream_circle_samples(3.0, 4.0, true);
+    assert!(
+        s.answers.iter().all(|a| a.1 == 0),
+        "refusals: {:?}",
+        s.answers.iter().filter(|a| a.1 != 0).collect::<Vec<_>>()
+    );
+    assert_eq!(s.answered, s.sent, "every message answered");
+    let worst = s.err[1000..2900].iter().fold(0.0_f64, |m, e| m.max(*e));
+    println!(
+        "checked device samples: {} messages, TCP error from 1 s {worst:.3e} m",
+        s.sent
+    );
+    assert!(worst < 1e-3, "{worst:.3e} m");
+    assert_eq!(s.counters.paths_infeasible + s.counters.paths_unchecked, 0);
+}
+
+#[test]
+fn a_path_out_of_reach_sent_at_run_time_is_refused_at_its_knot_and_not_taken() {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    // The TCP from where it is straight out along x to 0.95 m at its height
+    // over 8 s, a knot every 0.5 s: 16 knots, then one more in a second
+    // message. The arm cannot reach past ~0.9 m: the stacked Jacobian loses
+    // rank on the way.
+    let s = run_sending(1.0, true, |k, start| {
+        if k > 0 {
+            return Vec::new();
+        }
+        let at = |t: f64| [start[0] + (0.95 - start[0]) * (t / 8.0), start[1], start[2]];
+        let mut first = PathKnots::zeroed();
+        (first.flags, first.client_id, first.header.seq) = (PATH_NEW, 9, 1);
+        for j in 0..16 {
+            first.push(j as f64 * 0.5, &at(j as f64 * 0.5)).unwrap();
+        }
+        let mut second = PathKnots::zeroed();
+        (second.flags, second.client_id, second.header.seq) = (PATH_EXTEND, 9, 2);
+        second.push(8.0, &at(8.0)).unwrap();
+        vec![first, second]
+    });
+    println!("answers (seq, code, knot): {:?}", s.answers);
+    // Refused where the rollout failed (the knot at or after it); the
+    // extension refused too: the path takes no more.
+    let first = s.answers.iter().find(|a| a.0 == 1).unwrap();
+    assert_eq!(first.1, 212);
+    let knot = first.2.unwrap();
+    assert!((8..=12).contains(&knot), "knot {knot}");
+    assert_eq!(
+        s.answers.iter().find(|a| a.0 == 2),
+        Some(&(2, 212, Some(0)))
+    );
+    assert_eq!(s.counters.paths_infeasible, 2);
+    // Nothing was taken: the level held its goal.
+    let moved = s
+        .desired
+        .iter()
+        .map(|x| {
+            (0..3)
+                .map(|a| (x[a] - s.start[a]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(0.0_f64, f64::max);
+    assert!(moved < 1e-9, "the equilibrium moved {moved:.3e} m");
 }

@@ -91,11 +91,20 @@ pub enum PathRejection {
     /// the one before (√(|Δp|² + θ²) / Δt, as a transition's), or a sample's
     /// own velocity does.
     TooFast = 211,
+    /// The hierarchy cannot follow the path from where the arm is: the
+    /// feasibility check's rollout finds the stacked Jacobian singular at a
+    /// knot's segment, or the level falling behind its path (out of reach,
+    /// or blocked by the levels above). Once a message is refused for this,
+    /// the path takes no more extensions: send a new path.
+    Infeasible = 212,
+    /// The feasibility check did not answer in time (`[setpoint_limits]
+    /// path_check_timeout_ms`), or its queue was full: nothing was taken.
+    Unchecked = 213,
 }
 
 impl PathRejection {
     /// Every rejection, in code order.
-    pub const ALL: [PathRejection; 11] = [
+    pub const ALL: [PathRejection; 13] = [
         Self::BadFlags,
         Self::KnotCount,
         Self::NotIncreasing,
@@ -107,6 +116,8 @@ impl PathRejection {
         Self::PathFull,
         Self::StartsAway,
         Self::TooFast,
+        Self::Infeasible,
+        Self::Unchecked,
     ];
 
     /// The stable code.
@@ -137,6 +148,8 @@ impl PathRejection {
             Self::PathFull => "path_full",
             Self::StartsAway => "starts_away",
             Self::TooFast => "too_fast",
+            Self::Infeasible => "infeasible",
+            Self::Unchecked => "unchecked",
         }
     }
 
@@ -156,6 +169,10 @@ impl PathRejection {
             Self::PathFull => "the level's path holds as many knots ahead as it can",
             Self::StartsAway => "the path's first knot is too far from the level's equilibrium",
             Self::TooFast => "the path moves faster than the level's max_speed",
+            Self::Infeasible => {
+                "the hierarchy cannot follow the path from where the arm is (singular, or out of reach)"
+            }
+            Self::Unchecked => "the feasibility check did not answer in time: nothing was taken",
         }
     }
 }
@@ -519,7 +536,7 @@ mod tests {
             assert_eq!(PathRejection::from_code(r.code()), Some(r));
         }
         assert_eq!(PathRejection::from_code(200), None);
-        assert_eq!(PathRejection::from_code(212), None);
+        assert_eq!(PathRejection::from_code(214), None);
         let mut p = knots();
         assert_eq!(p.push(1.0, &[0.0; 2]), Err(PathRejection::ColumnMismatch));
         for k in 4..MAX_KNOTS_PER_MESSAGE {

@@ -23,6 +23,8 @@ pub struct LevelSetpointLimits {
 
 /// Default of [`SetpointLimits::path_knots`].
 pub const DEFAULT_PATH_KNOTS: usize = 256;
+/// Default of [`SetpointLimits::path_check_timeout_ms`].
+pub const DEFAULT_PATH_CHECK_TIMEOUT_MS: f64 = 100.0;
 /// Most knots a level's run-time path may be configured to hold ahead.
 pub const MAX_PATH_KNOTS: usize = 100_000;
 
@@ -33,6 +35,9 @@ pub struct SetpointLimits {
     pub relative_damping: bool,
     /// Knots a level's run-time path holds ahead at most (docs/tracking.md).
     pub path_knots: usize,
+    /// How long a run-time path message waits for its feasibility check at
+    /// most before it is refused `unchecked`, ms (docs/tracking.md).
+    pub path_check_timeout_ms: f64,
     /// One per level.
     pub levels: Vec<LevelSetpointLimits>,
 }
