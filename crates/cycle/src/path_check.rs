@@ -171,6 +171,9 @@ impl PathChecker {
         )
         .err()
         .or_else(|| {
+            if l.t >= t_last {
+                return None;
+            }
             // The rest, to the last knot, on copies.
             let (mut stream, mut rollout, mut t) = (l.stream.clone(), rollout.clone(), l.t);
             roll(

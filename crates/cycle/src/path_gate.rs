@@ -20,6 +20,8 @@
 //! order). Allocation-free after [`PathGate::new`].
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use hcc_msgs::{KnotsRefusal, MAX_JOINTS, PathKnots, PathRejection, Setpoint};
 
@@ -28,6 +30,11 @@ use crate::path_check::{CheckRequest, PathChecker, Verdict};
 /// Messages the gate holds at most (path messages and the setpoints that
 /// wait behind them).
 pub const GATE_CAPACITY: usize = 64;
+
+/// How long the worker sleeps when no request waits (a message waits about
+/// this long more for its verdict; the real-time thread never wakes it: no
+/// system call in the loop).
+pub const IDLE_SLEEP: Duration = Duration::from_micros(200);
 
 /// A message waiting for its turn.
 // Both variants are large (a path's knots, a setpoint's gains): boxing one
@@ -88,6 +95,17 @@ impl PathCheckWorker {
             checked += 1;
         }
         checked
+    }
+
+    /// Checks requests as they come until `done` is set or the cycle's side
+    /// is gone, sleeping [`IDLE_SLEEP`] when there is none: the body of the
+    /// worker's thread.
+    pub fn run(mut self, done: &AtomicBool) {
+        while !done.load(Ordering::Relaxed) && !self.abandoned() {
+            if self.run_pending() == 0 {
+                std::thread::sleep(IDLE_SLEEP);
+            }
+        }
     }
 
     /// Whether the cycle's side is gone (the worker may end).

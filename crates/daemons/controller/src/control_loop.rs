@@ -284,6 +284,13 @@ impl ControlLoop {
         Arc::clone(&self.status)
     }
 
+    /// From now on, run-time path messages wait for their feasibility
+    /// check: the worker to run on a thread of its own
+    /// ([`hcc_cycle::ControlCycle::check_paths_at_run_time`]). Start-up only.
+    pub fn check_paths_at_run_time(&mut self) -> hcc_cycle::PathCheckWorker {
+        self.cycle.check_paths_at_run_time()
+    }
+
     /// The control cycle (last command, telemetry, every counter, the law).
     pub fn cycle(&self) -> &ControlCycle {
         &self.cycle
@@ -484,9 +491,11 @@ impl ControlLoop {
                 .flatten()
                 .map(|sample| *sample)
         });
-        // Then the paths' knots, in arrival order (bounded by the queue).
-        self.cycle
-            .take_paths(|| ports.paths.receive().ok().flatten().map(|sample| *sample));
+        // Then the paths' knots, in arrival order (bounded by the queue),
+        // through the feasibility check when it runs.
+        self.cycle.take_paths_at(state, || {
+            ports.paths.receive().ok().flatten().map(|sample| *sample)
+        });
         let taken = monotonic_now_ns();
         let answer = self.cycle.decide_command(state, wake);
         if let Some(step_ns) = self.cycle.step_ns() {

@@ -163,6 +163,19 @@ pub fn run(args: Args) -> Result<()> {
     set_log_level_from_env_or(LogLevel::Warn);
     let ipc = Ipc::open(&setup)?;
 
+    // The run-time paths' feasibility check, on a thread of its own started
+    // before this thread turns real-time (it inherits no pinning or
+    // priority).
+    let done = Arc::new(AtomicBool::new(false));
+    let checker = {
+        let worker = control.check_paths_at_run_time();
+        let done = done.clone();
+        std::thread::Builder::new()
+            .name("hcc-path-check".into())
+            .spawn(move || worker.run(&done))
+            .context("starting the path-check thread")?
+    };
+
     let d = &scenario.controller_daemon;
     let rt_settings = RtSettings {
         cpu_core: args.cpu_core.or(d.cpu_core),
@@ -175,7 +188,6 @@ pub fn run(args: Args) -> Result<()> {
 
     let status = control.status();
     let baseline = Arc::new(AtomicU64::new(u64::MAX));
-    let done = Arc::new(AtomicBool::new(false));
     let logger = {
         let (status, baseline, done) = (status.clone(), baseline.clone(), done.clone());
         std::thread::Builder::new()
@@ -187,6 +199,7 @@ pub fn run(args: Args) -> Result<()> {
     control_loop(&mut control, &ipc.ports, &baseline);
     done.store(true, Ordering::Relaxed);
     let _ = logger.join();
+    let _ = checker.join();
     let baseline = baseline.load(Ordering::Relaxed);
     log_stop(&status, baseline);
     if let Some(path) = &args.stats {
