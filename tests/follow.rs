@@ -43,6 +43,18 @@ fn circle_csv(start: [f64; 3], seconds: f64) -> String {
     s
 }
 
+/// From `start` straight out along x to `x_end` at the same height over
+/// `seconds`, a knot every 0.1 s.
+fn line_csv(start: [f64; 3], x_end: f64, seconds: f64) -> String {
+    let mut s = String::from("t,x,y,z\n");
+    for k in 0..=(seconds / 0.1).round() as usize {
+        let t = k as f64 * 0.1;
+        let x = start[0] + (x_end - start[0]) * t / seconds;
+        s += &format!("{t:.1},{x},{},{}\n", start[1], start[2]);
+    }
+    s
+}
+
 fn hcc(args: &[&str], ns: &str, prefix: &str, dir: &Path, tag: &str, secs: u64) -> Finished {
     let mut cmd = Command::new(bin("hcc"));
     cmd.env(FILE_PREFIX_ENV, prefix)
@@ -76,6 +88,8 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
     let recording = dir.path().join("follow.mcap");
     let away = dir.path().join("away.csv");
     std::fs::write(&away, circle_csv([0.70, 0.20, 0.30], 2.0)).unwrap();
+    let out_of_reach = dir.path().join("out_of_reach.csv");
+    std::fs::write(&out_of_reach, line_csv(goal, 0.95, 8.0)).unwrap();
     {
         let mut ctl = Daemon::start(
             "hcc-controller",
@@ -165,6 +179,41 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
             out.log()
         );
         assert!(tcp_error(&ns, &prefix, dir.path()) < 1e-3);
+
+        // Out along x past the arm's reach: the first knots are taken and
+        // followed, the message where the hierarchy would turn singular is
+        // refused (`infeasible`, naming the knot) before the arm gets there;
+        // the path stops on its last knot taken.
+        let o = out_of_reach.to_string_lossy().into_owned();
+        let out = hcc(
+            &["follow", "--level", "1", &o],
+            &ns,
+            &prefix,
+            dir.path(),
+            "out_of_reach",
+            60,
+        );
+        println!("{}", out.log());
+        assert!(!out.status.success(), "{}", out.log());
+        assert!(out.stderr.contains("infeasible"), "{}", out.log());
+        let knot: usize = out
+            .stderr
+            .split("knot ")
+            .nth(1)
+            .and_then(|s| s.split(' ').next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("no knot named: {}", out.log()));
+        // A knot every 0.1 s: refused between 3.5 s and 5.5 s of the path
+        // (x from 0.77 to 0.83 m), before the arm's reach ends.
+        assert!((35..=55).contains(&knot), "knot {knot}: {}", out.log());
+        let start = Instant::now();
+        while tcp_error(&ns, &prefix, dir.path()) > 1e-3 {
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "never came to rest"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
         // SAFETY: a signal to our own child, by pid.
         unsafe { libc::kill(rec.pid() as libc::pid_t, libc::SIGTERM) };
         let status = rec

@@ -89,7 +89,7 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
     let first = ahead(0, args.window).max(2).min(times.len());
     let accepted = client
         .follow(level, &times[..first], &points[..first], start_seq, wait)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
+        .map_err(|e| refused(&args.file, e, &times))?;
     let begin = Instant::now() + Duration::from_secs_f64(args.start_at);
     println!(
         "level {} path of {} knots over {duration:.3} s accepted (seq {}); {first} sent",
@@ -109,7 +109,7 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
             if until > sent {
                 client
                     .extend_path(level, &times[sent..until], &points[sent..until], wait)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
+                    .map_err(|e| refused(&args.file, in_file(e, sent), &times))?;
                 sent = until;
             }
         }
@@ -132,4 +132,21 @@ pub fn follow(args: FollowArgs) -> anyhow::Result<()> {
     }
     println!("path done; largest level error from 3 s: {worst:.3e}");
     Ok(())
+}
+
+/// A refusal of the message that began at the file's knot `offset`, its
+/// knots numbered as in the file.
+fn in_file(mut e: hcc_client::KnotsRefused, offset: usize) -> hcc_client::KnotsRefused {
+    e.first += offset;
+    e.last += offset;
+    e.knot = e.knot.map(|k| k + offset);
+    e
+}
+
+/// The error of a refused message of `file`, with the refused knot's time.
+fn refused(file: &std::path::Path, e: hcc_client::KnotsRefused, times: &[f64]) -> anyhow::Error {
+    match e.t_knot(times) {
+        Some(t) => anyhow::anyhow!("{}: {e} (the knot at t = {t} s)", file.display()),
+        None => anyhow::anyhow!("{}: {e}", file.display()),
+    }
 }

@@ -45,8 +45,8 @@ use anyhow::anyhow;
 use hcc_config::Scenario;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{
-    JointState, PathKnots, Setpoint, SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry,
-    TorqueCommand,
+    JointState, KnotsRefusal, PathKnots, PathRejection, Setpoint, SetpointAnswer,
+    TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
 };
 
 /// The most telemetry samples held back waiting for their inputs. The
@@ -200,9 +200,11 @@ pub struct Replay {
     /// Recorded setpoints and path messages per client, not yet taken, in
     /// the client's order.
     setpoints: BTreeMap<u64, VecDeque<ClientMessage>>,
-    /// The path messages of the cycle being replayed (taken after its
-    /// setpoints, with its state).
-    paths_due: Vec<PathKnots>,
+    /// The messages of the cycle being replayed from each client's first
+    /// path message on, in the client's order (taken after the setpoints
+    /// before them, with its state), and the refusal of the feasibility
+    /// check the recording shows for the last one.
+    paths_due: Vec<(ClientMessage, Option<KnotsRefusal>)>,
     /// Per client, the setpoints answered so far, as the telemetry counts
     /// them, and the seq of the last one answered.
     answered: BTreeMap<u64, Answered>,
@@ -561,12 +563,25 @@ impl Replay {
             Some(_) => self.states.pop_front(),
             None => None,
         };
-        // The cycle's paths, after its setpoints, in the cycle of its state.
-        self.counts.paths_taken += self.paths_due.len() as u64;
-        let mut next = std::mem::take(&mut self.paths_due).into_iter();
-        match &state {
-            Some(s) => self.cycle.take_paths_at(s, || next.next()),
-            None => self.cycle.take_paths(|| next.next()),
+        // The cycle's paths (and the setpoints that waited behind them), in
+        // the cycle of its state.
+        for (message, refusal) in std::mem::take(&mut self.paths_due) {
+            let mut once = match message {
+                ClientMessage::Setpoint(sp) => {
+                    self.cycle.take_setpoint_now(&sp);
+                    self.counts.setpoints_taken += 1;
+                    continue;
+                }
+                ClientMessage::Path(p) => Some(*p),
+            };
+            self.counts.paths_taken += 1;
+            match (refusal, once.as_ref()) {
+                (Some(r), Some(p)) => self.cycle.refuse_path(p, r),
+                _ => match &state {
+                    Some(s) => self.cycle.take_paths_at(s, || once.take()),
+                    None => self.cycle.take_paths(|| once.take()),
+                },
+            }
         }
         let answer = state.map(|s| {
             let wake = s
@@ -594,24 +609,35 @@ impl Replay {
         })
     }
 
-    /// Takes the setpoints the controller took in the cycle of `tel` (the
-    /// increase of each client's answer count), in the order they were sent;
-    /// returns how many of them the recording lacks.
+    /// Takes the messages the controller took in the cycle of `tel` (the
+    /// increase of each client's answer count), in the order they were sent:
+    /// a client's setpoints before its first path message at once, the rest
+    /// after, with the state (as the daemon takes its setpoints, then the
+    /// path messages whose feasibility check answered, with the setpoints
+    /// that waited behind them). A path message the check refused is the
+    /// last its client was answered in the cycle: the recorded answer says
+    /// so. Returns how many messages the recording lacks.
     fn take_setpoints(&mut self, tel: &Telemetry) -> u64 {
         let mut missing = 0;
         for a in tel.setpoint_answers.iter().filter(|a| a.answered > 0) {
             let before = self.answered_before(a);
+            let mut behind_path = false;
             for _ in before..a.answered {
                 match self
                     .setpoints
                     .get_mut(&a.client_id)
                     .and_then(|q| q.pop_front())
                 {
-                    Some(ClientMessage::Setpoint(s)) => {
+                    Some(ClientMessage::Setpoint(s)) if !behind_path => {
                         self.cycle.take_setpoint_now(&s);
                         self.counts.setpoints_taken += 1;
                     }
-                    Some(ClientMessage::Path(p)) => self.paths_due.push(*p),
+                    Some(ClientMessage::Path(p)) => {
+                        behind_path = true;
+                        let refused = (p.header.seq == a.seq).then(|| check_refusal(a)).flatten();
+                        self.paths_due.push((ClientMessage::Path(p), refused));
+                    }
+                    Some(m) => self.paths_due.push((m, None)),
                     None => missing += 1,
                 }
             }
@@ -622,6 +648,17 @@ impl Replay {
         self.counts.setpoints_missing += missing;
         missing
     }
+}
+
+/// The refusal of the paths' feasibility check an answer records, if it is
+/// one (`infeasible`, `unchecked`: a verdict the replay cannot compute again).
+fn check_refusal(a: &SetpointAnswer) -> Option<KnotsRefusal> {
+    let r = PathRejection::from_code(a.code)
+        .filter(|r| matches!(r, PathRejection::Infeasible | PathRejection::Unchecked))?;
+    Some(KnotsRefusal {
+        rejection: r.into(),
+        knot: a.refused_knot(),
+    })
 }
 
 #[cfg(test)]

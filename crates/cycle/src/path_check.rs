@@ -10,7 +10,7 @@
 //! other levels hold those goals); an extension continues it from where the
 //! previous message's knots left it. The rollout follows the checker's own
 //! copy of the level's [`PathStream`], stepped every
-//! [`crate::feasibility_step_s`] as far as the knots received fix the path
+//! [`crate::feasibility::ROLLOUT_STEP_S`] as far as the knots received fix the path
 //! (up to the last knot but one for knots, the last for samples: later knots
 //! change nothing before); the rest, up to the last knot, is rolled out on a
 //! copy, so that every message is checked to its end. A refused message
@@ -146,6 +146,9 @@ impl PathChecker {
             // An extension of a path this checker has not seen begin.
             return None;
         };
+        // The last knot before this message's (a knot extension's first
+        // segment runs from it).
+        let before = l.stream.last_time();
         if push_all(&mut l.stream, knots).is_err() {
             // The cycle refuses it for the same reason; what this level's
             // rollout follows is no longer the cycle's path.
@@ -154,11 +157,15 @@ impl PathChecker {
         }
         let last = knots.count() - 1;
         let t_last = knots.knot(last).0;
-        // As far as the knots received fix the path.
-        let fixed = if knots.has_derivatives() || last == 0 {
+        // As far as the knots received fix the path: to the last sample, or
+        // to the last knot but one (the segment into the last knot waits
+        // for the next; entering it now would stop this copy of the path).
+        let fixed = if knots.has_derivatives() {
             t_last
-        } else {
+        } else if last > 0 {
             knots.knot(last - 1).0
+        } else {
+            before.unwrap_or(0.0)
         };
         let failed = roll(
             rollout,

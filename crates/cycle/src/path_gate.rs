@@ -34,7 +34,7 @@ pub const GATE_CAPACITY: usize = 64;
 /// How long the worker sleeps when no request waits (a message waits about
 /// this long more for its verdict; the real-time thread never wakes it: no
 /// system call in the loop).
-pub const IDLE_SLEEP: Duration = Duration::from_micros(200);
+pub const IDLE_SLEEP: Duration = Duration::from_millis(1);
 
 /// A message waiting for its turn.
 // Both variants are large (a path's knots, a setpoint's gains): boxing one

@@ -113,6 +113,8 @@ struct Sent {
     answered: u64,
     stopped: u64,
     counters: hcc_cycle::CoreCounters,
+    /// The worker's time per message checked, s (checked runs).
+    check_s: Vec<f64>,
 }
 
 /// Runs the Panda regulating its pose for 2 s, then `seconds` more: from
@@ -146,6 +148,7 @@ fn run_sending(
         answered: 0,
         stopped: 0,
         counters: Default::default(),
+        check_s: Vec::new(),
     };
     run_zoh(&mut plant, timing, |k, _t, q, qd, tau| {
         let mut s = JointState::zeroed();
@@ -169,7 +172,12 @@ fn run_sending(
         }
         d.decide(&s, (k as u64 + 1) * period_ns);
         if let Some(w) = worker.as_mut() {
-            w.run_pending();
+            let began = std::time::Instant::now();
+            let checked = w.run_pending();
+            if checked > 0 {
+                let each = began.elapsed().as_secs_f64() / checked as f64;
+                out.check_s.extend(std::iter::repeat_n(each, checked));
+            }
         }
         if let Some(a) = d.telemetry().answer_for(9)
             && out.answers.last().is_none_or(|l| l.0 != a.seq)
@@ -200,6 +208,20 @@ fn run_sending(
 /// The circle's first `knots` knots (every 20 ms), all sent at 2 s in
 /// messages of 16.
 impl Sent {
+    /// The worker's time per message: median, 99 % and largest, ms.
+    fn check_ms(&self) -> String {
+        let mut t = self.check_s.clone();
+        t.sort_by(f64::total_cmp);
+        let at = |q: f64| t[((t.len() - 1) as f64 * q) as usize] * 1e3;
+        format!(
+            "check per message: median {:.3} ms, p99 {:.3} ms, max {:.3} ms ({} messages)",
+            at(0.5),
+            at(0.99),
+            at(1.0),
+            t.len()
+        )
+    }
+
     /// The largest change of a joint torque from one cycle to the next, N·m.
     fn largest_torque_step(&self) -> f64 {
         self.tau
@@ -462,57 +484,90 @@ fn samples_every_cycle_pass_the_feasibility_check_and_are_tracked() {
     assert_eq!(s.answered, s.sent, "every message answered");
     let worst = s.err[1000..2900].iter().fold(0.0_f64, |m, e| m.max(*e));
     println!(
-        "checked device samples: {} messages, TCP error from 1 s {worst:.3e} m",
-        s.sent
+        "checked device samples: {} messages, TCP error from 1 s {worst:.3e} m; {}",
+        s.sent,
+        s.check_ms()
     );
     assert!(worst < 1e-3, "{worst:.3e} m");
     assert_eq!(s.counters.paths_infeasible + s.counters.paths_unchecked, 0);
 }
 
+/// The TCP from where it is straight out along x to 0.95 m at its height
+/// over 8 s, a knot every 0.1 s: two knots, then messages of `per_message`
+/// (as `hcc follow` sends them, one or a few at a time), from 2 s four
+/// messages per cycle, through the feasibility check. The arm cannot reach
+/// past ~0.9 m: the stacked Jacobian loses rank on the way.
+fn out_of_reach(per_message: usize) -> Sent {
+    let mut queue = std::collections::VecDeque::new();
+    run_sending(1.0, true, move |k, start| {
+        if k == 0 {
+            queue.extend(line_messages(start, per_message));
+        }
+        let n = queue.len().min(4);
+        queue.drain(..n).collect()
+    })
+}
+
+/// [`out_of_reach`]'s messages from `start`.
+fn line_messages(start: [f64; 3], per_message: usize) -> Vec<hcc_msgs::PathKnots> {
+    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
+    let at = |t: f64| [start[0] + (0.95 - start[0]) * (t / 8.0), start[1], start[2]];
+    let mut msgs: Vec<PathKnots> = Vec::new();
+    for j in 0..=80 {
+        let full = |m: &PathKnots| m.count() == if j <= 2 { 2 } else { per_message };
+        if msgs.last().is_none_or(full) {
+            let mut m = PathKnots::zeroed();
+            m.flags = if j == 0 { PATH_NEW } else { PATH_EXTEND };
+            (m.client_id, m.header.seq) = (9, msgs.len() as u64 + 1);
+            msgs.push(m);
+        }
+        let t = j as f64 * 0.1;
+        msgs.last_mut().unwrap().push(t, &at(t)).unwrap();
+    }
+    msgs
+}
+
 #[test]
 fn a_path_out_of_reach_sent_at_run_time_is_refused_at_its_knot_and_not_taken() {
-    use hcc_msgs::{PATH_EXTEND, PATH_NEW, PathKnots};
-    // The TCP from where it is straight out along x to 0.95 m at its height
-    // over 8 s, a knot every 0.5 s: 16 knots, then one more in a second
-    // message. The arm cannot reach past ~0.9 m: the stacked Jacobian loses
-    // rank on the way.
-    let s = run_sending(1.0, true, |k, start| {
-        if k > 0 {
-            return Vec::new();
-        }
-        let at = |t: f64| [start[0] + (0.95 - start[0]) * (t / 8.0), start[1], start[2]];
-        let mut first = PathKnots::zeroed();
-        (first.flags, first.client_id, first.header.seq) = (PATH_NEW, 9, 1);
-        for j in 0..16 {
-            first.push(j as f64 * 0.5, &at(j as f64 * 0.5)).unwrap();
-        }
-        let mut second = PathKnots::zeroed();
-        (second.flags, second.client_id, second.header.seq) = (PATH_EXTEND, 9, 2);
-        second.push(8.0, &at(8.0)).unwrap();
-        vec![first, second]
-    });
-    println!("answers (seq, code, knot): {:?}", s.answers);
-    // Refused where the rollout failed (the knot at or after it); the
-    // extension refused too: the path takes no more.
-    let first = s.answers.iter().find(|a| a.0 == 1).unwrap();
-    assert_eq!(first.1, 212);
-    let knot = first.2.unwrap();
-    assert!((8..=12).contains(&knot), "knot {knot}");
-    assert_eq!(
-        s.answers.iter().find(|a| a.0 == 2),
-        Some(&(2, 212, Some(0)))
-    );
-    assert_eq!(s.counters.paths_infeasible, 2);
-    // Nothing was taken: the level held its goal.
-    let moved = s
-        .desired
-        .iter()
-        .map(|x| {
-            (0..3)
-                .map(|a| (x[a] - s.start[a]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-        .fold(0.0_f64, f64::max);
-    assert!(moved < 1e-9, "the equilibrium moved {moved:.3e} m");
+    for per_message in [16, 1] {
+        let s = out_of_reach(per_message);
+        // Refused where the rollout failed (the knot at or after it); every
+        // later extension refused too: the path takes no more. Nothing
+        // before the refused message was refused.
+        let refused = s
+            .answers
+            .iter()
+            .find(|a| a.1 != 0)
+            .unwrap_or_else(|| panic!("{:?}", s.answers));
+        println!(
+            "{per_message} knots per message: first refusal (seq, code, knot) {refused:?}; \
+             {} answers, {} refused infeasible; {}",
+            s.answered,
+            s.counters.paths_infeasible,
+            s.check_ms()
+        );
+        assert_eq!(refused.1, 212);
+        let knot_t = match per_message {
+            16 => 0.2 + ((refused.0 - 2) as f64 * 16.0 + refused.2.unwrap() as f64) * 0.1,
+            _ => 0.2 + (refused.0 - 2) as f64 * 0.1,
+        };
+        assert!(
+            (3.5..=5.5).contains(&knot_t),
+            "refused at the knot of {knot_t} s"
+        );
+        assert_eq!(s.answered, s.sent, "every message answered");
+        let after = s.answers.iter().filter(|a| a.0 > refused.0);
+        assert!(after.clone().all(|a| a.1 == 212 && a.2 == Some(0)));
+        assert_eq!(
+            s.counters.paths_infeasible,
+            s.sent - refused.0 + 1,
+            "{:?}",
+            s.answers
+        );
+        // What was taken is followed: the level's equilibrium went out along
+        // x to the last knot taken, never further.
+        let furthest = s.desired.iter().map(|x| x[0]).fold(0.0_f64, f64::max);
+        let x_at = |t: f64| s.start[0] + (0.95 - s.start[0]) * (t / 8.0);
+        assert!(furthest < x_at(knot_t), "{furthest} m");
+    }
 }

@@ -45,7 +45,7 @@ pub use sleep::{
 };
 pub use stop::{install_stop_handler, stop_requested};
 pub use thread::{
-    RtReport, RtSettings, available_cores, cleanup_stale_resources, fifo_permitted,
+    RtReport, RtSettings, available_cores, cleanup_stale_resources, fifo_permitted, lower_priority,
     prepare_rt_thread, set_fifo,
 };
 pub use upkeep::{ConnectionUpkeep, UpkeepCounts};

@@ -156,3 +156,16 @@ pub fn set_fifo(priority: i32) -> std::io::Result<()> {
     }
     Ok(())
 }
+
+/// Lowers the calling thread's priority to nice `nice` (0..=19; no
+/// privilege needed): a helper thread of a real-time daemon that must give
+/// way to everything the loop depends on (Linux: per thread).
+pub fn lower_priority(nice: i32) -> std::io::Result<()> {
+    // SAFETY: gettid has no preconditions.
+    let tid = unsafe { libc::gettid() };
+    // SAFETY: setpriority on this thread's own id.
+    if unsafe { libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, nice.clamp(0, 19)) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}

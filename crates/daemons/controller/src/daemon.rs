@@ -153,6 +153,10 @@ impl Ipc {
     }
 }
 
+/// The path-check thread's nice value: its rollouts give way to the
+/// processes around the loop (a driver, a simulator, the recorder).
+const PATH_CHECK_NICE: i32 = 10;
+
 /// Runs the daemon until SIGINT/SIGTERM.
 pub fn run(args: Args) -> Result<()> {
     let setup = load(&args)?;
@@ -165,14 +169,19 @@ pub fn run(args: Args) -> Result<()> {
 
     // The run-time paths' feasibility check, on a thread of its own started
     // before this thread turns real-time (it inherits no pinning or
-    // priority).
+    // priority), below everything else (nice PATH_CHECK_NICE).
     let done = Arc::new(AtomicBool::new(false));
     let checker = {
         let worker = control.check_paths_at_run_time();
         let done = done.clone();
         std::thread::Builder::new()
             .name("hcc-path-check".into())
-            .spawn(move || worker.run(&done))
+            .spawn(move || {
+                if let Err(e) = rt::lower_priority(PATH_CHECK_NICE) {
+                    warn!("the path-check thread keeps its priority: {e}");
+                }
+                worker.run(&done)
+            })
             .context("starting the path-check thread")?
     };
 
