@@ -163,16 +163,21 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
 
         // A path that starts 15 cm from the level's equilibrium: refused,
         // naming its first knots and the reason; the controller runs on.
-        let a = away.to_string_lossy().into_owned();
-        let out = hcc(
-            &["follow", "--level", "1", &a],
-            &ns,
-            &prefix,
-            dir.path(),
-            "away",
-            30,
-        );
-        assert!(!out.status.success(), "{}", out.log());
+        let refused = |file: &Path, tag: &str| {
+            let f = file.to_string_lossy().into_owned();
+            let out = hcc(
+                &["follow", "--level", "1", &f],
+                &ns,
+                &prefix,
+                dir.path(),
+                tag,
+                60,
+            );
+            println!("{}", out.log());
+            assert!(!out.status.success(), "{}", out.log());
+            out
+        };
+        let out = refused(&away, "away");
         assert!(
             out.stderr.contains("knots 0..=15") && out.stderr.contains("starts_away"),
             "{}",
@@ -184,17 +189,7 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
         // followed, the message where the hierarchy would turn singular is
         // refused (`infeasible`, naming the knot) before the arm gets there;
         // the path stops on its last knot taken.
-        let o = out_of_reach.to_string_lossy().into_owned();
-        let out = hcc(
-            &["follow", "--level", "1", &o],
-            &ns,
-            &prefix,
-            dir.path(),
-            "out_of_reach",
-            60,
-        );
-        println!("{}", out.log());
-        assert!(!out.status.success(), "{}", out.log());
+        let out = refused(&out_of_reach, "out_of_reach");
         assert!(out.stderr.contains("infeasible"), "{}", out.log());
         let knot: usize = out
             .stderr

@@ -189,16 +189,9 @@ impl Paths {
         state_seq: u64,
         setpoints: &SetpointHandler,
     ) -> Result<(), KnotsRefusal> {
-        knots.validate()?;
-        let i = knots.level as usize;
-        let goals_now = setpoints.goals_taken(i);
-        let l = self
-            .levels
-            .get_mut(i)
-            .ok_or(SetpointRejection::UnknownLevel)?;
-        if knots.columns() != l.stream.columns() {
-            return Err(PathRejection::ColumnMismatch.into());
-        }
+        let goals_now = setpoints.goals_taken(knots.level as usize);
+        let period_s = self.period_s;
+        let (i, l) = self.level_of(knots)?;
         let max_speed = setpoints
             .max_speed(i)
             .ok_or(SetpointRejection::UnknownLevel)?;
@@ -239,7 +232,7 @@ impl Paths {
             l.last_t = last_t;
             l.driver = Driver::Stream;
             let start = knots.apply_at_state_seq.max(state_seq);
-            l.stream_t = -((start - state_seq) as f64) * self.period_s;
+            l.stream_t = -((start - state_seq) as f64) * period_s;
             l.goals_at_start = goals_now;
             l.stopping = false;
             return Ok(());
@@ -269,6 +262,13 @@ impl Paths {
         knots: &PathKnots,
         setpoints: &SetpointHandler,
     ) -> Result<(), KnotsRefusal> {
+        let (i, l) = self.level_of(knots)?;
+        (0..knots.count()).try_for_each(|k| l.check_knot(knots, k, i, setpoints))
+    }
+
+    /// The message's level, once the message is well-formed and has the
+    /// level's columns.
+    fn level_of(&mut self, knots: &PathKnots) -> Result<(usize, &mut LevelPath), KnotsRefusal> {
         knots.validate()?;
         let i = knots.level as usize;
         let l = self
@@ -278,7 +278,7 @@ impl Paths {
         if knots.columns() != l.stream.columns() {
             return Err(PathRejection::ColumnMismatch.into());
         }
-        (0..knots.count()).try_for_each(|k| l.check_knot(knots, k, i, setpoints))
+        Ok((i, l))
     }
 
     /// Hands every driving path's value at this state's time to the law and
