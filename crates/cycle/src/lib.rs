@@ -67,7 +67,7 @@ mod wrench;
 pub use control_cycle::{Answer, ControlCycle};
 pub use counters::{CoreCounters, CycleCounters};
 pub use law::controller_for;
-pub use path_gate::{GATE_CAPACITY, PathCheckWorker};
+pub use path_gate::{CHECK_IDLE_SLEEP, GATE_CAPACITY, PathCheckWorker};
 pub use schedule::Schedule;
 pub use setpoints::SetpointHandler;
 pub use settings::{CycleError, CycleSettings};

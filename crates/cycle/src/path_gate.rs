@@ -34,7 +34,7 @@ pub const GATE_CAPACITY: usize = 64;
 /// How long the worker sleeps when no request waits (a message waits about
 /// this long more for its verdict; the real-time thread never wakes it: no
 /// system call in the loop).
-pub const IDLE_SLEEP: Duration = Duration::from_millis(1);
+pub const CHECK_IDLE_SLEEP: Duration = Duration::from_millis(1);
 
 /// A message waiting for its turn.
 // Both variants are large (a path's knots, a setpoint's gains): boxing one
@@ -98,12 +98,12 @@ impl PathCheckWorker {
     }
 
     /// Checks requests as they come until `done` is set or the cycle's side
-    /// is gone, sleeping [`IDLE_SLEEP`] when there is none: the body of the
+    /// is gone, sleeping [`CHECK_IDLE_SLEEP`] when there is none: the body of the
     /// worker's thread.
     pub fn run(mut self, done: &AtomicBool) {
         while !done.load(Ordering::Relaxed) && !self.abandoned() {
             if self.run_pending() == 0 {
-                std::thread::sleep(IDLE_SLEEP);
+                std::thread::sleep(CHECK_IDLE_SLEEP);
             }
         }
     }
