@@ -15,6 +15,7 @@
 
 pub mod algorithms;
 pub mod error;
+pub mod load;
 pub mod urdf;
 
 /// The dense linear algebra (Cholesky and the rest), from its one home `hcc-linalg`.
@@ -22,6 +23,7 @@ pub use hcc_linalg as linalg;
 
 pub use algorithms::*;
 pub use error::ModelError;
+pub use load::{Load, LoadError, set_load};
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3, Vector6};
 
@@ -94,6 +96,11 @@ pub struct Model {
     pub gravity: Vector3<f64>,
     /// Names of movable joints not on the chain that were locked at 0.
     pub locked_joints: Vec<String>,
+    /// The load the tip frame carries ([`set_load`]; none from the URDF).
+    pub load: Load,
+    /// The inertia of the body that carries the tip frame, without the load
+    /// (what [`set_load`] adds the load to).
+    pub unloaded_tip_body: SpatialInertia,
 }
 
 /// Preallocated workspace for every algorithm of this crate. Create it once

@@ -144,25 +144,7 @@ fn check_inertial(link: &urdf_rs::Link, file: &str) -> Result<(), ModelError> {
     let ic = Matrix3::new(
         i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
     );
-    let eig = ic.symmetric_eigenvalues();
-    let scale = eig.iter().fold(0.0_f64, |a, &b| a.max(b.abs()));
-    let tol = 1e-9 * scale.max(1e-12);
-    if eig.iter().any(|&e| e < -tol) {
-        return Err(err(format!(
-            "inertia is not positive semidefinite (principal moments {:.6e}, {:.6e}, {:.6e})",
-            eig[0], eig[1], eig[2]
-        )));
-    }
-    for k in 0..3 {
-        let others = eig[(k + 1) % 3] + eig[(k + 2) % 3];
-        if eig[k] > others + tol {
-            return Err(err(format!(
-                "principal moments {:.6e}, {:.6e}, {:.6e} violate the triangle inequality",
-                eig[0], eig[1], eig[2]
-            )));
-        }
-    }
-    Ok(())
+    crate::load::check_rotational_inertia(&ic).map_err(|e| err(e.to_string()))
 }
 
 /// A link waiting in the depth-first walk: its chain body, its placement in
@@ -527,7 +509,7 @@ fn build(
             tip: tip.to_string(),
         });
     }
-    Ok(Model {
+    let mut model = Model {
         name: robot.name.clone(),
         root_link: root_name,
         tip_link: tip.to_string(),
@@ -535,5 +517,15 @@ fn build(
         frames: w.frames,
         gravity,
         locked_joints: w.locked_joints,
-    })
+        load: crate::Load::none(),
+        unloaded_tip_body: SpatialInertia {
+            mass: 0.0,
+            com: Vector3::zeros(),
+            inertia: Matrix3::zeros(),
+        },
+    };
+    if let Some(body) = crate::load::tip_body(&model) {
+        model.unloaded_tip_body = model.joints[body].inertia;
+    }
+    Ok(model)
 }

@@ -36,6 +36,8 @@ fn run_all(model: &Model) {
     let mut x = DVector::zeros(n);
     let mut xm = DMatrix::zeros(n, 3);
     let short = DVector::zeros(n + 1);
+    let mut loaded = model.clone();
+    let load = hcc_model::Load::point(1.5, [0.0, 0.02, 0.1]);
 
     let before = hcc_rtalloc::thread_stats().allocs;
     for _ in 0..ITERATIONS {
@@ -66,6 +68,9 @@ fn run_all(model: &Model) {
         xm.fill(1.0);
         black_box(cholesky_solve_matrix_in_place(&factor, &mut xm).is_ok());
         black_box(spd_inverse(&data.m, &mut factor, &mut inverse));
+        // A load changed at run time.
+        hcc_model::set_load(&mut loaded, &load);
+        black_box(load.check(3.0).is_ok());
     }
     let after = hcc_rtalloc::thread_stats().allocs;
     assert_eq!(
