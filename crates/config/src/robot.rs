@@ -7,7 +7,7 @@ use nalgebra::{DVector, Vector3};
 
 use crate::context::Ctx;
 use crate::error::{self, ConfigError};
-use crate::schema::{InitialSection, RobotSection};
+use crate::schema::{InitialSection, LoadSection, RobotSection};
 
 /// `[robot]`: the model from the URDF (path relative to the scenario file),
 /// or from its text `urdf` when given (the path is then only named).
@@ -43,7 +43,51 @@ pub(crate) fn load_model(
             error,
         }
     })?;
+    let mut model = model;
+    if let Some(limit) = robot.payload_kg {
+        if !(limit.is_finite() && limit >= 0.0) {
+            return Err(cx.err(
+                "robot.payload_kg",
+                format!("{limit} must be a mass ≥ 0 (kg)"),
+            ));
+        }
+        model.payload_limit = limit;
+    }
+    if let Some(section) = &robot.load {
+        let load = tip_load(cx, section)?;
+        load.check(model.payload_limit).map_err(|e| {
+            let field = match e {
+                hcc_model::LoadError::Inertia(_) | hcc_model::LoadError::NotSymmetric => {
+                    "robot.load.inertia"
+                }
+                _ => "robot.load.mass",
+            };
+            cx.err(field, e.to_string())
+        })?;
+        hcc_model::set_load(&mut model, &load);
+    }
     Ok((model, urdf_path))
+}
+
+/// `[robot.load]` as a [`hcc_model::Load`] (its values' count and finiteness
+/// checked; its physics by [`hcc_model::Load::check`]).
+fn tip_load(cx: &Ctx, section: &LoadSection) -> Result<hcc_model::Load, ConfigError> {
+    let com = match &section.com {
+        Some(c) => cx.vector("robot.load.com", c, 3, "x, y, z in the tip frame")?,
+        None => DVector::zeros(3),
+    };
+    let inertia = match &section.inertia {
+        Some(i) => {
+            let v = cx.vector("robot.load.inertia", i, 6, "ixx, ixy, ixz, iyy, iyz, izz")?;
+            nalgebra::Matrix3::new(v[0], v[1], v[2], v[1], v[3], v[4], v[2], v[4], v[5])
+        }
+        None => nalgebra::Matrix3::zeros(),
+    };
+    Ok(hcc_model::Load {
+        mass: section.mass,
+        com: Vector3::new(com[0], com[1], com[2]),
+        inertia,
+    })
 }
 
 /// `[initial]`: q0 (within the joint limits) and q̇0.

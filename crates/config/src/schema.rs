@@ -69,6 +69,23 @@ pub struct RobotSection {
     /// robots whose torque interface compensates gravity itself.
     #[serde(default = "yes")]
     pub gravity_compensation: bool,
+    /// The heaviest load the robot may carry at its tip, kg (default: no limit).
+    pub payload_kg: Option<f64>,
+    /// The load the tip frame carries from the start (default: none).
+    pub load: Option<LoadSection>,
+}
+
+/// `[robot.load]`: a load held rigidly at the tip frame.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSection {
+    /// Mass, kg.
+    pub mass: f64,
+    /// Centre of mass in the tip frame, m (default: the tip frame's origin).
+    pub com: Option<Vec<f64>>,
+    /// Rotational inertia about the centre of mass, tip axes, kg·m², as a
+    /// URDF gives it: ixx, ixy, ixz, iyy, iyz, izz (default: a point mass).
+    pub inertia: Option<Vec<f64>>,
 }
 
 fn yes() -> bool {

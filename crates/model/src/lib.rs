@@ -98,6 +98,9 @@ pub struct Model {
     pub locked_joints: Vec<String>,
     /// The load the tip frame carries ([`set_load`]; none from the URDF).
     pub load: Load,
+    /// The heaviest load the tip may carry, kg (a URDF does not say:
+    /// infinite unless the configuration gives it).
+    pub payload_limit: f64,
     /// The inertia of the body that carries the tip frame, without the load
     /// (what [`set_load`] adds the load to).
     pub unloaded_tip_body: SpatialInertia,

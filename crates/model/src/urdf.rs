@@ -518,6 +518,7 @@ fn build(
         gravity,
         locked_joints: w.locked_joints,
         load: crate::Load::none(),
+        payload_limit: f64::INFINITY,
         unloaded_tip_body: SpatialInertia {
             mass: 0.0,
             com: Vector3::zeros(),
