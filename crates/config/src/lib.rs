@@ -65,6 +65,6 @@ pub use error::ConfigError;
 pub use published::{COMPARE_WAIT, ToolScenarioError, scenario_for_tool};
 pub use scenario::Scenario;
 pub use schema::*;
-pub use simulation::{Simulation, Wrench};
+pub use simulation::{Simulation, TimedLoad, Wrench};
 
 pub use hcc_spec::{ControllerSpec, Form, LevelSpec, TaskSpec, TaskUnit};

@@ -54,40 +54,47 @@ pub(crate) fn load_model(
         model.payload_limit = limit;
     }
     if let Some(section) = &robot.load {
-        let load = tip_load(cx, section)?;
-        load.check(model.payload_limit).map_err(|e| {
-            let field = match e {
-                hcc_model::LoadError::Inertia(_) | hcc_model::LoadError::NotSymmetric => {
-                    "robot.load.inertia"
-                }
-                _ => "robot.load.mass",
-            };
-            cx.err(field, e.to_string())
-        })?;
+        let load = tip_load(cx, "robot.load", section, model.payload_limit)?;
         hcc_model::set_load(&mut model, &load);
     }
     Ok((model, urdf_path))
 }
 
-/// `[robot.load]` as a [`hcc_model::Load`] (its values' count and finiteness
-/// checked; its physics by [`hcc_model::Load::check`]).
-fn tip_load(cx: &Ctx, section: &LoadSection) -> Result<hcc_model::Load, ConfigError> {
+/// The load `section` (at `path`, e.g. `robot.load`) as a
+/// [`hcc_model::Load`]: its values' count and finiteness, then its physics
+/// and mass against `payload_limit` ([`hcc_model::Load::check`]), each
+/// refusal naming its field.
+pub(crate) fn tip_load(
+    cx: &Ctx,
+    path: &str,
+    section: &LoadSection,
+    payload_limit: f64,
+) -> Result<hcc_model::Load, ConfigError> {
+    let field = |f: &str| format!("{path}.{f}");
     let com = match &section.com {
-        Some(c) => cx.vector("robot.load.com", c, 3, "x, y, z in the tip frame")?,
+        Some(c) => cx.vector(&field("com"), c, 3, "x, y, z in the tip frame")?,
         None => DVector::zeros(3),
     };
     let inertia = match &section.inertia {
         Some(i) => {
-            let v = cx.vector("robot.load.inertia", i, 6, "ixx, ixy, ixz, iyy, iyz, izz")?;
+            let v = cx.vector(&field("inertia"), i, 6, "ixx, ixy, ixz, iyy, iyz, izz")?;
             nalgebra::Matrix3::new(v[0], v[1], v[2], v[1], v[3], v[4], v[2], v[4], v[5])
         }
         None => nalgebra::Matrix3::zeros(),
     };
-    Ok(hcc_model::Load {
+    let load = hcc_model::Load {
         mass: section.mass,
         com: Vector3::new(com[0], com[1], com[2]),
         inertia,
-    })
+    };
+    load.check(payload_limit).map_err(|e| {
+        let f = match e {
+            hcc_model::LoadError::Inertia(_) | hcc_model::LoadError::NotSymmetric => "inertia",
+            _ => "mass",
+        };
+        cx.err(&field(f), e.to_string())
+    })?;
+    Ok(load)
 }
 
 /// `[initial]`: q0 (within the joint limits) and q̇0.

@@ -75,6 +75,29 @@ pub struct RobotSection {
     pub load: Option<LoadSection>,
 }
 
+/// `[[simulation.load]]`: from `start_s` on, the plant's tip carries this
+/// load (replacing the one before; `mass = 0.0` lets it go).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimedLoadSection {
+    pub start_s: f64,
+    /// As `[robot.load]`'s.
+    pub mass: f64,
+    pub com: Option<Vec<f64>>,
+    pub inertia: Option<Vec<f64>>,
+}
+
+impl TimedLoadSection {
+    /// The load, as `[robot.load]` writes it.
+    pub fn load(&self) -> LoadSection {
+        LoadSection {
+            mass: self.mass,
+            com: self.com.clone(),
+            inertia: self.inertia.clone(),
+        }
+    }
+}
+
 /// `[robot.load]`: a load held rigidly at the tip frame.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -288,6 +311,10 @@ pub struct SimulationSection {
     /// External wrenches (`[[simulation.wrench]]`), applied in the plant only.
     #[serde(default)]
     pub wrench: Vec<WrenchSection>,
+    /// Loads the plant's tip takes at a time (`[[simulation.load]]`), in the
+    /// plant only: what the controller is not told.
+    #[serde(default)]
+    pub load: Vec<TimedLoadSection>,
 }
 
 fn default_duration() -> f64 {
@@ -308,6 +335,7 @@ impl Default for SimulationSection {
             integrator_dt_s: default_dt(),
             joint_friction: None,
             wrench: Vec::new(),
+            load: Vec::new(),
         }
     }
 }

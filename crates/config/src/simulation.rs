@@ -29,6 +29,16 @@ pub struct Simulation {
     /// Viscous friction per joint.
     pub joint_friction: DVector<f64>,
     pub wrenches: Vec<Wrench>,
+    /// What the plant's tip carries from a time on (`[[simulation.load]]`),
+    /// by start time.
+    pub loads: Vec<TimedLoad>,
+}
+
+/// A load the plant's tip takes at `start_s` (replacing the one before).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimedLoad {
+    pub start_s: f64,
+    pub load: hcc_model::Load,
 }
 
 pub(crate) fn resolve_simulation(
@@ -54,12 +64,26 @@ pub(crate) fn resolve_simulation(
     for (i, w) in s.wrench.iter().enumerate() {
         wrenches.push(resolve_wrench(cx, model, i, w)?);
     }
+    let mut loads = Vec::with_capacity(s.load.len());
+    for (i, l) in s.load.iter().enumerate() {
+        let path = format!("simulation.load[{i}]");
+        if !(l.start_s.is_finite() && l.start_s >= 0.0) {
+            return Err(cx.err(&format!("{path}.start_s"), "must be a time ≥ 0 (s)"));
+        }
+        let load = crate::robot::tip_load(cx, &path, &l.load(), model.payload_limit)?;
+        loads.push(TimedLoad {
+            start_s: l.start_s,
+            load,
+        });
+    }
+    loads.sort_by(|a, b| a.start_s.total_cmp(&b.start_s));
     Ok(Simulation {
         duration_s: s.duration_s,
         integrator_dt_s: s.integrator_dt_s,
         substeps: substeps as usize,
         joint_friction,
         wrenches,
+        loads,
     })
 }
 

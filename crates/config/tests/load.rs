@@ -66,3 +66,35 @@ fn a_load_that_is_not_physical_or_too_heavy_is_refused_at_its_field() {
     let e = refused("", "mass = 1.0\ncolour = 3\n");
     assert!(e.contains("colour"), "{e}");
 }
+
+#[test]
+fn loads_the_plant_takes_at_a_time_are_checked_and_sorted() {
+    let s = load(
+        "payload_kg = 3.0\n",
+        "\n[[simulation.load]]\nstart_s = 2.0\nmass = 0.0\n\n[[simulation.load]]\nstart_s = 1.0\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\n",
+    )
+    .unwrap();
+    let loads = &s.simulation.loads;
+    assert_eq!(loads.len(), 2);
+    assert_eq!((loads[0].start_s, loads[0].load.mass), (1.0, 1.0));
+    assert_eq!((loads[1].start_s, loads[1].load.mass), (2.0, 0.0));
+    // The controller's model is not told.
+    assert_eq!(s.model.load.mass, 0.0);
+    let refused = |section: &str| {
+        load(
+            "payload_kg = 3.0\n",
+            &format!("\n[[simulation.load]]\n{section}"),
+        )
+        .unwrap_err()
+        .to_string()
+    };
+    let e = refused("start_s = -1.0\nmass = 1.0\n");
+    assert!(e.contains("simulation.load[0].start_s"), "{e}");
+    let e = refused("start_s = 1.0\nmass = 4.0\n");
+    assert!(
+        e.contains("simulation.load[0].mass") && e.contains("payload"),
+        "{e}"
+    );
+    let e = refused("start_s = 1.0\nmass = 1.0\ninertia = [0.1, 0.0, 0.0, 0.1, 0.0, -0.3]\n");
+    assert!(e.contains("simulation.load[0].inertia"), "{e}");
+}

@@ -15,7 +15,7 @@ use hcc_config::Scenario;
 
 pub use driver::{Applied, DriverCounters, SimDriver};
 pub use end_stops::EndStops;
-pub use plant::{ExternalWrench, Plant, PlantEnergy};
+pub use plant::{ExternalWrench, Plant, PlantEnergy, TimedLoad};
 pub use zoh::{LoopTiming, PeriodStep, run_zoh};
 
 /// Errors of the simulator, naming the offending quantity.
@@ -37,7 +37,8 @@ pub enum SimError {
     Model(#[from] hcc_model::ModelError),
 }
 
-/// Builds the plant of a scenario (model, initial state, friction, wrenches).
+/// Builds the plant of a scenario (model, initial state, friction, wrenches,
+/// the loads its tip takes at a time).
 pub fn plant_for(scenario: &Scenario) -> Result<Plant, SimError> {
     let s = &scenario.simulation;
     let mut plant = Plant::new(
@@ -55,6 +56,15 @@ pub fn plant_for(scenario: &Scenario) -> Result<Plant, SimError> {
                 frame: w.frame_id,
                 force: w.force,
                 torque: w.torque,
+            })
+            .collect(),
+    )?;
+    plant.set_loads(
+        s.loads
+            .iter()
+            .map(|l| TimedLoad {
+                start_s: l.start_s,
+                load: l.load,
             })
             .collect(),
     )?;

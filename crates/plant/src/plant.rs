@@ -53,6 +53,14 @@ impl PlantEnergy {
     }
 }
 
+/// A load the plant's tip takes at `start_s` (what the tip carries from then
+/// on; a zero mass lets go).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimedLoad {
+    pub start_s: f64,
+    pub load: hcc_model::Load,
+}
+
 /// The plant: model, state, and preallocated integration workspace.
 #[derive(Clone, Debug)]
 pub struct Plant {
@@ -63,6 +71,10 @@ pub struct Plant {
     qd: DVector<f64>,
     friction: DVector<f64>,
     wrenches: Vec<ExternalWrench>,
+    /// Loads the tip takes at their time ([`Plant::set_loads`]), by time, and
+    /// how many of them it has taken.
+    loads: Vec<TimedLoad>,
+    loads_taken: usize,
     // RK4 workspace.
     q_stage: DVector<f64>,
     qd_stage: DVector<f64>,
@@ -112,6 +124,8 @@ impl Plant {
             qd: qd0.clone(),
             friction: friction.clone(),
             wrenches: Vec::new(),
+            loads: Vec::new(),
+            loads_taken: 0,
             q_stage: z.clone(),
             qd_stage: z.clone(),
             k_q: [z.clone(), z.clone(), z.clone(), z.clone()],
@@ -241,9 +255,42 @@ impl Plant {
         Ok(())
     }
 
+    /// Loads the tip takes at their times (each replacing the one before;
+    /// checked: finite times ≥ 0, physical loads). A load is taken at the
+    /// first step that begins at or after its time.
+    pub fn set_loads(&mut self, mut loads: Vec<TimedLoad>) -> Result<(), SimError> {
+        for (i, l) in loads.iter().enumerate() {
+            if !(l.start_s.is_finite() && l.start_s >= 0.0) {
+                return Err(SimError::Invalid(format!(
+                    "load {i}: start {} s",
+                    l.start_s
+                )));
+            }
+            l.load
+                .check(f64::INFINITY)
+                .map_err(|e| SimError::Invalid(format!("load {i}: {e}")))?;
+        }
+        loads.sort_by(|a, b| a.start_s.total_cmp(&b.start_s));
+        self.loads = loads;
+        self.loads_taken = 0;
+        Ok(())
+    }
+
+    /// Takes the loads whose time has come (allocation-free).
+    fn take_loads(&mut self) {
+        while let Some(l) = self.loads.get(self.loads_taken) {
+            if l.start_s > self.t + 1e-12 {
+                break;
+            }
+            hcc_model::set_load(&mut self.model, &l.load);
+            self.loads_taken += 1;
+        }
+    }
+
     /// Advances the state by `dt` with the joint torque `tau` held constant (RK4).
     /// On error the state is left unchanged.
     pub fn step(&mut self, tau: &DVector<f64>, dt: f64) -> Result<(), SimError> {
+        self.take_loads();
         let n = self.model.nq();
         if tau.len() != n {
             return Err(SimError::Dimension {
