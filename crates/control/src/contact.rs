@@ -237,6 +237,12 @@ impl ContactDetector {
         self.in_contact = false;
     }
 
+    /// Whether every entry of `r` is at or below its release threshold (a
+    /// contact would end; none would begin).
+    pub fn below_release(&self, r: &[f64]) -> bool {
+        r.iter().zip(self.off.iter()).all(|(&x, &t)| x.abs() <= t)
+    }
+
     /// Updates the flag from the estimate `r` (length n; a non-finite entry
     /// counts as above every threshold). Allocation-free.
     pub fn update(&mut self, r: &[f64]) -> ContactChange {

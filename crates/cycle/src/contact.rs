@@ -33,6 +33,9 @@ pub(crate) struct ContactWatch {
     last_seq: Option<u64>,
     /// Whether a contact began at the last update.
     began: bool,
+    /// A load is being announced (or was, and the residual it left has not
+    /// yet fallen below the release thresholds): no contact begins.
+    quiet: bool,
 }
 
 impl ContactWatch {
@@ -43,6 +46,7 @@ impl ContactWatch {
             detector: ContactDetector::new(contact.threshold.as_slice(), contact.release),
             last_seq: None,
             began: false,
+            quiet: false,
         }
     }
 
@@ -78,7 +82,7 @@ impl ContactWatch {
         terms: &Data,
         previous: &TorqueCommand,
         gravity_in_command: bool,
-        period_s: f64,
+        (period_s, announcing): (f64, bool),
         counters: &mut CoreCounters,
     ) {
         let seq = state.header.seq;
@@ -99,7 +103,20 @@ impl ContactWatch {
         };
         observe(&mut self.observer, terms, &input);
         self.last_seq = Some(seq);
-        self.began = self.detector.update(self.observer.residual()) == ContactChange::Began;
+        let r = self.observer.residual();
+        self.quiet |= announcing;
+        if self.quiet && !announcing && self.detector.below_release(r) {
+            self.quiet = false;
+        }
+        self.began = if self.quiet {
+            // An announced load: a contact flagged before may end, none begins.
+            if self.detector.in_contact() {
+                self.detector.update(r);
+            }
+            false
+        } else {
+            self.detector.update(r) == ContactChange::Began
+        };
         if self.began {
             counters.contact_events += 1;
         }

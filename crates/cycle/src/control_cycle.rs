@@ -57,6 +57,7 @@ use hcc_msgs::{
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
+use crate::load_ramp::LoadRamp;
 use crate::output_tank::OutputTank;
 use crate::path_check::PathChecker;
 use crate::path_gate::{PathCheckWorker, PathGate, Turn};
@@ -94,6 +95,8 @@ pub struct ControlCycle {
     setpoints: SetpointHandler,
     /// The levels' desired paths (module `paths`).
     paths: Paths,
+    /// A load being announced (module `load_ramp`).
+    load_ramp: LoadRamp,
     /// Run-time path messages waiting for their feasibility check (module
     /// `path_gate`); `None`: taken at once.
     gate: Option<PathGate>,
@@ -185,6 +188,7 @@ impl ControlCycle {
             setpoints,
             paths,
             gate: None,
+            load_ramp: LoadRamp::new(),
             path_knots: settings.setpoint_limits.path_knots,
             path_check_timeout_s: settings.setpoint_limits.path_check_timeout_ms * 1e-3,
             filter: TorqueFilter::new(&settings.torque_filter, settings.period_s()),
@@ -517,6 +521,21 @@ impl ControlCycle {
         self.setpoints.fill(&mut self.telemetry);
     }
 
+    /// The tip carries `load` from now on: the controller's model takes it
+    /// over `ramp_s` s (module `load_ramp`), the contact detection quiet
+    /// meanwhile. Refused when it is not a physical load or heavier than the
+    /// model's payload limit. Allocation-free.
+    pub fn set_load(
+        &mut self,
+        load: &hcc_model::Load,
+        ramp_s: f64,
+    ) -> Result<(), hcc_model::LoadError> {
+        load.check(self.controller.model().payload_limit)?;
+        let from = self.controller.model().load;
+        self.load_ramp.start(from, *load, ramp_s);
+        Ok(())
+    }
+
     /// Path messages (and setpoints behind them) waiting for their
     /// feasibility check.
     pub fn paths_in_check(&self) -> usize {
@@ -777,6 +796,9 @@ impl ControlCycle {
             .advance(self.period_s, &mut self.controller, &mut self.setpoints);
         self.counters.core.paths_stopped = self.paths.stopped;
         self.counters.core.streams_stopped = self.setpoints.streams_stopped;
+        // A load being announced moves the model on (module `load_ramp`).
+        let announcing = self.load_ramp.active();
+        self.load_ramp.advance(self.period_s, &mut self.controller);
         // The contact reaction, from the flag of the previous state (module `reaction`).
         self.reaction.before_law(
             self.contact.in_contact(),
@@ -811,7 +833,7 @@ impl ControlCycle {
             self.controller.model_terms(),
             &self.command,
             self.gravity_compensation,
-            self.period_s,
+            (self.period_s, announcing),
             &mut self.counters.core,
         );
         if let Some(i) = self.wrench.level() {

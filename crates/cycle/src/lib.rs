@@ -50,6 +50,7 @@ pub mod control_cycle;
 pub mod counters;
 pub mod feasibility;
 mod law;
+mod load_ramp;
 mod output_tank;
 pub mod path_check;
 mod path_gate;

@@ -37,6 +37,13 @@ impl Controller {
         };
     }
 
+    /// The load the tip frame carries from now on (hcc-model's `set_load`:
+    /// M, C, g and everything the law and the observer compute follow it).
+    /// The caller checks it (`Load::check`) and ramps it in. Allocation-free.
+    pub fn set_load(&mut self, load: &hcc_model::Load) {
+        hcc_model::set_load(&mut self.model, load);
+    }
+
     /// Whether the control rate carries the gains of level `i` (crate::rate):
     /// the stiffness `k` and damping `d` given, the level's own where `None`, at
     /// the configuration of the last cycle (the initial one before the first).
