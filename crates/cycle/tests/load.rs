@@ -103,3 +103,52 @@ fn a_load_announced_as_it_is_taken_is_held_without_a_contact() {
     // The filter's rate: 1000 N·m/s, 1 N·m per cycle.
     assert!(step <= 1.0 + 1e-9, "{step} N·m");
 }
+
+#[test]
+fn a_load_message_is_checked_answered_and_ramped_in() {
+    use hcc_msgs::LoadSetpoint;
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "[robot]\n",
+        "[robot]\npayload_kg = 3.0\n",
+        1,
+    );
+    let sc = Scenario::from_toml_str(&text, &path).unwrap();
+    let c = hcc_cycle::controller_for(&sc).unwrap();
+    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let answer = |d: &ControlCycle| {
+        let a = d.telemetry().answer_for(7).copied().unwrap();
+        (a.seq, a.code)
+    };
+    let mut heavy = LoadSetpoint::point(7, 1, 3.5, [0.0, 0.0, 0.1]);
+    assert_eq!(d.take_load(&heavy), 302);
+    assert_eq!(answer(&d), (1, 302));
+    heavy.mass = -1.0;
+    heavy.header.seq = 2;
+    assert_eq!(d.take_load(&heavy), 301);
+    let mut odd = LoadSetpoint::point(7, 3, 1.0, [0.0, 0.0, 0.1]);
+    odd.inertia = [0.1, 0.0, 0.0, 0.1, 0.0, 0.3];
+    assert_eq!(d.take_load(&odd), 303);
+    odd.inertia = [0.0; 6];
+    odd.ramp_s = -1.0;
+    assert_eq!(d.take_load(&odd), 304);
+    // A good one: taken over its ramp (0.05 s), then the model carries it.
+    let mut good = LoadSetpoint::point(7, 5, 1.0, [0.0, 0.0, 0.1]);
+    good.ramp_s = 0.05;
+    assert_eq!(d.take_load(&good), 0);
+    assert_eq!(answer(&d), (5, 0));
+    let n = sc.model.nq();
+    let mut s = JointState::zeroed();
+    let q: Vec<f64> = sc.q0.iter().copied().collect();
+    s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+    let mut masses = Vec::new();
+    for k in 1..=60 {
+        s.header.seq = k;
+        d.decide(&s, k * sc.period_ns());
+        masses.push(d.controller().model().load.mass);
+    }
+    assert!(masses[0] > 0.0 && masses[0] < 0.01, "{masses:?}");
+    assert!(masses.windows(2).all(|w| w[1] >= w[0]));
+    assert_eq!(masses[49..], [1.0; 11]);
+}

@@ -154,6 +154,7 @@
 pub mod driver;
 mod error;
 pub mod ipc;
+mod load;
 mod path;
 pub mod scenario;
 mod sequence;
@@ -163,6 +164,7 @@ mod telemetry;
 mod types;
 
 pub use error::{MsgError, NamespaceError};
+pub use load::{DEFAULT_LOAD_RAMP_S, LoadRefusal, LoadRejection, LoadSetpoint};
 pub use path::{
     KnotsRefusal, KnotsRejection, MAX_KNOTS_PER_MESSAGE, MAX_PATH_COLUMNS, PATH_DERIVATIVES,
     PATH_EXTEND, PATH_FLAGS_KNOWN, PATH_NEW, PathKnots, PathRejection,

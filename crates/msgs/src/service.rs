@@ -98,6 +98,7 @@ pub struct ServiceNames {
     telemetry: String,
     setpoint: String,
     path: String,
+    load: String,
     state_ready: String,
     command_ready: String,
     scenario: String,
@@ -118,6 +119,7 @@ impl ServiceNames {
             telemetry: format!("{base}/telemetry"),
             setpoint: format!("{base}/setpoint"),
             path: format!("{base}/path"),
+            load: format!("{base}/load"),
             state_ready: format!("{base}/state_ready"),
             command_ready: format!("{base}/command_ready"),
             scenario: format!("{base}/scenario"),
@@ -155,6 +157,11 @@ impl ServiceNames {
         &self.path
     }
 
+    /// Publish-subscribe service of [`crate::LoadSetpoint`] (clients → controller).
+    pub fn load(&self) -> &str {
+        &self.load
+    }
+
     /// Event service the driver notifies with [`EVENT_STATE_PUBLISHED`].
     pub fn state_ready(&self) -> &str {
         &self.state_ready
@@ -172,13 +179,14 @@ impl ServiceNames {
     }
 
     /// All names, for listing/cleanup.
-    pub fn all(&self) -> [&str; 8] {
+    pub fn all(&self) -> [&str; 9] {
         [
             &self.joint_state,
             &self.torque_command,
             &self.telemetry,
             &self.setpoint,
             &self.path,
+            &self.load,
             &self.state_ready,
             &self.command_ready,
             &self.scenario,

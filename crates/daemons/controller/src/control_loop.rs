@@ -27,8 +27,8 @@ use hcc_control::Controller;
 use hcc_cycle::{Answer, ControlCycle, CycleError, CycleSettings};
 use hcc_msgs::ipc::{
     self, CommandPublisher, ConnectionFailure, EventListener, EventNotifier, IpcError,
-    LATEST_BUFFER, PathSubscriber, PreLoan, SETPOINT_BUFFER, ScenarioPublisher, Services,
-    SetpointSubscriber, StateSubscriber, TelemetryPublisher, UpdateConnections,
+    LATEST_BUFFER, LoadSubscriber, PathSubscriber, PreLoan, SETPOINT_BUFFER, ScenarioPublisher,
+    Services, SetpointSubscriber, StateSubscriber, TelemetryPublisher, UpdateConnections,
 };
 use hcc_msgs::{
     CommandMode, JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, TelemetryTimings, monotonic_now_ns,
@@ -59,6 +59,8 @@ pub struct Ports {
     /// Path knots from clients (buffer [`SETPOINT_BUFFER`]; all taken each
     /// cycle after the setpoints; docs/tracking.md).
     pub paths: PathSubscriber,
+    /// Loads the robot's hand holds (clients → controller).
+    pub loads: LoadSubscriber,
     /// The scenario the controller runs, for tools that know only the
     /// namespace (none in a test rig that does not publish one).
     pub scenario: Option<ScenarioPublisher>,
@@ -81,6 +83,7 @@ impl Ports {
         // setpoints (a schedule due at the first state).
         let setpoints = services.setpoint_subscriber(SETPOINT_BUFFER)?;
         let paths = services.path_subscriber(SETPOINT_BUFFER)?;
+        let loads = services.load_subscriber(SETPOINT_BUFFER)?;
         let commands = services.torque_command_publisher()?;
         let telemetry = services.telemetry_publisher()?;
         let command_ready = services.command_ready_notifier()?;
@@ -89,6 +92,7 @@ impl Ports {
         Ok(Ports {
             setpoints,
             paths,
+            loads,
             commands,
             telemetry,
             command_ready,
@@ -102,7 +106,7 @@ impl Ports {
     /// while it waits ([`rt::ConnectionUpkeep`]): the publishers, the
     /// notifier and the subscribers (a listener has no connections), and the
     /// scenario's publisher, which hands its document to tools that connect.
-    pub fn connections(&self) -> [&dyn UpdateConnections; 7] {
+    pub fn connections(&self) -> [&dyn UpdateConnections; 8] {
         [
             &self.commands,
             &self.telemetry,
@@ -110,6 +114,7 @@ impl Ports {
             &self.states,
             &self.setpoints,
             &self.paths,
+            &self.loads,
             match &self.scenario {
                 Some(p) => p,
                 None => &NoPort,
@@ -496,6 +501,13 @@ impl ControlLoop {
         self.cycle.take_paths_at(state, || {
             ports.paths.receive().ok().flatten().map(|sample| *sample)
         });
+        // Then the loads the hand holds (bounded by the queue).
+        for _ in 0..SETPOINT_BUFFER {
+            let Ok(Some(sample)) = ports.loads.receive() else {
+                break;
+            };
+            self.cycle.take_load(&sample);
+        }
         let taken = monotonic_now_ns();
         let answer = self.cycle.decide_command(state, wake);
         if let Some(step_ns) = self.cycle.step_ns() {

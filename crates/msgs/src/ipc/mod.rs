@@ -85,9 +85,9 @@ pub use events::{EventListener, EventNotifier, wait_for_event_until};
 pub use node::{FILE_PREFIX_ENV, Ipc, IpcNode, config, create_node, file_prefix_from_env};
 pub use preloan::PreLoan;
 pub use pubsub::{
-    CommandPublisher, CommandSubscriber, PathPublisher, PathSubscriber, SetpointPublisher,
-    SetpointSubscriber, StatePublisher, StateSample, StateSubscriber, TelemetryPublisher,
-    TelemetrySubscriber,
+    CommandPublisher, CommandSubscriber, LoadPublisher, LoadSubscriber, PathPublisher,
+    PathSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher, StateSample,
+    StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
 };
 pub use scenario::{
     CONTROLLER_NODE, MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario,

@@ -14,7 +14,7 @@ use super::node::Ipc;
 use super::settings::{MAX_LOANED_SAMPLES, MAX_SUBSCRIBER_BUFFER};
 use crate::setpoint::Setpoint;
 use crate::types::{JointState, TorqueCommand};
-use crate::{PathKnots, Telemetry};
+use crate::{LoadSetpoint, PathKnots, Telemetry};
 
 /// Publisher of [`JointState`] (driver/simulator).
 pub type StatePublisher = Publisher<Ipc, JointState, ()>;
@@ -34,6 +34,10 @@ pub type SetpointSubscriber = Subscriber<Ipc, Setpoint, ()>;
 pub type PathPublisher = Publisher<Ipc, PathKnots, ()>;
 /// Subscriber of [`PathKnots`] (the controller).
 pub type PathSubscriber = Subscriber<Ipc, PathKnots, ()>;
+/// Publisher of [`LoadSetpoint`] (a client).
+pub type LoadPublisher = Publisher<Ipc, LoadSetpoint, ()>;
+/// Subscriber of [`LoadSetpoint`] (the controller).
+pub type LoadSubscriber = Subscriber<Ipc, LoadSetpoint, ()>;
 /// Publisher of [`Telemetry`] (controller).
 pub type TelemetryPublisher = Publisher<Ipc, Telemetry, ()>;
 /// Subscriber of [`Telemetry`].

@@ -14,9 +14,9 @@ use super::error::IpcError;
 use super::events::{EventListener, EventNotifier, listener, notifier};
 use super::node::{Ipc, IpcNode};
 use super::pubsub::{
-    CommandPublisher, CommandSubscriber, PathPublisher, PathSubscriber, SetpointPublisher,
-    SetpointSubscriber, StatePublisher, StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
-    publisher, subscriber,
+    CommandPublisher, CommandSubscriber, LoadPublisher, LoadSubscriber, PathPublisher,
+    PathSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher, StateSubscriber,
+    TelemetryPublisher, TelemetrySubscriber, publisher, subscriber,
 };
 use super::settings::{
     EVENT_ID_MAX, MAX_BORROWED_SAMPLES, MAX_COMMAND_SUBSCRIBERS, MAX_LISTENERS, MAX_NODES,
@@ -26,7 +26,7 @@ use super::settings::{
 use crate::service::{EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, ServiceNames};
 use crate::setpoint::Setpoint;
 use crate::types::{JointState, TorqueCommand};
-use crate::{PathKnots, Telemetry};
+use crate::{LoadSetpoint, PathKnots, Telemetry};
 
 fn pubsub_open_reason(e: PublishSubscribeOpenError) -> String {
     use PublishSubscribeOpenError as E;
@@ -154,6 +154,7 @@ pub struct Services {
     telemetry: publish_subscribe::PortFactory<Ipc, Telemetry, ()>,
     setpoint: publish_subscribe::PortFactory<Ipc, Setpoint, ()>,
     path: publish_subscribe::PortFactory<Ipc, PathKnots, ()>,
+    load: publish_subscribe::PortFactory<Ipc, LoadSetpoint, ()>,
     state_ready: event::PortFactory<Ipc>,
     command_ready: event::PortFactory<Ipc>,
 }
@@ -182,6 +183,12 @@ impl Services {
             path: open_pubsub(
                 node,
                 names.path(),
+                MAX_SETPOINT_PUBLISHERS,
+                MAX_SETPOINT_SUBSCRIBERS,
+            )?,
+            load: open_pubsub(
+                node,
+                names.load(),
                 MAX_SETPOINT_PUBLISHERS,
                 MAX_SETPOINT_SUBSCRIBERS,
             )?,
@@ -247,6 +254,16 @@ impl Services {
     /// A path publisher (a client; up to [`MAX_SETPOINT_PUBLISHERS`] at once).
     pub fn path_publisher(&self) -> Result<PathPublisher, IpcError> {
         publisher(&self.path, self.names.path(), "client")
+    }
+
+    /// A load publisher (a client; up to [`MAX_SETPOINT_PUBLISHERS`] at once).
+    pub fn load_publisher(&self) -> Result<LoadPublisher, IpcError> {
+        publisher(&self.load, self.names.load(), "client")
+    }
+
+    /// A load subscriber with a queue of `buffer` samples (the controller).
+    pub fn load_subscriber(&self, buffer: usize) -> Result<LoadSubscriber, IpcError> {
+        subscriber(&self.load, self.names.load(), buffer)
     }
 
     /// A path subscriber with a queue of `buffer` samples (the controller
