@@ -249,6 +249,23 @@ fn goals_gains_rejections_and_the_monitor() {
                 ],
                 "not_positive_definite",
             ),
+            (
+                vec![
+                    "load",
+                    "--mass",
+                    "1.0",
+                    "--inertia",
+                    "0.1",
+                    "0",
+                    "0",
+                    "0.1",
+                    "0",
+                    "0.3",
+                ],
+                "not_physical",
+            ),
+            (vec!["load", "--mass", "5.0"], "above_payload"),
+            (vec!["load", "--mass", "-1.0"], "negative_mass"),
         ] {
             let out = hcc(&args, &ns, &prefix, dir.path(), "bad");
             assert!(!out.status.success(), "{args:?}: {}", out.log());
@@ -258,6 +275,37 @@ fn goals_gains_rejections_and_the_monitor() {
         let s = sample(&ns, &prefix, dir.path());
         let goal: Vec<f64> = serde_json::from_value(s["levels"][0]["goal"].clone()).unwrap();
         assert_eq!(goal, [0.55, 0.10, 0.30], "targets unchanged");
+
+        // The hand takes a load and the controller is told: the pair's plant
+        // does not carry it, so the TCP moves by what the model now
+        // compensates (K⁻¹ m g, a few mm) — the load is in the law.
+        let out = hcc(
+            &[
+                "load", "--mass", "0.5", "--com", "0", "0", "0.1", "--ramp", "0.1",
+            ],
+            &ns,
+            &prefix,
+            dir.path(),
+            "load",
+        );
+        assert!(out.status.success(), "{}", out.log());
+        assert!(out.stdout.contains("accepted"), "{}", out.stdout);
+        std::thread::sleep(Duration::from_millis(1000));
+        let moved = error_norm(&sample(&ns, &prefix, dir.path()), 0);
+        let out = hcc(&["load", "--mass", "0"], &ns, &prefix, dir.path(), "unload");
+        assert!(out.status.success(), "{}", out.log());
+        let back = loop {
+            let e = error_norm(&sample(&ns, &prefix, dir.path()), 0);
+            if e < 1e-3 || t0.elapsed() > Duration::from_secs(120) {
+                break e;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        println!(
+            "a 0.5 kg load told but not carried moves the TCP {moved:.2e} m; unloaded, {back:.2e} m"
+        );
+        assert!(moved > 1e-3, "{moved:e} m: the load is not in the law");
+        assert!(back < 1e-3, "{back:e} m");
 
         // A stiffness change shows in the monitor. The level by its name and
         // no --dim: both from the controller's scenario service.

@@ -13,6 +13,7 @@ mod daemons;
 mod derive;
 mod follow_cmd;
 mod jitter;
+mod load_cmd;
 mod model_cmd;
 mod monitor_cmd;
 mod plot_cmd;
@@ -63,6 +64,9 @@ enum Command {
     Goal(setpoint_cmd::GoalArgs),
     /// Set a level's stiffness and/or damping on a running controller.
     Gains(setpoint_cmd::GainsArgs),
+    /// Tell a running controller the load the robot's hand holds from now on
+    /// (mass, centre of mass and inertia at the tip frame).
+    Load(load_cmd::LoadArgs),
     /// Send a path file to a running controller's level while it runs, and
     /// follow its progress (the format of a scenario's `trajectory`).
     Follow(follow_cmd::FollowArgs),
@@ -91,6 +95,7 @@ fn main() -> ExitCode {
         Command::Goal(args) => setpoint_cmd::goal(args),
         Command::Gains(args) => setpoint_cmd::gains(args),
         Command::Follow(args) => follow_cmd::follow(args),
+        Command::Load(args) => load_cmd::load(args),
         Command::Monitor(args) => monitor_cmd::monitor(args),
         Command::View(args) => hcc_view::run(args),
         Command::Bridge(args) => hcc_bridge::run(args),

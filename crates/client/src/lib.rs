@@ -62,6 +62,12 @@ pub enum ClientError {
     /// The controller refused the path's knots.
     #[error("path refused by the controller: {0}")]
     PathRejected(hcc_msgs::PathRejection),
+    /// The load failed the checks before it was sent (nothing was sent).
+    #[error("load not sent: {0}")]
+    LoadInvalid(hcc_msgs::LoadRefusal),
+    /// The controller refused the load.
+    #[error("load refused by the controller: {0}")]
+    LoadRejected(hcc_msgs::LoadRejection),
     /// The controller answered with a code this client does not know.
     #[error("the controller answered with unknown code {0}")]
     UnknownCode(u32),
@@ -76,6 +82,8 @@ fn rejection(code: u32) -> ClientError {
         ClientError::Rejected(r)
     } else if let Some(r) = hcc_msgs::PathRejection::from_code(code) {
         ClientError::PathRejected(r)
+    } else if let Some(r) = hcc_msgs::LoadRejection::from_code(code) {
+        ClientError::LoadRejected(r)
     } else {
         ClientError::UnknownCode(code)
     }
@@ -86,6 +94,7 @@ pub struct Client {
     _node: IpcNode,
     publisher: SetpointPublisher,
     paths: PathPublisher,
+    loads: hcc_msgs::ipc::LoadPublisher,
     telemetry: TelemetrySubscriber,
     client_id: u64,
     seq: u64,
@@ -106,6 +115,7 @@ impl Client {
         let services = Services::open(&node, &names)?;
         let publisher = services.setpoint_publisher()?;
         let paths = services.path_publisher()?;
+        let loads = services.load_publisher()?;
         let telemetry = services.telemetry_subscriber(TELEMETRY_BUFFER)?;
         // Unique among the clients of one host: the process id and the clock.
         let client_id = (pid << 32) ^ (hcc_msgs::monotonic_now_ns() & 0xffff_ffff);
@@ -113,6 +123,7 @@ impl Client {
             _node: node,
             publisher,
             paths,
+            loads,
             telemetry,
             client_id,
             seq: 0,
@@ -198,6 +209,26 @@ impl Client {
             }
         }
         self.latest.as_deref()
+    }
+
+    /// Tells the controller the load the robot's hand holds from now on
+    /// (docs/load.md; `message` with this client's id and next sequence
+    /// number filled in) and waits for the answer: accepted, or the reason.
+    pub fn set_load(
+        &mut self,
+        mut message: hcc_msgs::LoadSetpoint,
+        timeout: Duration,
+    ) -> Result<SetpointAnswer, ClientError> {
+        message.client_id = self.client_id;
+        message.validate().map_err(ClientError::LoadInvalid)?;
+        self.seq += 1;
+        message.header.seq = self.seq;
+        message.header.stamp_ns = hcc_msgs::monotonic_now_ns();
+        self.loads
+            .send_copy(message)
+            .map_err(|e| ClientError::Send(format!("{e:?}")))?;
+        let seq = self.seq;
+        self.wait_until_accepted(seq, timeout)
     }
 
     /// Waits for the controller's answer to this client's setpoint `seq`:

@@ -23,9 +23,9 @@ fn load(robot: &str, extra: &str) -> Result<Scenario, hcc_config::ConfigError> {
 fn a_load_in_the_scenario_is_carried_by_the_model() {
     let bare = load("", "").unwrap();
     assert_eq!(bare.model.load.mass, 0.0);
-    assert_eq!(bare.model.payload_limit, f64::INFINITY);
+    assert_eq!(bare.model.payload_limit, 3.0, "the Panda's rated payload");
     let loaded = load(
-        "payload_kg = 3.0\n",
+        "",
         "\n[robot.load]\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\ninertia = [0.001, 0.0, 0.0, 0.001, 0.0, 0.001]\n",
     )
     .unwrap();
@@ -44,7 +44,7 @@ fn a_load_that_is_not_physical_or_too_heavy_is_refused_at_its_field() {
             .unwrap_err()
             .to_string()
     };
-    let e = refused("payload_kg = 0.5\n", "mass = 1.0\n");
+    let e = refused("", "mass = 4.0\n");
     assert!(
         e.contains("robot.load.mass") && e.contains("payload"),
         "{e}"
@@ -61,8 +61,18 @@ fn a_load_that_is_not_physical_or_too_heavy_is_refused_at_its_field() {
     );
     let e = refused("", "mass = 1.0\ncom = [0.0, 0.1]\n");
     assert!(e.contains("robot.load.com") && e.contains("3"), "{e}");
-    let e = refused("payload_kg = -2.0\n", "mass = 1.0\n");
-    assert!(e.contains("robot.payload_kg"), "{e}");
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "payload_kg = 3.0",
+        "payload_kg = -2.0",
+        1,
+    );
+    let e = Scenario::from_toml_str(&text, &path)
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("robot.payload_kg") && e.contains("≥ 0"), "{e}");
     let e = refused("", "mass = 1.0\ncolour = 3\n");
     assert!(e.contains("colour"), "{e}");
 }
@@ -70,7 +80,7 @@ fn a_load_that_is_not_physical_or_too_heavy_is_refused_at_its_field() {
 #[test]
 fn loads_the_plant_takes_at_a_time_are_checked_and_sorted() {
     let s = load(
-        "payload_kg = 3.0\n",
+        "",
         "\n[[simulation.load]]\nstart_s = 2.0\nmass = 0.0\n\n[[simulation.load]]\nstart_s = 1.0\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\n",
     )
     .unwrap();
@@ -81,12 +91,9 @@ fn loads_the_plant_takes_at_a_time_are_checked_and_sorted() {
     // The controller's model is not told.
     assert_eq!(s.model.load.mass, 0.0);
     let refused = |section: &str| {
-        load(
-            "payload_kg = 3.0\n",
-            &format!("\n[[simulation.load]]\n{section}"),
-        )
-        .unwrap_err()
-        .to_string()
+        load("", &format!("\n[[simulation.load]]\n{section}"))
+            .unwrap_err()
+            .to_string()
     };
     let e = refused("start_s = -1.0\nmass = 1.0\n");
     assert!(e.contains("simulation.load[0].start_s"), "{e}");
