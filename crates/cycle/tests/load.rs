@@ -109,12 +109,8 @@ fn a_load_message_is_checked_answered_and_ramped_in() {
     use hcc_msgs::LoadSetpoint;
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let text = std::fs::read_to_string(&path).unwrap().replacen(
-        "[robot]\n",
-        "[robot]\npayload_kg = 3.0\n",
-        1,
-    );
-    let sc = Scenario::from_toml_str(&text, &path).unwrap();
+    // The shipped scenario: the Panda's payload limit of 3 kg.
+    let sc = Scenario::load(&path).unwrap();
     let c = hcc_cycle::controller_for(&sc).unwrap();
     let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
     let answer = |d: &ControlCycle| {
