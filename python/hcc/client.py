@@ -32,6 +32,8 @@ from .msgs import (
     PATH_EXTEND,
     PATH_NEW,
     JointState,
+    LoadRejection,
+    LoadSetpoint,
     PathKnots,
     PathRejection,
     SetpointRejection,
@@ -56,9 +58,11 @@ class SetpointRejected(SetpointError):
     def __init__(self, answer: SetpointAnswer) -> None:
         rejection = SetpointRejection.from_code(answer.code)
         path = PathRejection.from_code(answer.code)
+        load = LoadRejection.from_code(answer.code)
         what = (
             str(rejection) if rejection is not None
             else str(path) if path is not None
+            else str(load) if load is not None
             else f"unknown code {answer.code}"
         )
         super().__init__(
@@ -66,6 +70,8 @@ class SetpointRejected(SetpointError):
         )
         #: A path's own reason (codes from 201; :attr:`rejection` is None then).
         self.path_rejection: PathRejection | None = path
+        #: A load's own reason (codes from 301; :attr:`rejection` is None then).
+        self.load_rejection: LoadRejection | None = load
         #: The answer code (a :class:`~hcc.msgs.SetpointRejection` value).
         self.code: int = answer.code
         #: The controller's answer.
@@ -142,6 +148,7 @@ class Client:
         self._states = self._services.subscriber("joint_state", buffer)
         self._publisher: Any = None
         self._paths: Any = None
+        self._loads: Any = None
         self._last_telemetry: Telemetry | None = None
         self._last_state: JointState | None = None
         self._client_id = new_client_id() if client_id is None else client_id
@@ -156,10 +163,10 @@ class Client:
 
     def close(self) -> None:
         """Releases the ports and the node."""
-        for port in (self._telemetry, self._states, self._publisher, self._paths):
+        for port in (self._telemetry, self._states, self._publisher, self._paths, self._loads):
             if port is not None:
                 port.delete()
-        self._telemetry = self._states = self._publisher = self._paths = None
+        self._telemetry = self._states = self._publisher = self._paths = self._loads = None
         self._services = None
         self._node = None
 
@@ -385,6 +392,38 @@ class Client:
         except Exception as e:  # iceoryx2 raises its own exception types
             raise ipc.IpcError(f"cannot send the path: {e!r}") from e
         return self._seq
+
+    def set_load(
+        self,
+        mass: float,
+        com: Sequence[float] = (0.0, 0.0, 0.0),
+        inertia: Sequence[float] | None = None,
+        *,
+        ramp_s: float = 0.0,
+        timeout: float = 1.0,
+    ) -> SetpointAnswer:
+        """Tells the controller the load the robot's hand holds from now on
+        (docs/load.md): ``mass`` kg, ``com`` in the tip frame (m), ``inertia``
+        about it (kg·m², ixx ixy ixz iyy iyz izz; None: a point mass), ramped
+        in over ``ramp_s`` (0: the default). Waits for the answer: raises
+        :class:`~hcc.msgs.SetpointError` when the checks before sending
+        refuse it (nothing sent), :class:`SetpointRejected` with
+        :attr:`~SetpointRejected.load_rejection` when the controller does."""
+        msg = LoadSetpoint.of(mass, com, inertia, ramp_s)
+        refusal = msg.check()
+        if refusal is not None:
+            raise SetpointError(refusal, f"load not sent: {refusal}")
+        if self._loads is None:
+            self._loads = self._services.publisher("load")
+        msg.client_id = self._client_id
+        self._seq += 1
+        msg.header.seq = self._seq
+        msg.header.stamp_ns = time.monotonic_ns()
+        try:
+            self._loads.send_copy(msg)
+        except Exception as e:  # iceoryx2 raises its own exception types
+            raise ipc.IpcError(f"cannot send the load: {e!r}") from e
+        return self.wait_until_accepted(self._seq, timeout)
 
     def wait_until_accepted(self, seq: int, timeout: float = 1.0) -> SetpointAnswer:
         """Waits for the controller's answer to this client's setpoint ``seq``

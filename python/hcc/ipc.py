@@ -12,6 +12,7 @@ torque_command    TorqueCommand    1            MAX_COMMAND_SUBSCRIBERS      128
 telemetry         Telemetry        1            MAX_TELEMETRY_SUBSCRIBERS    128
 setpoint          Setpoint         4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
 path              PathKnots        4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
+load              LoadSetpoint     4 (clients)  MAX_SETPOINT_SUBSCRIBERS     128
 state_ready       event            2 notifiers  4 listeners
 command_ready     event            2 notifiers  4 listeners
 scenario          bytes (JSON)     1            MAX_SCENARIO_SUBSCRIBERS     1
@@ -20,7 +21,7 @@ scenario          bytes (JSON)     1            MAX_SCENARIO_SUBSCRIBERS     1
 ``scenario`` keeps its one sample (history 1): the controller publishes the
 scenario it runs once, and a tool that connects later reads it
 (:func:`read_scenario`). The others: history 0, safe overflow (the newest sample wins), publishers discard data
-instead of blocking. ``setpoint`` and ``path`` are the services with several
+instead of blocking. ``setpoint``, ``path`` and ``load`` are the services with several
 publishers: up to :data:`MAX_SETPOINT_PUBLISHERS` clients may command one
 controller at once; the controller reads every queued setpoint and path
 message each cycle.
@@ -38,7 +39,7 @@ from typing import Any
 
 import iceoryx2 as iox2
 
-from .msgs import JointState, PathKnots, Setpoint, Telemetry, TorqueCommand
+from .msgs import JointState, LoadSetpoint, PathKnots, Setpoint, Telemetry, TorqueCommand
 
 #: Prefix of all hcc service names.
 SERVICE_PREFIX: str = "hcc"
@@ -135,6 +136,11 @@ class ServiceNames:
     def path(self) -> str:
         """Publish-subscribe service of :class:`~hcc.msgs.PathKnots` (clients → controller)."""
         return self._name("path")
+
+    @property
+    def load(self) -> str:
+        """Publish-subscribe service of :class:`~hcc.msgs.LoadSetpoint` (clients → controller)."""
+        return self._name("load")
 
     @property
     def state_ready(self) -> str:
@@ -322,6 +328,9 @@ class Services:
         self.path = _pubsub(
             node, names.path, PathKnots, MAX_SETPOINT_SUBSCRIBERS, MAX_SETPOINT_PUBLISHERS
         )
+        self.load = _pubsub(
+            node, names.load, LoadSetpoint, MAX_SETPOINT_SUBSCRIBERS, MAX_SETPOINT_PUBLISHERS
+        )
         self.state_ready = _event(node, names.state_ready)
         self.command_ready = _event(node, names.command_ready)
 
@@ -338,7 +347,7 @@ class Services:
         factory = getattr(self, which)
         limit = (
             f"({which} allows {MAX_SETPOINT_PUBLISHERS} clients at once)"
-            if which in ("setpoint", "path")
+            if which in ("setpoint", "path", "load")
             else "(is another peer publishing in this namespace?)"
         )
         return self._port(

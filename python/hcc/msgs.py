@@ -712,7 +712,9 @@ class SetpointError(MsgError):
     """
 
     def __init__(
-        self, rejection: SetpointRejection | PathRejection | None, message: str | None = None
+        self,
+        rejection: "SetpointRejection | PathRejection | LoadRejection | None",
+        message: str | None = None,
     ) -> None:
         super().__init__(message or f"setpoint not sent: {rejection}")
         #: The rejection (None only for an answer code this schema does not know;
@@ -1176,6 +1178,118 @@ class PathKnots(ctypes.Structure):
         return None
 
 
+_LOAD_REJECTION_TEXT: dict[int, str] = {
+    301: "the load's mass is negative",
+    302: "the load is heavier than the robot's payload limit",
+    303: "the load's inertia is not a physical one (positive semidefinite, triangle inequalities)",
+    304: "the ramp is negative or too long",
+}
+
+#: The ramp of a load whose message gives none, s.
+DEFAULT_LOAD_RAMP_S: float = 0.2
+
+
+class LoadRejection(enum.IntEnum):
+    """Why the controller refused a load (codes from 301, sharing the answer
+    slots with :class:`SetpointRejection` and :class:`PathRejection`; mirror
+    of ``hcc_msgs::LoadRejection``; docs/load.md)."""
+
+    NEGATIVE_MASS = 301
+    ABOVE_PAYLOAD = 302
+    NOT_PHYSICAL = 303
+    BAD_RAMP = 304
+
+    @property
+    def label(self) -> str:
+        """The Rust ``LoadRejection::name()`` (snake_case)."""
+        return self.name.lower()
+
+    @property
+    def reason(self) -> str:
+        """The reason in plain words."""
+        return _LOAD_REJECTION_TEXT[self.value]
+
+    def __str__(self) -> str:
+        return f"{self.label} (code {self.value}): {self.reason}"
+
+    @classmethod
+    def from_code(cls, code: int) -> "LoadRejection | None":
+        """The rejection of an answer code, None for codes that are not a load's."""
+        try:
+            return cls(code)
+        except ValueError:
+            return None
+
+
+class LoadSetpoint(ctypes.Structure):
+    """The load the robot's hand holds from now on (mirror of
+    ``hcc_msgs::LoadSetpoint``; docs/load.md): mass (kg), centre of mass in
+    the tip frame (m), rotational inertia about it in the tip frame's axes
+    (kg·m², ixx ixy ixz iyy iyz izz), and the ramp (s; 0:
+    :data:`DEFAULT_LOAD_RAMP_S`)."""
+
+    _fields_ = [
+        ("header", Header),
+        ("client_id", ctypes.c_uint64),
+        ("mass", ctypes.c_double),
+        ("com", ctypes.c_double * 3),
+        ("inertia", ctypes.c_double * 6),
+        ("ramp_s", ctypes.c_double),
+    ]
+    header: Header
+    client_id: int
+    mass: float
+    ramp_s: float
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name of the Rust type."""
+        return _client_type_name("LoadSetpoint")
+
+    @classmethod
+    def zeroed(cls) -> "LoadSetpoint":
+        """An empty message of the current schema (no load)."""
+        m = cls()
+        m.header = _client_header()
+        return m
+
+    @classmethod
+    def of(
+        cls,
+        mass: float,
+        com: Sequence[float] = (0.0, 0.0, 0.0),
+        inertia: Sequence[float] | None = None,
+        ramp_s: float = 0.0,
+    ) -> "LoadSetpoint":
+        """A load; :class:`MsgError` when ``com`` is not 3 values or
+        ``inertia`` not 6."""
+        com = _floats(com)
+        values = _floats(inertia) if inertia is not None else [0.0] * 6
+        if len(com) != 3 or len(values) != 6:
+            raise MsgError(f"load: {len(com)} values for com (3), {len(values)} for inertia (6)")
+        m = cls.zeroed()
+        m.mass = float(mass)
+        for a, v in enumerate(com):
+            m.com[a] = v
+        for a, v in enumerate(values):
+            m.inertia[a] = v
+        m.ramp_s = float(ramp_s)
+        return m
+
+    def check(self) -> "SetpointRejection | LoadRejection | None":
+        """The model-free checks of ``LoadSetpoint::validate``; None when it passes."""
+        if self.header.schema_version != CLIENT_SCHEMA_VERSION:
+            return SetpointRejection.SCHEMA_MISMATCH
+        values = [self.mass, self.ramp_s, *self.com, *self.inertia]
+        if not all(math.isfinite(v) for v in values):
+            return SetpointRejection.NON_FINITE
+        if self.mass < 0.0:
+            return LoadRejection.NEGATIVE_MASS
+        if not 0.0 <= self.ramp_s <= MAX_TRANSITION_S:
+            return LoadRejection.BAD_RAMP
+        return None
+
+
 #: Every wire type by its Rust name.
 WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "Header": Header,
@@ -1187,4 +1301,5 @@ WIRE_TYPES: dict[str, type[ctypes.Structure]] = {
     "Telemetry": Telemetry,
     "Setpoint": Setpoint,
     "PathKnots": PathKnots,
+    "LoadSetpoint": LoadSetpoint,
 }

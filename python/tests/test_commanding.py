@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from hcc import Client, SetpointError, SetpointRejected, SetpointRejection
+from hcc import Client, LoadRejection, SetpointError, SetpointRejected, SetpointRejection
 
 from hcc import ipc
 from circle import circle_knots, circle_sample
@@ -96,6 +96,28 @@ def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Pat
         assert t.stiffness_diag_list(0) == pytest.approx([400.0, 400.0, 300.0])
         assert t.damping_diag_list(0) == pytest.approx([40.0, 40.0, 35.0])
         assert t.goal_list(0) == pytest.approx(GOAL, abs=1e-12), "targets kept"
+
+        # The load in the hand (docs/load.md): refused with its reason, or
+        # taken; the plant does not carry it, so the TCP moves by the weight
+        # the model now compensates, and comes back when the hand is empty.
+        with pytest.raises(SetpointRejected) as e:
+            client.set_load(5.0, timeout=5.0)
+        assert e.value.load_rejection is LoadRejection.ABOVE_PAYLOAD and "above_payload" in str(e.value)
+        with pytest.raises(SetpointRejected) as e:
+            client.set_load(1.0, inertia=[0.1, 0.0, 0.0, 0.1, 0.0, 0.3], timeout=5.0)
+        assert e.value.load_rejection is LoadRejection.NOT_PHYSICAL
+        with pytest.raises(SetpointError) as e:
+            client.set_load(-1.0)
+        assert e.value.rejection is LoadRejection.NEGATIVE_MASS
+        assert client.set_load(0.5, (0.0, 0.0, 0.1), ramp_s=0.1, timeout=5.0).accepted()
+        time.sleep(1.0)
+        t = client.latest_telemetry()
+        assert t is not None
+        moved = t.error_norm(0)
+        assert client.set_load(0.0, timeout=5.0).accepted()
+        back = client.wait_until_converged(0, 1e-3, timeout=10.0)
+        print(f"set_load: 0.5 kg told but not carried moves the TCP {1e3 * moved:.1f} mm; unloaded {1e3 * back:.3f} mm")
+        assert moved > 1e-3 and back < 1e-3
         assert ctl.poll() is None and plant.poll() is None, "the pair keeps running"
 
 

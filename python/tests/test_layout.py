@@ -80,6 +80,34 @@ def test_path_rejection_codes_names_and_reasons(rust: dict[str, Any]) -> None:
     assert msgs.PathRejection.from_code(200) is None
 
 
+def test_load_rejection_codes_names_and_reasons(rust: dict[str, Any]) -> None:
+    codes = rust["load_rejections"]
+    assert [r["code"] for r in codes] == [r.value for r in msgs.LoadRejection]
+    for r in codes:
+        mine = msgs.LoadRejection(r["code"])
+        assert (mine.label, mine.reason) == (r["name"], r["reason"]), r
+        assert str(mine) == f"{r['name']} (code {r['code']}): {r['reason']}"
+    assert msgs.LoadRejection.from_code(300) is None
+
+
+def test_load_checks_mirror_the_rust_validate() -> None:
+    """The cases of crates/msgs/src/load.rs, through the Python mirror."""
+    ok = msgs.LoadSetpoint.of(1.0, (0.0, 0.0, 0.1))
+    assert ok.check() is None
+    L, S = msgs.LoadRejection, msgs.SetpointRejection
+    for change, expected in [
+        (lambda m: setattr(m, "mass", -1.0), L.NEGATIVE_MASS),
+        (lambda m: setattr(m, "ramp_s", -0.1), L.BAD_RAMP),
+        (lambda m: m.inertia.__setitem__(2, float("nan")), S.NON_FINITE),
+        (lambda m: setattr(m.header, "schema_version", m.header.schema_version + 1), S.SCHEMA_MISMATCH),
+    ]:
+        m = msgs.LoadSetpoint.of(1.0, (0.0, 0.0, 0.1))
+        change(m)
+        assert m.check() is expected
+    with pytest.raises(msgs.MsgError):
+        msgs.LoadSetpoint.of(1.0, (0.0, 0.1))
+
+
 def test_path_knots_checks_mirror_the_rust_validate() -> None:
     """The cases of crates/msgs/src/path.rs, through the Python mirror."""
     def knots() -> msgs.PathKnots:

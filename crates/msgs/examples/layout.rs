@@ -13,14 +13,15 @@ use std::mem::{align_of, offset_of, size_of};
 use hcc_msgs::{
     ANSWER_ACCEPTED, CLIENT_SCHEMA_VERSION, COMMAND_FLAG_GRAVITY_INCLUDED, DRIVER_SCHEMA_VERSION,
     EVENT_COMMAND_PUBLISHED, EVENT_STATE_PUBLISHED, GAIN_DAMPING_FULL, GAIN_LAYOUT_KNOWN,
-    GAIN_STIFFNESS_FULL, Header, JointState, MAX_GAIN_ENTRIES, MAX_JOINTS, MAX_KNOTS_PER_MESSAGE,
-    MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_PATH_COLUMNS, MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS,
-    MAX_TASK_DIM, MAX_TRANSITION_S, PATH_EXTEND, PATH_FLAGS_KNOWN, PATH_NEW, PathKnots,
-    PathRejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN, SETPOINT_GOAL, SETPOINT_STIFFNESS,
-    SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION, STATE_FLAG_DRIVER_POLLS_COMMANDS,
-    STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames, Setpoint, SetpointAnswer,
-    SetpointRejection, TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD,
-    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters, TelemetryTimings, TorqueCommand, ipc,
+    GAIN_STIFFNESS_FULL, Header, JointState, LoadRejection, LoadSetpoint, MAX_GAIN_ENTRIES,
+    MAX_JOINTS, MAX_KNOTS_PER_MESSAGE, MAX_LEVELS, MAX_NAMESPACE_LEN, MAX_PATH_COLUMNS,
+    MAX_PENDING_SETPOINTS, MAX_SETPOINT_CLIENTS, MAX_TASK_DIM, MAX_TRANSITION_S, PATH_EXTEND,
+    PATH_FLAGS_KNOWN, PATH_NEW, PathKnots, PathRejection, SETPOINT_DAMPING, SETPOINT_FIELDS_KNOWN,
+    SETPOINT_GOAL, SETPOINT_STIFFNESS, SETPOINT_VELOCITY, STATE_FLAG_DRIVER_GRAVITY_COMPENSATION,
+    STATE_FLAG_DRIVER_POLLS_COMMANDS, STATE_FLAGS_KNOWN, SYMMETRY_TOLERANCE, ServiceNames,
+    Setpoint, SetpointAnswer, SetpointRejection, TELEMETRY_FLAG_CONTACT,
+    TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryCounters,
+    TelemetryTimings, TorqueCommand, ipc,
 };
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -103,6 +104,10 @@ fn main() {
             fields!(PathKnots: header, client_id, level, flags, columns, count,
                 apply_at_state_seq, t, values, velocity, acceleration),
         ),
+        (
+            "LoadSetpoint",
+            fields!(LoadSetpoint: header, client_id, mass, com, inertia, ramp_s),
+        ),
     ];
     let body: Vec<String> = structs
         .iter()
@@ -115,6 +120,7 @@ fn main() {
         ("telemetry", names.telemetry()),
         ("setpoint", names.setpoint()),
         ("path", names.path()),
+        ("load", names.load()),
         ("state_ready", names.state_ready()),
         ("command_ready", names.command_ready()),
     ]
@@ -188,12 +194,17 @@ fn main() {
         .iter()
         .map(|r| entry((r.code(), r.name(), r.reason())))
         .collect();
+    let load_rejections: Vec<String> = LoadRejection::ALL
+        .iter()
+        .map(|r| entry((r.code(), r.name(), r.reason())))
+        .collect();
     println!(
-        "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"path_rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
+        "{{\n  \"driver_schema_version\": {DRIVER_SCHEMA_VERSION},\n  \"client_schema_version\": {CLIENT_SCHEMA_VERSION},\n  \"max_joints\": {MAX_JOINTS},\n  \"max_levels\": {MAX_LEVELS},\n  \"max_task_dim\": {MAX_TASK_DIM},\n  \"ipc_file_prefix_env\": \"{}\",\n  \"services\": {{{}}},\n  \"settings\": {{{settings}}},\n  \"flags\": {{{flags}}},\n  \"setpoint\": {{{setpoint}}},\n  \"rejections\": [{}],\n  \"path_rejections\": [{}],\n  \"load_rejections\": [{}],\n  \"structs\": {{\n{}\n  }}\n}}",
         ipc::FILE_PREFIX_ENV,
         object(&services),
         rejections.join(", "),
         path_rejections.join(", "),
+        load_rejections.join(", "),
         body.join(",\n")
     );
 }
