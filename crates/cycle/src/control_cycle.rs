@@ -49,18 +49,16 @@
 use hcc_control::Controller;
 use hcc_msgs::ipc::SETPOINT_BUFFER;
 use hcc_msgs::{
-    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, KnotsRefusal, MAX_JOINTS, NO_KNOT,
-    PathKnots, PathRejection, Setpoint, SetpointRejection, TELEMETRY_FLAG_CONTACT,
-    TELEMETRY_FLAG_CONTACT_HOLD, TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings,
-    TorqueCommand, monotonic_now_ns,
+    COMMAND_FLAG_GRAVITY_INCLUDED, CommandMode, JointState, MAX_JOINTS, NO_KNOT, Setpoint,
+    SetpointRejection, TELEMETRY_FLAG_CONTACT, TELEMETRY_FLAG_CONTACT_HOLD,
+    TELEMETRY_FLAG_PEER_LOST, Telemetry, TelemetryTimings, TorqueCommand, monotonic_now_ns,
 };
 
 use crate::contact::ContactWatch;
 use crate::counters::CycleCounters;
 use crate::load_ramp::LoadRamp;
 use crate::output_tank::OutputTank;
-use crate::path_check::PathChecker;
-use crate::path_gate::{PathCheckWorker, PathGate, Turn};
+use crate::path_gate::PathGate;
 use crate::paths::Paths;
 use crate::reaction::ContactReaction;
 use crate::setpoints::SetpointHandler;
@@ -70,6 +68,9 @@ use crate::telemetry;
 use crate::torque_filter::TorqueFilter;
 use crate::velocity_limit::VelocityLimit;
 use crate::wrench::WrenchEstimate;
+
+mod load_messages;
+mod path_messages;
 
 /// What [`ControlCycle::decide`] made of a state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -382,197 +383,6 @@ impl ControlCycle {
         let code = self.setpoints.take(setpoint, &mut self.controller);
         self.setpoints.fill(&mut self.telemetry);
         code
-    }
-
-    /// Takes a client's path knots ([`PathKnots`], docs/tracking.md) in the
-    /// cycle of the last well-formed state: checked against the level,
-    /// starting or extending its path, answered in the client's slot like a
-    /// setpoint. Returns the answer code. Allocation-free.
-    pub fn take_path(&mut self, knots: &PathKnots) -> u32 {
-        let code = self.paths.take(
-            knots,
-            self.clock_seq,
-            &mut self.controller,
-            &mut self.setpoints,
-        );
-        self.setpoints.fill(&mut self.telemetry);
-        code
-    }
-
-    /// [`ControlCycle::take_paths`] in the cycle of `state` (its sequence
-    /// number, when well-formed, times a new path's start as
-    /// [`ControlCycle::take_setpoints`] does): what a replay does with the
-    /// path messages a recording says were taken in a cycle.
-    pub fn take_paths_at(
-        &mut self,
-        state: &JointState,
-        next_knots: impl FnMut() -> Option<PathKnots>,
-    ) {
-        if self.stream.well_formed(state) {
-            self.clock_seq = state.header.seq;
-            if let Some(gate) = self.gate.as_mut() {
-                gate.note_q(state.q());
-            }
-        }
-        self.take_paths(next_knots);
-    }
-
-    /// Takes every path message `next_knots` yields (at most
-    /// [`SETPOINT_BUFFER`]), as [`ControlCycle::take_path`] does, and writes
-    /// the answers into the telemetry once. What the controller daemon calls
-    /// each cycle after [`ControlCycle::take_setpoints`]. Allocation-free.
-    pub fn take_paths(&mut self, mut next_knots: impl FnMut() -> Option<PathKnots>) {
-        if self.gate.is_some() {
-            self.take_paths_checked(next_knots);
-            return;
-        }
-        let mut taken = false;
-        for _ in 0..SETPOINT_BUFFER {
-            let Some(knots) = next_knots() else {
-                break;
-            };
-            self.paths.take(
-                &knots,
-                self.clock_seq,
-                &mut self.controller,
-                &mut self.setpoints,
-            );
-            taken = true;
-        }
-        if taken {
-            self.setpoints.fill(&mut self.telemetry);
-        }
-    }
-
-    /// [`ControlCycle::take_paths`] with the feasibility check (module
-    /// `path_gate`): the verdicts that came in, the new messages handed to
-    /// the worker, then the messages whose turn has come, in arrival order.
-    fn take_paths_checked(&mut self, mut next_knots: impl FnMut() -> Option<PathKnots>) {
-        let Some(gate) = self.gate.as_mut() else {
-            return;
-        };
-        let setpoints = &mut self.setpoints;
-        let core = &mut self.counters.core;
-        let mut answered = false;
-        gate.begin_cycle();
-        for _ in 0..SETPOINT_BUFFER {
-            let Some(knots) = next_knots() else {
-                break;
-            };
-            let prechecked = self.paths.precheck(&knots, setpoints).is_ok();
-            if !gate.submit(&knots, prechecked, |i| setpoints.equilibrium(i)) {
-                let code = (PathRejection::Unchecked.code(), NO_KNOT);
-                setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
-                core.paths_unchecked += 1;
-                answered = true;
-            }
-        }
-        while let Some(turn) = gate.next() {
-            answered = true;
-            match turn {
-                Turn::Take(knots) => {
-                    self.paths
-                        .take(&knots, self.clock_seq, &mut self.controller, setpoints);
-                }
-                Turn::Setpoint(setpoint) => {
-                    setpoints.receive(&setpoint, self.clock_seq, &mut self.controller);
-                }
-                Turn::Refuse(knots, refusal) => {
-                    let code = (refusal.code(), refusal.knot_field());
-                    setpoints.record_answer(knots.client_id, knots.header.seq, knots.level, code);
-                    if refusal.code() == PathRejection::Infeasible.code() {
-                        core.paths_infeasible += 1;
-                    } else {
-                        core.paths_unchecked += 1;
-                    }
-                    // The last answer its client sees in this cycle.
-                    break;
-                }
-            }
-        }
-        if answered {
-            setpoints.fill(&mut self.telemetry);
-        }
-    }
-
-    /// From now on, the path messages [`ControlCycle::take_paths`] takes
-    /// wait for a feasibility check (module `path_gate`): returns the worker
-    /// that checks them, to run on a thread of its own
-    /// ([`PathCheckWorker::run_pending`]). Allocates (start-up only).
-    pub fn check_paths_at_run_time(&mut self) -> PathCheckWorker {
-        let checker = PathChecker::new(
-            &self.controller,
-            self.path_knots,
-            crate::feasibility::ROLLOUT_STEP_S,
-        );
-        let timeout_cycles = (self.path_check_timeout_s / self.period_s).ceil() as u64;
-        let (gate, worker) = PathGate::new(checker, timeout_cycles);
-        self.gate = Some(gate);
-        worker
-    }
-
-    /// Refuses a client's path message as `refusal` without taking it: what
-    /// a replay does with a message the recording says the feasibility
-    /// check refused.
-    pub fn refuse_path(&mut self, knots: &PathKnots, refusal: KnotsRefusal) {
-        let code = (refusal.code(), refusal.knot_field());
-        self.setpoints
-            .record_answer(knots.client_id, knots.header.seq, knots.level, code);
-        self.setpoints.fill(&mut self.telemetry);
-    }
-
-    /// Takes a client's load message ([`hcc_msgs::LoadSetpoint`],
-    /// docs/load.md): checked (the message, then the physics and the payload
-    /// limit), ramped in ([`ControlCycle::set_load`]) and answered in the
-    /// client's slot like a setpoint. Returns the answer code.
-    /// Allocation-free.
-    pub fn take_load(&mut self, message: &hcc_msgs::LoadSetpoint) -> u32 {
-        let code = match self.load_of(message) {
-            Ok(load) => match self.set_load(&load, message.ramp()) {
-                Ok(()) => hcc_msgs::ANSWER_ACCEPTED,
-                Err(e) => load_rejection(&e).code(),
-            },
-            Err(r) => r.code(),
-        };
-        let (client, seq) = (message.client_id, message.header.seq);
-        self.setpoints
-            .record_answer(client, seq, 0, (code, NO_KNOT));
-        self.setpoints.fill(&mut self.telemetry);
-        code
-    }
-
-    fn load_of(
-        &self,
-        m: &hcc_msgs::LoadSetpoint,
-    ) -> Result<hcc_model::Load, hcc_msgs::LoadRefusal> {
-        m.validate()?;
-        let i = &m.inertia;
-        Ok(hcc_model::Load {
-            mass: m.mass,
-            com: nalgebra::Vector3::from(m.com),
-            inertia: nalgebra::Matrix3::new(i[0], i[1], i[2], i[1], i[3], i[4], i[2], i[4], i[5]),
-        })
-    }
-
-    /// The tip carries `load` from now on: the controller's model takes it
-    /// over `ramp_s` s (module `load_ramp`), the contact detection quiet
-    /// meanwhile. Refused when it is not a physical load or heavier than the
-    /// model's payload limit. Allocation-free.
-    pub fn set_load(
-        &mut self,
-        load: &hcc_model::Load,
-        ramp_s: f64,
-    ) -> Result<(), hcc_model::LoadError> {
-        load.check(self.controller.model().payload_limit)?;
-        let from = self.controller.model().load;
-        self.load_ramp.start(from, *load, ramp_s);
-        Ok(())
-    }
-
-    /// Path messages (and setpoints behind them) waiting for their
-    /// feasibility check.
-    pub fn paths_in_check(&self) -> usize {
-        self.gate.as_ref().map_or(0, PathGate::len)
     }
 
     /// Setpoints waiting for their state.
@@ -938,17 +748,5 @@ impl ControlCycle {
             telemetry::write_law_terms(t, self.controller.output(), self.gravity_compensation);
             t.h += self.output_tank.energy_at_sample();
         }
-    }
-}
-
-/// The answer to a load the model refused.
-fn load_rejection(e: &hcc_model::LoadError) -> hcc_msgs::LoadRefusal {
-    use hcc_model::LoadError as E;
-    use hcc_msgs::LoadRejection as R;
-    match e {
-        E::NonFinite => SetpointRejection::NonFinite.into(),
-        E::NegativeMass(_) => R::NegativeMass.into(),
-        E::AbovePayload { .. } => R::AbovePayload.into(),
-        E::NotSymmetric | E::Inertia(_) => R::NotPhysical.into(),
     }
 }
