@@ -3,6 +3,8 @@
 //! pose without calling the load a collision, and the torque grows within
 //! the filter's rate.
 
+mod common;
+
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -68,17 +70,6 @@ fn run(announce: Option<f64>) -> Run {
     out
 }
 
-fn largest_step(tau: &[Vec<f64>]) -> f64 {
-    tau.windows(2)
-        .map(|w| {
-            w[0].iter()
-                .zip(&w[1])
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max)
-}
-
 #[test]
 fn a_load_announced_as_it_is_taken_is_held_without_a_contact() {
     let unannounced = run(None);
@@ -87,7 +78,7 @@ fn a_load_announced_as_it_is_taken_is_held_without_a_contact() {
     let flagged = unannounced.contact.iter().position(|c| *c);
     let after_1s = announced.err[1000..].iter().fold(0.0_f64, |m, e| m.max(*e));
     let worst = announced.err.iter().fold(0.0_f64, |m, e| m.max(*e));
-    let step = largest_step(&announced.tau);
+    let step = common::largest_torque_step(&announced.tau);
     println!(
         "unannounced: contact flagged {flagged:?} cycles after the load, the TCP sags {sag:.2e} m; \
          announced over 0.1 s: no contact {}, the TCP at most {worst:.2e} m off, {after_1s:.2e} m from \

@@ -3,6 +3,8 @@
 //! starts from where the path is (no jump of the equilibrium), the path
 //! stops driving the level, and the level ends at the setpoint's goal.
 
+mod common;
+
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -224,13 +226,18 @@ impl Sent {
 
     /// The largest change of a joint torque from one cycle to the next, N·m.
     fn largest_torque_step(&self) -> f64 {
-        self.tau
-            .windows(2)
-            .map(|w| {
-                w[0].iter()
-                    .zip(&w[1])
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max)
+        common::largest_torque_step(&self.tau)
+    }
+
+    /// How far the desired values of the first `cycles` cycles are off the
+    /// circle in its plane, m.
+    fn off_circle(&self, cycles: usize) -> f64 {
+        self.desired[..cycles]
+            .iter()
+            .enumerate()
+            .map(|(k, x)| {
+                let c = circle(self.start, k as f64 * 1e-3);
+                ((x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt()
             })
             .fold(0.0_f64, f64::max)
     }
@@ -269,14 +276,7 @@ fn a_circle_sent_at_run_time_is_tracked_within_a_millimetre() {
     assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
     let from = 2000; // 2 s after the path began
     let worst = s.err[from..].iter().fold(0.0_f64, |m, e| m.max(*e));
-    let off_circle = s.desired[..4900]
-        .iter()
-        .enumerate()
-        .map(|(k, x)| {
-            let c = circle(s.start, k as f64 * 1e-3);
-            ((x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt()
-        })
-        .fold(0.0_f64, f64::max);
+    let off_circle = s.off_circle(4900);
     println!(
         "run-time circle: largest TCP error to the path from 2 s {worst:.3e} m; the path off the \
          circle by at most {off_circle:.3e} m (knots every 20 ms)"
@@ -443,14 +443,7 @@ fn a_device_s_samples_are_tracked_and_a_stream_that_stops_rests_on_its_last() {
     let s = stream_circle_samples(3.0, 5.0, false);
     assert!(s.codes.iter().all(|&c| c == 0), "answers {:?}", s.codes);
     let worst = s.err[1000..2900].iter().fold(0.0_f64, |m, e| m.max(*e));
-    let off_circle = s.desired[..2990]
-        .iter()
-        .enumerate()
-        .map(|(k, x)| {
-            let c = circle(s.start, k as f64 * 1e-3);
-            ((x[1] - c[1]).powi(2) + (x[2] - c[2]).powi(2)).sqrt()
-        })
-        .fold(0.0_f64, f64::max);
+    let off_circle = s.off_circle(2990);
     assert_eq!(s.stopped, 1);
     let last = circle(s.start, 3.0);
     let end = s.desired[s.desired.len() - 1];
