@@ -53,7 +53,10 @@ fn prefixed_files(prefix: &str) -> Vec<(PathBuf, u32, u32)> {
             return;
         };
         for e in entries.flatten() {
-            let meta = e.metadata().unwrap();
+            // Another test's process may remove its files while this walks: skip what is gone.
+            let Ok(meta) = e.metadata() else {
+                continue;
+            };
             if e.file_name().to_string_lossy().starts_with(prefix) {
                 out.push((e.path(), meta.mode() & 0o7777, meta.uid()));
             }
