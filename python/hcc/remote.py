@@ -2,7 +2,8 @@
 
 ``hcc bridge`` (a process beside the controller) publishes a namespace's
 joint states, torque commands and telemetry on Zenoh in the wire format of
-ROS 2's ``rmw_zenoh`` and takes goals on one topic per level.
+ROS 2's ``rmw_zenoh`` and takes goals and paths on topics per level and the
+load in the hand on one topic (:meth:`Client.follow`, :meth:`Client.set_load`).
 :class:`Client` here reads those topics and sends goals with the surface of
 :class:`hcc.Client` (which needs the controller's shared memory, i.e. the
 same host): :meth:`Client.telemetry`, :meth:`Client.joint_states`,
@@ -62,6 +63,11 @@ MULTI_DOF_JOINT_TRAJECTORY = ("trajectory_msgs/msg/MultiDOFJointTrajectory",
                               "RIHS01_3a18fd095292a65cfde8833c72985a30af981f3ec44494655c6267262b443a4a")
 #: The types of the levels' path topics (joint levels; Cartesian levels).
 PATH_TYPES = (JOINT_TRAJECTORY, MULTI_DOF_JOINT_TRAJECTORY)
+#: The load topic's type (``/<ns>/load``, docs/load.md).
+INERTIA_STAMPED = ("geometry_msgs/msg/InertiaStamped",
+                   "RIHS01_766be45976252babf7f9d8ac4ae7c912a7ceccf71035622529f27518b695aa09")
+#: The level of a load's :class:`RemoteAnswer` (no level's index).
+LOAD_LEVEL = 0xFFFF_FFFF
 
 #: Codes of the bridge's own refusals (RemoteAnswer.code).
 REFUSED_READ_ONLY = 100
@@ -279,6 +285,26 @@ def encode_trajectory(
     return bytes(w.buf)
 
 
+def encode_load(
+    mass: float,
+    com: Sequence[float] = (0.0, 0.0, 0.0),
+    inertia: Sequence[float] | None = None,
+    stamp_ns: int = 0,
+    frame_id: str = "",
+) -> bytes:
+    """A ``geometry_msgs/msg/InertiaStamped`` telling the load in the hand
+    (docs/load.md): ``mass`` kg, ``com`` in the tip frame (m), ``inertia``
+    about it (kg·m², ixx ixy ixz iyy iyz izz; None: a point mass);
+    ``frame_id`` empty or the robot's tip link."""
+    i = [0.0] * 6 if inertia is None else [float(x) for x in inertia]
+    if len(com) != 3 or len(i) != 6:
+        raise ValueError("a load is a mass, a centre of mass x y z and ixx ixy ixz iyy iyz izz")
+    w = CdrWriter().header(stamp_ns, frame_id)
+    for x in (float(mass), *(float(c) for c in com), *i):
+        w.f64(x)
+    return bytes(w.buf)
+
+
 def attachment(seq: int, stamp_ns: int, gid: bytes) -> bytes:
     """rmw_zenoh's attachment: int64 sequence number, int64 source
     timestamp, the GID as a LEB128 length (16) and 16 bytes."""
@@ -480,7 +506,9 @@ class GoalRefused(Exception):
     message, controller unreachable)."""
 
     def __init__(self, answer: RemoteAnswer) -> None:
-        super().__init__(f"goal {answer.source_seq} for level {answer.level} refused: "
+        what = ("load" if answer.level == LOAD_LEVEL
+                else f"goal for level {answer.level}")
+        super().__init__(f"{what} (message {answer.source_seq}) refused: "
                          f"{answer.reason} (code {answer.code})")
         self.answer = answer
         self.code = answer.code
@@ -717,6 +745,31 @@ class Client:
         now = time.time_ns()
         pub.put(encode_trajectory(ty, times, points, joint_names, now, velocities, accelerations),
                 attachment=attachment(self._seq, now, gid))
+        self._sent[self._seq] = gid
+        return self._seq
+
+    def set_load(
+        self,
+        mass: float,
+        com: Sequence[float] = (0.0, 0.0, 0.0),
+        inertia: Sequence[float] | None = None,
+        timeout: float = 2.0,
+    ) -> int:
+        """Tells the controller the load the robot's hand holds from now on,
+        on the load topic (as :meth:`hcc.Client.set_load`; the ramp is the
+        bridge's ``--load-ramp``). Returns the sequence number for
+        :meth:`wait_until_accepted`; the answer's level is :data:`LOAD_LEVEL`."""
+        key = "load"
+        if key not in self._publishers:
+            topic = f"/{self.namespace}/load"
+            ty = self._goal_type(topic, timeout, (INERTIA_STAMPED,))
+            self._tokens.append(self._token("MP", (topic, ty)))
+            pub = self._session.declare_publisher(topic_key(self.domain, topic, ty))
+            self._publishers[key] = (pub, os.urandom(16), ty)
+        pub, gid, _ = self._publishers[key]
+        self._seq += 1
+        now = time.time_ns()
+        pub.put(encode_load(mass, com, inertia, now), attachment=attachment(self._seq, now, gid))
         self._sent[self._seq] = gid
         return self._seq
 

@@ -12,6 +12,10 @@ operator station). Checked:
   reaches it; one outside the workspace is rejected by the controller with
   its reason; a flood of remote goals is capped (counted) while a local
   client's goal is still accepted;
+* the load in the hand from a ROS 2-style peer (``InertiaStamped``): a
+  non-physical one refused with the controller's code, a point mass taken
+  with the bridge's ramp, and the TCP moves by the weight told but not
+  carried, and comes back when the hand is told empty;
 * killing the bridge (SIGKILL) leaves the control loop alone (it keeps
   running, no invalid state, no sequence error; misses, stale timeouts and
   peer losses are printed beside those of the second before), and a
@@ -28,7 +32,8 @@ import time
 import pytest
 
 from hcc import Client
-from hcc.remote import REFUSED_READ_ONLY, Client as RemoteClient, GoalRefused, rpy_to_quaternion
+from hcc import LoadRejection
+from hcc.remote import LOAD_LEVEL, REFUSED_READ_ONLY, Client as RemoteClient, GoalRefused, rpy_to_quaternion
 
 from bridge_procs import bridge, router, wait_for, zenoh_config
 from circle import circle_sample
@@ -227,3 +232,44 @@ def test_a_ros_trajectory_through_the_bridge_is_followed(tmp_path: pathlib.Path)
                     worst = max(worst, math.hypot(*t.task_error_list(0)[:3]))
             print(f"ROS trajectory through the bridge: largest TCP error from 3 s {worst:.3e} m")
             assert 0.0 < worst < 1e-3
+
+
+def test_a_load_through_the_bridge_is_checked_and_taken(tmp_path: pathlib.Path) -> None:
+    """The load topic (docs/load.md): a ROS 2-style peer tells the hand's
+    load as a ``geometry_msgs/msg/InertiaStamped``; the controller refuses a
+    non-physical inertia with its code and takes a point mass, ramped over
+    the bridge's ``--load-ramp``. The plant does not carry it, so the TCP
+    moves by the weight the model now compensates, and comes back when the
+    hand is told empty."""
+    with (
+        router(tmp_path) as port,
+        sim_pair(SCENARIO, tmp_path, duration=120.0) as (ns, prefix, ctl, plant),
+        Client(ns, file_prefix=prefix) as local,
+    ):
+        config = zenoh_config(tmp_path, port)
+        with (
+            bridge(ns, prefix, SCENARIO, config, tmp_path / "bridge.log", "--allow-setpoints",
+                   "--load-ramp", "0.1"),
+            remote(port, ns) as arm,
+        ):
+            wait_remote_telemetry(arm)
+            arm.wait_until_converged(0, 1e-3, timeout=30.0)
+            # ixx + iyy < izz: no body has it.
+            seq = arm.set_load(1.0, inertia=[0.1, 0.0, 0.0, 0.1, 0.0, 0.3])
+            with pytest.raises(GoalRefused) as e:
+                arm.wait_until_accepted(seq, timeout=5.0)
+            assert e.value.code == LoadRejection.NOT_PHYSICAL, e.value
+            assert e.value.answer.level == LOAD_LEVEL and "load" in str(e.value)
+            seq = arm.set_load(0.5, (0.0, 0.0, 0.1))
+            answer = arm.wait_until_accepted(seq, timeout=5.0)
+            assert answer.level == LOAD_LEVEL and answer.duration_s == 0.1, answer
+            time.sleep(1.0)
+            t = local.latest_telemetry()
+            assert t is not None
+            moved = t.error_norm(0)
+            answer = arm.wait_until_accepted(arm.set_load(0.0), timeout=5.0)
+            back = local.wait_until_converged(0, 1e-3, timeout=10.0)
+            print(f"load through the bridge: 0.5 kg told, not carried, moves the TCP {1e3 * moved:.1f} mm; "
+                  f"unloaded {1e3 * back:.3f} mm")
+            assert moved > 1e-3 and back < 1e-3
+            assert ctl.poll() is None and plant.poll() is None

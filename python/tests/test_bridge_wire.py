@@ -183,7 +183,7 @@ def check_tokens(session: zenoh.Session, ns: str, ts: Any) -> None:
     keys = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=5.0)
             if r.ok is not None]
     mine = [k.split("/") for k in keys if k.split("/")[7:9] == [f"%{ns}", "hcc_bridge"]]
-    assert len(mine) == 1 + 3 + 3 + 3, keys
+    assert len(mine) == 1 + 3 + 3 + 3 + 1, keys
     assert sum(p[5] == "NN" and len(p) == 9 and p[6] == "%" for p in mine) == 1
     topics = {(p[5], p[9], p[10], p[11], p[12]) for p in mine if len(p) == 13}
     goal = unique_ros_names(["TCP position", "TCP orientation", "posture"])
@@ -198,6 +198,7 @@ def check_tokens(session: zenoh.Session, ns: str, ts: Any) -> None:
         ("MS", "tcp_position/path", "trajectory_msgs/msg/MultiDOFJointTrajectory"),
         ("MS", "tcp_orientation/path", "trajectory_msgs/msg/MultiDOFJointTrajectory"),
         ("MS", "posture/path", "trajectory_msgs/msg/JointTrajectory"),
+        ("MS", "load", "geometry_msgs/msg/InertiaStamped"),
     }
     assert topics == {(kind, f"%{ns}%{name}".replace("/", "%"), dds(ty), ts.hash_rihs01(ty), "::,10:,:,:,,")
                       for kind, name, ty in want}
@@ -274,7 +275,8 @@ def test_remote_goal_messages_are_ros_messages() -> None:
                            "std_msgs/msg/Float64MultiArray")
     assert m.data.tolist() == [0.1, -0.2, 0.3] and m.layout.data_offset == 0
     # Types and hashes of hcc.remote are ROS 2's.
-    for ty in (*remote.GOAL_TYPES, *remote.PATH_TYPES, remote.JOINT_STATE, remote.TELEMETRY):
+    for ty in (*remote.GOAL_TYPES, *remote.PATH_TYPES, remote.INERTIA_STAMPED, remote.JOINT_STATE,
+               remote.TELEMETRY):
         assert ts.hash_rihs01(ty[0]) == ty[1], ty[0]
     # The path messages decode with rosbags too.
     m = ts.deserialize_cdr(remote.encode_trajectory(remote.JOINT_TRAJECTORY, [0.0, 1.5], [[0.1, 0.2], [0.3, 0.4]],
@@ -288,3 +290,9 @@ def test_remote_goal_messages_are_ros_messages() -> None:
     assert (tf.translation.x, tf.rotation.w, m.points[0].time_from_start.nanosec) == (0.5, 1.0, 250_000_000)
     att = remote.attachment(5, stamp, bytes(range(16)))
     assert remote.read_attachment(att) == (5, stamp, bytes(range(16))) and len(att) == 33
+    # The load message decodes with rosbags too, field for field.
+    m = ts.deserialize_cdr(remote.encode_load(1.5, (0.01, -0.02, 0.1), (4e-3, 1e-4, 2e-4, 5e-3, 3e-4, 6e-3), stamp,
+                                              "tcp"), "geometry_msgs/msg/InertiaStamped")
+    i = m.inertia
+    assert m.header.frame_id == "tcp" and (i.m, i.com.x, i.com.y, i.com.z) == (1.5, 0.01, -0.02, 0.1)
+    assert (i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz) == (4e-3, 1e-4, 2e-4, 5e-3, 3e-4, 6e-3)

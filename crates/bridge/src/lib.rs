@@ -15,6 +15,8 @@
 //! | `/<ns>/torque_command`   | `sensor_msgs/msg/JointState`      | names, effort = the commanded τ |
 //! | `/<ns>/telemetry`        | `hcc_msgs/msg/Telemetry`          | levels (errors, goals, gains, S_i), P_μ, counters, answers |
 //! | `/<ns>/<level>/goal`     | PoseStamped, PointStamped, QuaternionStamped or Float64MultiArray ([`goal`]) | a remote goal (subscribed) |
+//! | `/<ns>/<level>/path`     | JointTrajectory or MultiDOFJointTrajectory ([`trajectory`]) | a remote path (subscribed) |
+//! | `/<ns>/load`             | `geometry_msgs/msg/InertiaStamped` ([`load`]) | the load in the hand (subscribed) |
 //!
 //! The real-time loops never wait for the bridge: its subscribers drain
 //! the queues every millisecond, count what they lost, decimate to `--rate`
@@ -37,6 +39,7 @@ pub mod cdr;
 pub mod counters;
 pub mod goal;
 pub mod ipc_side;
+pub mod load;
 pub mod names;
 pub mod rate;
 pub mod ros;

@@ -19,8 +19,8 @@ use crate::ipc_side::{IpcReader, Sample};
 use crate::names;
 use crate::rate::RateLimiter;
 use crate::ros::{self, ClockMap, RemoteAnswer, TelemetryExtras};
-use crate::trajectory;
 use crate::zenoh_side::{Graph, RosPublisher, RosSubscription, zenoh_config};
+use crate::{load, trajectory};
 
 /// Highest `--rate`: the control rate.
 pub const MAX_RATE_HZ: f64 = 1000.0;
@@ -75,6 +75,10 @@ pub struct Args {
     /// speed limit allows).
     #[arg(long, default_value_t = 0.0)]
     pub goal_duration: f64,
+    /// Ramp of a remote load (`/<ns>/load`), s (0: the controller's
+    /// default, 0.2 s).
+    #[arg(long, default_value_t = 0.0)]
+    pub load_ramp: f64,
     /// iceoryx2 file prefix of the daemons (default: HCC_IPC_FILE_PREFIX, else iceoryx2's).
     #[arg(long)]
     pub file_prefix: Option<String>,
@@ -97,6 +101,13 @@ impl Args {
         }
         if !(self.goal_duration.is_finite() && self.goal_duration >= 0.0) {
             bail!("--goal-duration must be a non-negative number of s");
+        }
+        let max = hcc_msgs::MAX_TRANSITION_S;
+        if !(self.load_ramp.is_finite() && (0.0..=max).contains(&self.load_ramp)) {
+            bail!(
+                "--load-ramp must be in [0, {max}] s, not {}",
+                self.load_ramp
+            );
         }
         if let Some(d) = self.duration
             && !(d.is_finite() && d > 0.0)
@@ -140,13 +151,23 @@ fn admit<'a>(
     Ok(client)
 }
 
-/// A remote goal (or path, on a level's path topic) as the Zenoh callback
-/// hands it on.
+/// The topic a remote message came on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Topic {
+    /// A level's goal topic.
+    Goal,
+    /// A level's path topic (trajectory.rs).
+    Path,
+    /// The load topic (load.rs); no level.
+    Load,
+}
+
+/// A remote goal, path or load as the Zenoh callback hands it on.
 struct RemoteGoal {
     level: usize,
     payload: Vec<u8>,
     attachment: Option<Attachment>,
-    path: bool,
+    topic: Topic,
 }
 
 /// A forwarded goal waiting for the controller's answer.
@@ -178,9 +199,12 @@ struct Goals {
     joints: Vec<Vec<String>>,
     equilibrium: Vec<Vec<f64>>,
     root_link: String,
+    /// The robot's tip link: the frame of a remote load.
+    tip_link: String,
     client: Option<Client>,
     limiter: RateLimiter,
     duration_s: f64,
+    load_ramp_s: f64,
     rx: mpsc::Receiver<RemoteGoal>,
     pending: VecDeque<Pending>,
     answers: VecDeque<RemoteAnswer>,
@@ -413,7 +437,7 @@ impl Goals {
                     level: index,
                     payload: sample.payload().to_bytes().into_owned(),
                     attachment: Attachment::from_zbytes(sample.attachment()),
-                    path: false,
+                    topic: Topic::Goal,
                 };
                 bump(&c.goals_received);
                 if tx.try_send(goal).is_err() {
@@ -430,7 +454,7 @@ impl Goals {
                     level: index,
                     payload: sample.payload().to_bytes().into_owned(),
                     attachment: Attachment::from_zbytes(sample.attachment()),
-                    path: true,
+                    topic: Topic::Path,
                 };
                 bump(&c.goals_received);
                 if tx.try_send(goal).is_err() {
@@ -439,6 +463,25 @@ impl Goals {
             })?;
             subscriptions.push(sub);
         }
+        // The load topic (load.rs).
+        let c = counters.clone();
+        let sub = graph.subscription(
+            &graph.topic("load"),
+            &load::INERTIA_STAMPED,
+            move |sample| {
+                let goal = RemoteGoal {
+                    level: 0,
+                    payload: sample.payload().to_bytes().into_owned(),
+                    attachment: Attachment::from_zbytes(sample.attachment()),
+                    topic: Topic::Load,
+                };
+                bump(&c.goals_received);
+                if tx.try_send(goal).is_err() {
+                    bump(&c.goals_refused_rate);
+                }
+            },
+        )?;
+        subscriptions.push(sub);
         let client = if args.allow_setpoints {
             let c =
                 Client::connect(&args.namespace, file_prefix.as_deref()).with_context(|| {
@@ -463,9 +506,11 @@ impl Goals {
             joints,
             equilibrium,
             root_link: scenario.model.root_link.clone(),
+            tip_link: scenario.model.tip_link.clone(),
             client,
             limiter: RateLimiter::new(args.setpoint_rate, args.setpoint_burst),
             duration_s: args.goal_duration,
+            load_ramp_s: args.load_ramp,
             rx,
             pending: VecDeque::new(),
             answers: VecDeque::new(),
@@ -489,25 +534,34 @@ impl Goals {
         let mut answer = RemoteAnswer {
             source_gid: att.source_gid,
             source_seq: att.sequence_number,
-            level: g.level as u32,
+            level: match g.topic {
+                Topic::Load => load::LOAD_LEVEL,
+                _ => g.level as u32,
+            },
             code: 0,
             reason: String::new(),
             duration_s: 0.0,
         };
-        if g.path {
-            match self.forward_path(&g, c) {
-                Ok(()) => {
+        if g.topic != Topic::Goal {
+            // Paths and loads are answered as they are sent.
+            let result = match g.topic {
+                Topic::Path => self.forward_path(&g, c),
+                _ => self.forward_load(&g, c),
+            };
+            match result {
+                Ok(duration_s) => {
                     bump(&c.goals_accepted);
                     answer.reason = ros::answer_reason(0);
+                    answer.duration_s = duration_s;
                 }
                 Err((code, reason)) => {
                     answer.code = code;
                     answer.reason = reason;
-                    tracing::info!(
-                        "remote path for level {} refused: {}",
-                        g.level + 1,
-                        answer.reason
-                    );
+                    let what = match g.topic {
+                        Topic::Path => format!("path for level {}", g.level + 1),
+                        _ => "load".into(),
+                    };
+                    tracing::info!("remote {what} refused: {}", answer.reason);
                 }
             }
             self.record(answer);
@@ -569,7 +623,7 @@ impl Goals {
     /// Checks and sends one path (trajectory.rs) through the client, a
     /// message at a time after the controller's answer to the one before;
     /// the refusal (code, reason) names the knots.
-    fn forward_path(&mut self, g: &RemoteGoal, c: &Counters) -> Result<(), (u32, String)> {
+    fn forward_path(&mut self, g: &RemoteGoal, c: &Counters) -> Result<f64, (u32, String)> {
         let client = admit(&mut self.client, &mut self.limiter, c)?;
         let level = &self.levels[g.level];
         let ty = trajectory::ros_type(&level.kind);
@@ -595,7 +649,7 @@ impl Goals {
             Some((v, a)) => client.follow_samples(g.level, times, points, (v, a), 0, timeout),
             None => client.follow(g.level, times, points, 0, timeout),
         }
-        .map(|_| ())
+        .map(|_| 0.0)
         .map_err(|e| {
             bump(&c.goals_rejected);
             let code = match &e.error {
@@ -607,6 +661,29 @@ impl Goals {
             };
             (code, e.to_string())
         })
+    }
+
+    /// Checks and sends one load (load.rs) through the client and waits for
+    /// the controller's answer; the ramp, or the refusal (code, reason).
+    fn forward_load(&mut self, g: &RemoteGoal, c: &Counters) -> Result<f64, (u32, String)> {
+        let client = admit(&mut self.client, &mut self.limiter, c)?;
+        let message = load::read_load(&g.payload, &self.tip_link, self.load_ramp_s)
+            .inspect_err(|_| bump(&c.goals_refused_bad))
+            .map_err(|e| (ros::REFUSED_BAD_MESSAGE, e.to_string()))?;
+        bump(&c.goals_forwarded);
+        match client.set_load(message, Duration::from_millis(500)) {
+            Ok(_) => Ok(message.ramp()),
+            Err(e) => {
+                bump(&c.goals_rejected);
+                let code = match &e {
+                    ClientError::LoadRejected(r) => r.code(),
+                    ClientError::LoadInvalid(r) => r.code(),
+                    ClientError::Rejected(r) | ClientError::Invalid(r) => r.code(),
+                    _ => ros::REFUSED_UNREACHABLE,
+                };
+                Err((code, e.to_string()))
+            }
+        }
     }
 
     /// Keeps `answer` as the last of its publisher.
