@@ -4,7 +4,8 @@
 //! 1 mm of the path; a path that does not start at the level's equilibrium
 //! is refused with its knots and reason, and the controller keeps running.
 //! `hcc record` attached for the whole run: `hcc replay` repeats it bit for
-//! bit, the path messages taken again in their cycles.
+//! bit, the path messages and the loads told to it (one refused) taken again
+//! in their cycles.
 
 mod monitor;
 
@@ -218,6 +219,31 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
             );
             std::thread::sleep(Duration::from_millis(200));
         }
+        // The hand's load told (the plant does not carry it: the TCP moves),
+        // one refused, and the hand told empty again: replayed too.
+        for (args, accepted) in [
+            (
+                &["--mass", "0.5", "--com", "0", "0", "0.1", "--ramp", "0.1"][..],
+                true,
+            ),
+            (&["--mass", "5"][..], false),
+            (&["--mass", "0"][..], true),
+        ] {
+            let args: Vec<&str> = std::iter::once("load")
+                .chain(args.iter().copied())
+                .collect();
+            let out = hcc(&args, &ns, &prefix, dir.path(), "load", 30);
+            assert_eq!(out.status.success(), accepted, "{args:?}: {}", out.log());
+            std::thread::sleep(Duration::from_millis(300));
+        }
+        let start = Instant::now();
+        while tcp_error(&ns, &prefix, dir.path()) > 1e-3 {
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "never came back after the load"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
         // SAFETY: a signal to our own child, by pid.
         unsafe { libc::kill(rec.pid() as libc::pid_t, libc::SIGTERM) };
         let status = rec
@@ -245,5 +271,6 @@ fn hcc_follow_streams_a_circle_that_the_tcp_tracks_within_a_millimetre() {
         .unwrap_or_else(|| panic!("no path count in: {log}"));
     // The circle's 451 knots in messages of 16, and the refused one.
     assert!(paths >= 29, "{paths} path messages replayed: {log}");
+    assert!(log.contains(" 3 load messages"), "{log}");
     assert!(log.contains("bit-identical"), "{log}");
 }

@@ -28,7 +28,7 @@ from conftest import ROOT, binary, unique
 
 CONFIG = ROOT / "config" / "paper-sim1.toml"
 URDF = ROOT / "config" / "planar4.urdf"
-TOPICS = {"/joint_state", "/torque_command", "/telemetry", "/setpoint", "/recorder", "/path"}
+TOPICS = {"/joint_state", "/torque_command", "/telemetry", "/setpoint", "/recorder", "/path", "/load"}
 
 
 def env_with_prefix() -> dict[str, str]:

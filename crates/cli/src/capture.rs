@@ -1,6 +1,6 @@
 //! Capturing a namespace's streams into an MCAP recording, as a pure
 //! subscriber: the receiver thread copies every joint state, torque command,
-//! telemetry sample, setpoint and path message out of the iceoryx2 queues (the largest
+//! telemetry sample, setpoint, path and load message out of the iceoryx2 queues (the largest
 //! queues the services allow, [`MAX_SUBSCRIBER_BUFFER`] samples, i.e. 128 ms
 //! at 1 kHz, drained every [`POLL`] — at once again when a drain found half a
 //! queue, as in lockstep runs faster than real time — so that publishers,
@@ -23,8 +23,8 @@
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
 use hcc_msgs::{
-    JointState, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint, Telemetry,
-    TorqueCommand,
+    JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint,
+    Telemetry, TorqueCommand,
 };
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use iceoryx2::prelude::SignalHandlingMode;
@@ -41,6 +41,7 @@ pub enum Received {
     Telemetry(Box<Telemetry>),
     Setpoint(Box<Setpoint>),
     Path(Box<PathKnots>),
+    Load(Box<LoadSetpoint>),
     /// The receiver failed and stopped.
     Failed(String),
 }
@@ -101,15 +102,16 @@ struct Subscribers {
     telemetry: ipc::TelemetrySubscriber,
     setpoints: ipc::SetpointSubscriber,
     paths: ipc::PathSubscriber,
+    loads: ipc::LoadSubscriber,
 }
 
 impl Subscribers {
     /// Reads every queued sample into `tx`; returns how many.
     fn drain_into(&self, tx: &Sink) -> Result<usize, String> {
-        // Setpoints, paths and states first: a command or telemetry always
-        // follows them. A client numbers its setpoints and path messages
-        // together: they are handed on in that order (a message of either
-        // queue seen here was sent before any later one of the other).
+        // Setpoints, paths, loads and states first: a command or telemetry
+        // always follows them. A client numbers its setpoints, path and load
+        // messages together: they are handed on in that order (a message of
+        // one queue seen here was sent before any later one of the others).
         let mut clients = Vec::new();
         while let Some(s) = self
             .setpoints
@@ -124,6 +126,13 @@ impl Subscribers {
             .map_err(|e| format!("receive path: {e:?}"))?
         {
             clients.push((p.header.seq, Received::Path(Box::new(*p))));
+        }
+        while let Some(l) = self
+            .loads
+            .receive()
+            .map_err(|e| format!("receive load: {e:?}"))?
+        {
+            clients.push((l.header.seq, Received::Load(Box::new(*l))));
         }
         clients.sort_by_key(|(seq, _)| *seq);
         let mut k = clients.len();
@@ -205,6 +214,7 @@ impl Receiver {
                         telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
                         setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
                         paths: services.path_subscriber(SETPOINT_BUFFER)?,
+                        loads: services.load_subscriber(SETPOINT_BUFFER)?,
                     };
                     Ok((node, services, subs))
                 };
@@ -341,6 +351,7 @@ pub struct StreamRecorder {
     setpoints: BTreeMap<u64, Stream>,
     setpoint_stats: StreamStats,
     path_stats: StreamStats,
+    load_stats: StreamStats,
     started: Instant,
     next_report: Instant,
 }
@@ -358,6 +369,7 @@ impl StreamRecorder {
             setpoints: BTreeMap::new(),
             setpoint_stats: StreamStats::default(),
             path_stats: StreamStats::default(),
+            load_stats: StreamStats::default(),
             started: now,
             next_report: now + Duration::from_secs(1),
         })
@@ -392,6 +404,12 @@ impl StreamRecorder {
                 self.path_stats.received += 1;
                 self.path_stats.recorded += 1;
             }
+            Received::Load(l) => {
+                self.client(l.client_id).observe(l.header.seq);
+                self.writer.load(l)?;
+                self.load_stats.received += 1;
+                self.load_stats.recorded += 1;
+            }
             Received::Failed(_) => {}
         }
         Ok(())
@@ -408,12 +426,14 @@ impl StreamRecorder {
         self.setpoints.entry(key).or_default()
     }
 
-    /// The counts so far: `setpoint` counts a client's setpoints and path
-    /// messages as one sequence (its gaps are either's), `path` the path
-    /// messages received and recorded.
+    /// The counts so far: `setpoint` counts a client's setpoints, path and
+    /// load messages as one sequence (its gaps are any's), `path` and `load`
+    /// those messages received and recorded.
     pub fn stats(&self) -> RecorderMsg {
         let mut sp = StreamStats {
-            recorded: self.setpoint_stats.recorded + self.path_stats.recorded,
+            recorded: self.setpoint_stats.recorded
+                + self.path_stats.recorded
+                + self.load_stats.recorded,
             ..StreamStats::default()
         };
         for s in self.setpoints.values() {
@@ -431,6 +451,7 @@ impl StreamRecorder {
             telemetry: self.telemetry.stats,
             setpoint: sp,
             path: self.path_stats,
+            load: self.load_stats,
             total_gaps: 0,
             last: false,
         };

@@ -198,6 +198,7 @@ pub struct Recording {
     telemetry: Stream,
     setpoints: u64,
     paths: u64,
+    loads: u64,
     pub last_state: Option<JointState>,
     pub last_telemetry: Option<Box<Telemetry>>,
     latencies_ns: Vec<u64>,
@@ -213,6 +214,7 @@ impl Recording {
             telemetry: Stream::default(),
             setpoints: 0,
             paths: 0,
+            loads: 0,
             last_state: None,
             last_telemetry: None,
             latencies_ns: Vec::new(),
@@ -386,6 +388,10 @@ pub fn derive<'a>(
                 rec.paths += 1;
                 replay.on_path(p.to_msg().map_err(bad)?);
             }
+            Entry::Load(l) => {
+                rec.loads += 1;
+                replay.on_load(l.to_msg().map_err(bad)?);
+            }
             Entry::Setpoint(s) => {
                 rec.setpoints += 1;
                 replay.on_setpoint(s.to_msg().map_err(bad)?);
@@ -535,6 +541,9 @@ impl Derived<'_> {
         }
         if rec.paths > 0 {
             println!("  path messages recorded: {}", rec.paths);
+        }
+        if rec.loads > 0 {
+            println!("  load messages recorded: {}", rec.loads);
         }
         if self.replayed.controller_restarts > 0 {
             println!(

@@ -45,7 +45,7 @@ use anyhow::anyhow;
 use hcc_config::Scenario;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{
-    JointState, KnotsRefusal, PathKnots, PathRejection, Setpoint, SetpointAnswer,
+    JointState, KnotsRefusal, LoadSetpoint, PathKnots, PathRejection, Setpoint, SetpointAnswer,
     TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
 };
 
@@ -68,6 +68,8 @@ pub struct ReplayCounts {
     pub setpoints_taken: u64,
     /// Path messages taken again.
     pub paths_taken: u64,
+    /// Load messages taken again.
+    pub loads_taken: u64,
     /// Setpoints the controller answered that the recording does not hold.
     pub setpoints_missing: u64,
     /// Recorded setpoints answered before the first replayed cycle (history
@@ -122,11 +124,13 @@ pub struct Replayed<'a> {
     pub before_recording: bool,
 }
 
-/// A client's message: a setpoint or a path message (numbered together).
+/// A client's message: a setpoint, a path or a load message (numbered
+/// together).
 #[derive(Clone, Debug)]
 enum ClientMessage {
     Setpoint(Box<Setpoint>),
     Path(Box<PathKnots>),
+    Load(Box<LoadSetpoint>),
 }
 
 impl ClientMessage {
@@ -134,6 +138,7 @@ impl ClientMessage {
         match self {
             Self::Setpoint(s) => s.header.seq,
             Self::Path(p) => p.header.seq,
+            Self::Load(l) => l.header.seq,
         }
     }
 }
@@ -197,14 +202,17 @@ pub struct Replay {
     ctl: ControllerStreams,
     /// A restarted controller's, read before the replay reached them.
     next: Option<ControllerStreams>,
-    /// Recorded setpoints and path messages per client, not yet taken, in
-    /// the client's order.
+    /// Recorded setpoints, path and load messages per client, not yet
+    /// taken, in the client's order.
     setpoints: BTreeMap<u64, VecDeque<ClientMessage>>,
     /// The messages of the cycle being replayed from each client's first
     /// path message on, in the client's order (taken after the setpoints
     /// before them, with its state), and the refusal of the feasibility
     /// check the recording shows for the last one.
     paths_due: Vec<(ClientMessage, Option<KnotsRefusal>)>,
+    /// The load messages of the cycle being replayed, taken after its paths
+    /// (as the daemon takes them), in the order they were sent.
+    loads_due: Vec<LoadSetpoint>,
     /// Per client, the setpoints answered so far, as the telemetry counts
     /// them, and the seq of the last one answered.
     answered: BTreeMap<u64, Answered>,
@@ -236,6 +244,7 @@ impl Replay {
             next: None,
             setpoints: BTreeMap::new(),
             paths_due: Vec::new(),
+            loads_due: Vec::new(),
             answered: BTreeMap::new(),
             last_state: None,
             latest_stamp: 0,
@@ -303,6 +312,11 @@ impl Replay {
     /// A recorded path message (as a setpoint: the client numbers both).
     pub fn on_path(&mut self, p: PathKnots) {
         self.on_client_message(p.client_id, ClientMessage::Path(Box::new(p)));
+    }
+
+    /// A recorded load message (as a setpoint: the client numbers both).
+    pub fn on_load(&mut self, l: LoadSetpoint) {
+        self.on_client_message(l.client_id, ClientMessage::Load(Box::new(l)));
     }
 
     fn on_client_message(&mut self, client_id: u64, m: ClientMessage) {
@@ -573,6 +587,11 @@ impl Replay {
                     continue;
                 }
                 ClientMessage::Path(p) => Some(*p),
+                // Loads go to `loads_due` when taken from the client's queue.
+                ClientMessage::Load(l) => {
+                    self.loads_due.push(*l);
+                    continue;
+                }
             };
             self.counts.paths_taken += 1;
             match (refusal, once.as_ref()) {
@@ -583,6 +602,16 @@ impl Replay {
                 },
             }
         }
+        // Then its loads. The daemon takes them in their arrival order: a
+        // client's in its order, across clients by their send time.
+        let mut loads = std::mem::take(&mut self.loads_due);
+        loads.sort_by_key(|l| l.header.stamp_ns);
+        for l in &loads {
+            self.cycle.take_load(l);
+            self.counts.loads_taken += 1;
+        }
+        loads.clear();
+        self.loads_due = loads;
         let answer = state.map(|s| {
             let wake = s
                 .header
@@ -614,7 +643,7 @@ impl Replay {
     /// a client's setpoints before its first path message at once, the rest
     /// after, with the state (as the daemon takes its setpoints, then the
     /// path messages whose feasibility check answered, with the setpoints
-    /// that waited behind them). A path message the check refused is the
+    /// that waited behind them, then the loads). A path message the check refused is the
     /// last its client was answered in the cycle: the recorded answer says
     /// so. Returns how many messages the recording lacks.
     fn take_setpoints(&mut self, tel: &Telemetry) -> u64 {
@@ -632,6 +661,7 @@ impl Replay {
                         self.cycle.take_setpoint_now(&s);
                         self.counts.setpoints_taken += 1;
                     }
+                    Some(ClientMessage::Load(l)) => self.loads_due.push(*l),
                     Some(ClientMessage::Path(p)) => {
                         behind_path = true;
                         let refused = (p.header.seq == a.seq).then(|| check_refusal(a)).flatten();

@@ -138,6 +138,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             Entry::Telemetry(t) => replay.on_telemetry(t.to_msg().map_err(bad)?),
             Entry::Setpoint(s) => replay.on_setpoint(s.to_msg().map_err(bad)?),
             Entry::Path(p) => replay.on_path(p.to_msg().map_err(bad)?),
+            Entry::Load(l) => replay.on_load(l.to_msg().map_err(bad)?),
             Entry::Recorder(_) | Entry::Metadata(..) => {}
         }
         going = replay.advance(false, &mut each)?;
@@ -191,11 +192,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "replayed {} cycles of {} ({} setpoints, {} path messages, {} stale events, {} driver restarts, {} controller restarts): every torque bit-identical to the recording",
+        "replayed {} cycles of {} ({} setpoints, {} path messages, {} load messages, {} stale events, {} driver restarts, {} controller restarts): every torque bit-identical to the recording",
         cmp.compared,
         args.recording.display(),
         counts.setpoints_taken,
         counts.paths_taken,
+        counts.loads_taken,
         counts.stale,
         counts.driver_restarts,
         counts.controller_restarts

@@ -96,6 +96,9 @@ fn messages_read_back_bit_for_bit() {
         .push_sample(0.25, &[0.31, 0.4], &[0.0, 0.0], &[0.0, 0.0])
         .unwrap();
     w.path_knots(&knots).unwrap();
+    let mut load = hcc_msgs::LoadSetpoint::point(42, 9, 0.5, [0.0, 0.0, 0.1]);
+    load.inertia = [1e-3, 0.0, 0.0, 1e-3, 0.0, 1.5e-3];
+    w.load(&load).unwrap();
     w.finish(&RecorderMsg::default(), BTreeMap::new()).unwrap();
 
     let mut k = 0;
@@ -138,6 +141,10 @@ fn messages_read_back_bit_for_bit() {
                 let back = p.to_msg().unwrap();
                 assert_eq!(bytes_of(&back), bytes_of(&knots));
             }
+            Entry::Load(l) => {
+                let back = l.to_msg().unwrap();
+                assert_eq!(bytes_of(&back), bytes_of(&load));
+            }
             Entry::Metadata(name, map) => {
                 metadata.insert(name, map);
             }
@@ -150,6 +157,7 @@ fn messages_read_back_bit_for_bit() {
     assert!(summary.truncated.is_none(), "{:?}", summary.truncated);
     assert_eq!(summary.messages["/telemetry"], 50);
     assert_eq!(summary.messages["/path"], 1);
+    assert_eq!(summary.messages["/load"], 1);
     assert_eq!(metadata["hcc_run"]["recorder"], "test");
     assert!(metadata.contains_key(mcap_log::META_END));
 }

@@ -7,13 +7,14 @@
 //! | `/telemetry`         | `hcc.Telemetry` (JSON)                    | the cycle of a published state         |
 //! | `/setpoint`          | `hcc.Setpoint` (JSON)                     | every setpoint                         |
 //! | `/path`              | `hcc.PathKnots` (JSON)                    | every path message                     |
+//! | `/load`              | `hcc.LoadSetpoint` (JSON)                 | every load message                     |
 //! | `/tf`                | `foxglove.FrameTransforms` (protobuf)     | the chain's links, TCP and goal frames |
 //! | `/chain`            | `foxglove.SceneUpdate` (protobuf)         | the chain as a stick figure (joint origins) |
 //! | `/joint_limits`      | `hcc.JointLimits` (JSON)                  | q, q̇, τ against the URDF's limits     |
 //! | `/robot_description` | `hcc.RobotDescription` (JSON, `data`)     | the URDF text                          |
 //! | `/view`              | `hcc.View` (JSON)                         | what the server received, published and lost |
 //!
-//! The first five use the channel names and JSON schemas of the recordings
+//! The first six use the channel names and JSON schemas of the recordings
 //! (`hcc_record::mcap_log`), so one Foxglove layout opens a live server and
 //! a recording alike. Log times are the messages' own stamps
 //! (CLOCK_MONOTONIC) shifted to Unix time, as in a recording.
@@ -26,7 +27,8 @@ use foxglove::messages::{
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use hcc_record::mcap_log::schemas::{integer, number, numbers, object};
 use hcc_record::mcap_log::{
-    self, TOPIC_JOINT_STATE, TOPIC_PATH, TOPIC_SETPOINT, TOPIC_TELEMETRY, TOPIC_TORQUE_COMMAND,
+    self, TOPIC_JOINT_STATE, TOPIC_LOAD, TOPIC_PATH, TOPIC_SETPOINT, TOPIC_TELEMETRY,
+    TOPIC_TORQUE_COMMAND,
 };
 use serde::Serialize;
 use serde_json::json;
@@ -46,12 +48,13 @@ pub const TOPIC_ROBOT_DESCRIPTION: &str = "/robot_description";
 pub const TOPIC_VIEW: &str = "/view";
 
 /// The recording's topics that the server carries too.
-pub const RECORDED_TOPICS: [&str; 5] = [
+pub const RECORDED_TOPICS: [&str; 6] = [
     TOPIC_JOINT_STATE,
     TOPIC_TORQUE_COMMAND,
     TOPIC_TELEMETRY,
     TOPIC_SETPOINT,
     TOPIC_PATH,
+    TOPIC_LOAD,
 ];
 
 /// Counts of one stream of the server.
@@ -82,6 +85,7 @@ pub struct ViewMsg {
     pub telemetry: StreamCounts,
     pub setpoint: StreamCounts,
     pub path: StreamCounts,
+    pub load: StreamCounts,
     /// Transform sets published on `/tf`.
     pub tf_published: u64,
     /// Joint states not drawn (wrong size or a non-finite position).
@@ -131,6 +135,7 @@ pub fn view_schema() -> String {
             "telemetry": counts_schema(),
             "setpoint": counts_schema(),
             "path": counts_schema(),
+            "load": counts_schema(),
             "tf_published": integer("transform sets published"),
             "bad_states": integer("joint states not drawn (bad size or value)"),
         }),
@@ -201,6 +206,7 @@ pub enum Stream {
     Telemetry = 2,
     Setpoint = 3,
     Path = 4,
+    Load = 5,
 }
 
 impl Channels {
@@ -210,9 +216,9 @@ impl Channels {
             let (name, schema) = mcap_log::schema(topic);
             json_channel(ctx, topic, name, schema)
         });
-        let [a, b, c, d, e] = recorded;
+        let [a, b, c, d, e, f] = recorded;
         Ok(Channels {
-            recorded: [a?, b?, c?, d?, e?],
+            recorded: [a?, b?, c?, d?, e?, f?],
             tf: ctx.channel_builder(TOPIC_TF).build::<FrameTransforms>(),
             chain: ctx.channel_builder(TOPIC_CHAIN).build::<SceneUpdate>(),
             joint_limits: json_channel(

@@ -11,7 +11,7 @@ use hcc_config::ToolScenarioError;
 use hcc_msgs::ServiceNames;
 use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
 use hcc_record::mcap_log::{
-    self, JointStateMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
+    self, JointStateMsg, LoadMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
 };
 use iceoryx2::prelude::SignalHandlingMode;
 use std::time::{Duration, Instant};
@@ -32,6 +32,7 @@ struct Subscribers {
     telemetry: ipc::TelemetrySubscriber,
     setpoints: ipc::SetpointSubscriber,
     paths: ipc::PathSubscriber,
+    loads: ipc::LoadSubscriber,
 }
 
 /// Monotonic stamps onto Unix time (the offset measured at the start).
@@ -74,6 +75,12 @@ impl Subscribers {
         k = 0;
         while let Some(p) = self.paths.receive().map_err(|e| format!("path: {e:?}"))? {
             v.path(clock.unix(p.header.stamp_ns), &PathMsg::from(&*p));
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(l) = self.loads.receive().map_err(|e| format!("load: {e:?}"))? {
+            v.load(clock.unix(l.header.stamp_ns), &LoadMsg::from(&*l));
             k += 1;
         }
         most = most.max(k);
@@ -157,6 +164,7 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
         telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
         setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
         paths: services.path_subscriber(SETPOINT_BUFFER)?,
+        loads: services.load_subscriber(SETPOINT_BUFFER)?,
     };
     let mut server = crate::start(args, scenario.as_ref(), &format!("namespace {namespace}"))?;
     let clock = Clock::new();

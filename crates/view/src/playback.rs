@@ -128,6 +128,7 @@ pub fn run(args: &Args, file: &Path) -> anyhow::Result<()> {
             Entry::Telemetry(m) => v.telemetry(m.seq, m.state_seq, log_time, || *m),
             Entry::Setpoint(m) => v.setpoint(log_time, &m),
             Entry::Path(m) => v.path(log_time, &m),
+            Entry::Load(m) => v.load(log_time, &m),
             Entry::Recorder(_) | Entry::Metadata(..) => {}
         }
         between(&mut server, log_time);

@@ -10,7 +10,9 @@
 //! Setpoints are always published.
 
 use hcc_msgs::{SeqEvent, SequenceChecker};
-use hcc_record::mcap_log::{JointStateMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg};
+use hcc_record::mcap_log::{
+    JointStateMsg, LoadMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
+};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -314,6 +316,13 @@ impl Viewer {
         self.counts.path.published += 1;
     }
 
+    /// A load message (always published, as a setpoint).
+    pub fn load(&mut self, log_time: u64, msg: &LoadMsg) {
+        self.counts.load.received += 1;
+        self.channels.recorded(Stream::Load, msg, log_time);
+        self.counts.load.published += 1;
+    }
+
     /// A setpoint (always published; numbered per client, so not checked).
     pub fn setpoint(&mut self, log_time: u64, msg: &SetpointMsg) {
         self.counts.setpoint.received += 1;
@@ -356,13 +365,14 @@ pub fn stats_line(m: &ViewMsg) -> String {
         t
     };
     format!(
-        "{} client(s); published/received: joint_state {}, torque_command {}, telemetry {}, setpoint {}, path {}",
+        "{} client(s); published/received: joint_state {}, torque_command {}, telemetry {}, setpoint {}, path {}, load {}",
         m.clients,
         s(&m.joint_state),
         s(&m.torque_command),
         s(&m.telemetry),
         s(&m.setpoint),
-        s(&m.path)
+        s(&m.path),
+        s(&m.load)
     )
 }
 

@@ -24,7 +24,7 @@ fn nan() -> f64 {
 }
 
 /// Reads a number or `null` (NaN).
-fn num<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+pub(super) fn num<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
@@ -565,6 +565,9 @@ pub struct RecorderMsg {
     /// Path messages (absent in recordings made before they were recorded).
     #[serde(default)]
     pub path: StreamStats,
+    /// Load messages (absent in recordings made before they were recorded).
+    #[serde(default)]
+    pub load: StreamStats,
     /// Samples lost on all streams.
     pub total_gaps: u64,
     /// Whether this is the final count (the recording ended cleanly).
@@ -578,6 +581,7 @@ impl RecorderMsg {
             + self.torque_command.gaps
             + self.telemetry.gaps
             + self.setpoint.gaps
-            + self.path.gaps;
+            + self.path.gaps
+            + self.load.gaps;
     }
 }

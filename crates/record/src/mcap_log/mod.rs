@@ -13,6 +13,7 @@
 //! | `/setpoint`       | [`SetpointMsg`]                  | client setpoint             |
 //! | `/recorder`       | [`RecorderMsg`] (received, gaps) | second, and the last one    |
 //! | `/path`           | [`PathMsg`]                      | client path message         |
+//! | `/load`           | [`LoadMsg`]                      | client load message         |
 //!
 //! Metadata records: [`META_RUN`] (hcc and iceoryx2 versions, the recorder,
 //! namespace, start time, control rate), [`META_SCENARIO`] (the scenario
@@ -35,10 +36,12 @@
 //! holds one chunk at most and a small index per chunk (memory independent
 //! of the run's length for any practical run: ~100 B per flushed chunk).
 
+mod load_msg;
 mod messages;
 mod path_msg;
 pub mod schemas;
 
+pub use load_msg::LoadMsg;
 pub use messages::{
     AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
     TimingsMsg, TorqueCommandMsg, mode_name, status_name,
@@ -46,7 +49,7 @@ pub use messages::{
 pub use path_msg::PathMsg;
 pub use schemas::schema;
 
-use hcc_msgs::{JointState, PathKnots, Setpoint, Telemetry, TorqueCommand};
+use hcc_msgs::{JointState, LoadSetpoint, PathKnots, Setpoint, Telemetry, TorqueCommand};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use std::collections::BTreeMap;
@@ -67,14 +70,17 @@ pub const TOPIC_SETPOINT: &str = "/setpoint";
 pub const TOPIC_RECORDER: &str = "/recorder";
 /// Topic of the clients' path knots (after the others: added later).
 pub const TOPIC_PATH: &str = "/path";
+/// Topic of the clients' load messages (after the others: added later).
+pub const TOPIC_LOAD: &str = "/load";
 /// Every topic, in channel order.
-pub const TOPICS: [&str; 6] = [
+pub const TOPICS: [&str; 7] = [
     TOPIC_JOINT_STATE,
     TOPIC_TORQUE_COMMAND,
     TOPIC_TELEMETRY,
     TOPIC_SETPOINT,
     TOPIC_RECORDER,
     TOPIC_PATH,
+    TOPIC_LOAD,
 ];
 
 /// Metadata record of the run (versions, recorder, namespace, start time).
@@ -378,6 +384,11 @@ impl McapWriter {
         self.write(5, p.header.stamp_ns, &PathMsg::from(p))
     }
 
+    /// Appends a client's load message.
+    pub fn load(&mut self, l: &LoadSetpoint) -> Result<(), LogError> {
+        self.write(6, l.header.stamp_ns, &LoadMsg::from(l))
+    }
+
     /// The recorder's counts, stamped `now_ns` (monotonic).
     pub fn recorder(&mut self, r: &RecorderMsg, now_ns: u64) -> Result<(), LogError> {
         self.write(4, now_ns, r)
@@ -442,7 +453,8 @@ pub enum Entry {
     Telemetry(Box<TelemetryMsg>),
     Setpoint(Box<SetpointMsg>),
     Path(Box<PathMsg>),
-    Recorder(RecorderMsg),
+    Load(Box<LoadMsg>),
+    Recorder(Box<RecorderMsg>),
     /// A metadata record: its name and entries.
     Metadata(String, BTreeMap<String, String>),
 }
@@ -544,6 +556,9 @@ pub fn read<E: From<LogError>>(
                             }
                             TOPIC_PATH => {
                                 Entry::Path(serde_json::from_slice(&data).map_err(decode)?)
+                            }
+                            TOPIC_LOAD => {
+                                Entry::Load(serde_json::from_slice(&data).map_err(decode)?)
                             }
                             TOPIC_RECORDER => {
                                 Entry::Recorder(serde_json::from_slice(&data).map_err(decode)?)

@@ -207,6 +207,24 @@ fn path() -> Value {
     )
 }
 
+fn load() -> Value {
+    object(
+        "hcc.LoadSetpoint",
+        "A client's load in the hand to the controller (hcc-msgs LoadSetpoint)",
+        json!({
+            "seq": integer("the client's sequence number"),
+            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
+            "schema_version": integer("hcc-msgs schema"),
+            "n_joints": integer("header n_joints"),
+            "client_id": integer("the client"),
+            "mass": number("kg"),
+            "com": numbers("centre of mass in the tip frame, m"),
+            "inertia": numbers("about the centre of mass, tip axes, kg·m²: ixx ixy ixz iyy iyz izz"),
+            "ramp_s": number("the ramp as sent, s (0: the controller's default)"),
+        }),
+    )
+}
+
 fn recorder() -> Value {
     object(
         "hcc.Recorder",
@@ -218,6 +236,7 @@ fn recorder() -> Value {
             "telemetry": stream_stats(),
             "setpoint": stream_stats(),
             "path": stream_stats(),
+            "load": stream_stats(),
             "total_gaps": integer("samples lost on all streams"),
             "last": {"type": "boolean", "description": "the final count of a clean end"},
         }),
@@ -233,6 +252,7 @@ pub fn schema(topic: &str) -> (&'static str, String) {
         super::TOPIC_TELEMETRY => ("hcc.Telemetry", telemetry()),
         super::TOPIC_SETPOINT => ("hcc.Setpoint", setpoint()),
         super::TOPIC_PATH => ("hcc.PathKnots", path()),
+        super::TOPIC_LOAD => ("hcc.LoadSetpoint", load()),
         _ => ("hcc.Recorder", recorder()),
     };
     (name, value.to_string())
