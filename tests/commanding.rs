@@ -291,7 +291,13 @@ fn goals_gains_rejections_and_the_monitor() {
         assert!(out.status.success(), "{}", out.log());
         assert!(out.stdout.contains("accepted"), "{}", out.stdout);
         std::thread::sleep(Duration::from_millis(1000));
-        let moved = error_norm(&sample(&ns, &prefix, dir.path()), 0);
+        let s = sample(&ns, &prefix, dir.path());
+        let moved = error_norm(&s, 0);
+        // The monitor shows what the model carries.
+        assert_eq!(
+            s["load"],
+            serde_json::json!({"mass": 0.5, "com": [0.0, 0.0, 0.1], "progress": 1.0})
+        );
         let out = hcc(&["load", "--mass", "0"], &ns, &prefix, dir.path(), "unload");
         assert!(out.status.success(), "{}", out.log());
         let back = loop {

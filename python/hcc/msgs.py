@@ -26,7 +26,7 @@ from typing import Any, Sequence
 DRIVER_SCHEMA_VERSION: int = 3
 #: Version of the client-facing part (setpoints, telemetry, rejection codes);
 #: part of their type names (``@client<N>``).
-CLIENT_SCHEMA_VERSION: int = 7
+CLIENT_SCHEMA_VERSION: int = 8
 #: Joint capacity of every joint vector.
 MAX_JOINTS: int = 32
 #: Capacity of hierarchy levels r in :class:`Telemetry`.
@@ -432,8 +432,10 @@ class Telemetry(ctypes.Structure):
     kinetic energy, the levels' potentials as faded, the joint-limit guard's
     potential, the controller's energy tanks), ``potential``, each level's
     potential as H counts it, ``tank``, the energy in each level's energy tank
-    (J), and ``tank_valve``, its valve in [0, 1] (1: the paper's law) —
-    appended last.
+    (J), and ``tank_valve``, its valve in [0, 1] (1: the paper's law).
+    Since client schema 8 also the load the controller's model carries
+    (``load_mass``, ``load_com``, ``load_progress``; docs/load.md) — each
+    appended after every older field.
     """
 
     _fields_ = [
@@ -465,6 +467,9 @@ class Telemetry(ctypes.Structure):
         ("potential", ctypes.c_double * MAX_LEVELS),
         ("tank", ctypes.c_double * MAX_LEVELS),
         ("tank_valve", ctypes.c_double * MAX_LEVELS),
+        ("load_mass", ctypes.c_double),
+        ("load_com", ctypes.c_double * 3),
+        ("load_progress", ctypes.c_double),
     ]
     header: Header
     state_seq: int
@@ -557,6 +562,13 @@ class Telemetry(ctypes.Structure):
         level's spring point follows what the levels above do to it; client
         schema 6), length r."""
         return list(self.tank_valve[: self.levels()])
+
+    def load_com_list(self) -> list[float]:
+        """The centre of mass of the load the controller's model carries, in
+        the tip frame (m; client schema 8; ``load_mass`` its mass in kg,
+        ``load_progress`` the announced load's ramp in [0, 1], 1: none runs;
+        docs/load.md)."""
+        return list(self.load_com)
 
     def potential_list(self) -> list[float]:
         """Each level's potential as H counts it (J; V_1, then β_i V_i with

@@ -55,7 +55,7 @@ QUATERNION_STAMPED = ("geometry_msgs/msg/QuaternionStamped",
 FLOAT64_MULTI_ARRAY = ("std_msgs/msg/Float64MultiArray",
                        "RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f")
 TELEMETRY = ("hcc_msgs/msg/Telemetry",
-             "RIHS01_db220c33bd4c3256f681620f11badb3fa8643fa216a88b8d3ea0967161f44b86")
+             "RIHS01_715655cde20dd09c5cfa090561ba9bf36da8a823b27019ce59c04d3a2f3bba40")
 GOAL_TYPES = (POSE_STAMPED, POINT_STAMPED, QUATERNION_STAMPED, FLOAT64_MULTI_ARRAY)
 JOINT_TRAJECTORY = ("trajectory_msgs/msg/JointTrajectory",
                     "RIHS01_179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e")
@@ -425,6 +425,12 @@ class RemoteTelemetry:
     potential: list[float]
     tank: list[float]
     tank_valve: list[float]
+    #: The load the controller's model carries (docs/load.md): mass (kg),
+    #: centre of mass in the tip frame (m), the announced load's ramp in
+    #: [0, 1] (1: none runs).
+    load_mass: float
+    load_com: list[float]
+    load_progress: float
 
     @classmethod
     def decode(cls, data: bytes) -> "RemoteTelemetry":
@@ -445,8 +451,9 @@ class RemoteTelemetry:
         tau_ext = r.seq(r.f64)
         h = r.f64()
         potential, tank, tank_valve = r.seq(r.f64), r.seq(r.f64), r.seq(r.f64)
+        load_mass, load_com, load_progress = r.f64(), [r.f64(), r.f64(), r.f64()], r.f64()
         return cls(stamp, *head, tau, p_mu, levels, counters, answers, bridge_id, remote, tau_ext,
-                   h, potential, tank, tank_valve)
+                   h, potential, tank, tank_valve, load_mass, load_com, load_progress)
 
     def levels(self) -> int:
         return len(self.level_list)

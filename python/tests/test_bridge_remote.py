@@ -267,6 +267,10 @@ def test_a_load_through_the_bridge_is_checked_and_taken(tmp_path: pathlib.Path) 
             t = local.latest_telemetry()
             assert t is not None
             moved = t.error_norm(0)
+            # The telemetry through the bridge says what the model carries.
+            remote_t = arm.latest_telemetry()
+            assert remote_t is not None
+            assert (remote_t.load_mass, remote_t.load_com, remote_t.load_progress) == (0.5, [0.0, 0.0, 0.1], 1.0)
             answer = arm.wait_until_accepted(arm.set_load(0.0), timeout=5.0)
             back = local.wait_until_converged(0, 1e-3, timeout=10.0)
             print(f"load through the bridge: 0.5 kg told, not carried, moves the TCP {1e3 * moved:.1f} mm; "

@@ -146,6 +146,8 @@ def check_telemetry(ts: Any, samples: list[tuple[bytes, bytes | None]], telemetr
         assert bits(m.potential) == bits(t.potential_list())
         assert bits(m.tank) == bits(t.tank_list())
         assert bits(m.tank_valve) == bits(t.tank_valve_list())
+        assert bits([m.load_mass, *m.load_com, m.load_progress]) == bits(
+            [t.load_mass, *t.load_com_list(), t.load_progress])
         assert [lv.name for lv in m.levels] == ["TCP position", "TCP orientation", "posture"]
         for i, lv in enumerate(m.levels):
             assert lv.dim == t.task_dims[i]

@@ -114,6 +114,7 @@ def test_set_goal_converges_and_bad_setpoints_are_rejected(tmp_path: pathlib.Pat
         t = client.latest_telemetry()
         assert t is not None
         moved = t.error_norm(0)
+        assert (t.load_mass, t.load_com_list(), t.load_progress) == (0.5, [0.0, 0.0, 0.1], 1.0)
         assert client.set_load(0.0, timeout=5.0).accepted()
         back = client.wait_until_converged(0, 1e-3, timeout=10.0)
         print(f"set_load: 0.5 kg told but not carried moves the TCP {1e3 * moved:.1f} mm; unloaded {1e3 * back:.3f} mm")

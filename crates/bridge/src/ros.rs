@@ -42,7 +42,7 @@ pub const FLOAT64_MULTI_ARRAY: RosType = RosType {
 /// `hcc_msgs/msg/Telemetry` (`ros/hcc_msgs/msg/Telemetry.msg`).
 pub const TELEMETRY: RosType = RosType {
     name: "hcc_msgs/msg/Telemetry",
-    hash: "RIHS01_db220c33bd4c3256f681620f11badb3fa8643fa216a88b8d3ea0967161f44b86",
+    hash: "RIHS01_715655cde20dd09c5cfa090561ba9bf36da8a823b27019ce59c04d3a2f3bba40",
 };
 
 /// `builtin_interfaces/msg/Time`.
@@ -251,7 +251,12 @@ pub fn write_telemetry(w: &mut CdrWriter, t: &Telemetry, stamp: RosTime, x: &Tel
     w.f64(t.h)
         .seq_f64(&t.potential[..r])
         .seq_f64(&t.tank[..r])
-        .seq_f64(&t.tank_valve[..r]);
+        .seq_f64(&t.tank_valve[..r])
+        .f64(t.load_mass);
+    for c in t.load_com {
+        w.f64(c);
+    }
+    w.f64(t.load_progress);
 }
 
 /// A goal message as received, before it is checked against its level.
@@ -395,6 +400,9 @@ mod tests {
         t.potential[..2].copy_from_slice(&[3.0, 0.5]);
         t.tank[..2].copy_from_slice(&[0.0, 2.25]);
         t.tank_valve[..2].copy_from_slice(&[1.0, 0.75]);
+        t.load_mass = 0.5;
+        t.load_com = [0.01, -0.02, 0.1];
+        t.load_progress = 0.25;
         t.task_error[1][..2].copy_from_slice(&[0.25, 0.5]);
         t.singular_levels = 0b10;
         t.setpoint_answers[3] = hcc_msgs::SetpointAnswer {
@@ -488,6 +496,9 @@ mod tests {
         ] {
             r.seq_f64(name, &mut v).unwrap();
             assert_eq!(v, want, "{name}");
+        }
+        for want in [0.5, 0.01, -0.02, 0.1, 0.25] {
+            assert_eq!(r.f64("load").unwrap(), want);
         }
         assert_eq!(r.remaining(), 0);
     }

@@ -126,6 +126,11 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "levels": levels,
         "tau": t.tau(),
         "H": t.h,
+        "load": {
+            "mass": t.load_mass,
+            "com": t.load_com,
+            "progress": t.load_progress,
+        },
         "contact": t.contact(),
         "contact_hold": t.contact_hold(),
         "tau_ext": t.tau_ext(),
@@ -135,6 +140,20 @@ pub fn sample_json(t: &Telemetry, names: &[String]) -> serde_json::Value {
         "compute_ns": t.timings.compute_ns,
         "wakeup_latency_ns": t.timings.wakeup_latency_ns,
     })
+}
+
+/// The load the controller's model carries, and its ramp while one runs.
+fn load_line(t: &Telemetry) -> String {
+    let c = t.load_com;
+    let ramp = if t.load_progress < 1.0 {
+        format!(" (announcing: {:.0} % ramped)", 100.0 * t.load_progress)
+    } else {
+        String::new()
+    };
+    format!(
+        "load {:.3} kg at ({:.3}, {:.3}, {:.3}) m in the tip frame{ramp}\n",
+        t.load_mass, c[0], c[1], c[2]
+    )
 }
 
 fn table(t: &Telemetry, names: &[String]) -> String {
@@ -175,6 +194,7 @@ fn table(t: &Telemetry, names: &[String]) -> String {
         );
     }
     s += &format!("storage H {:.4} J (arm and controller)\n", t.h);
+    s += &load_line(t);
     let (r_max, joint) = largest_external_torque(t);
     s += &format!(
         "contact {}  max |tau_ext| {:.3} N·m (joint {}){}\n",
@@ -294,5 +314,26 @@ mod tests {
         held.flags |= TELEMETRY_FLAG_CONTACT_HOLD;
         assert!(table(&held, &[]).contains("HOLD"));
         assert_eq!(sample_json(&held, &[])["contact_hold"], true);
+    }
+
+    #[test]
+    fn the_load_and_its_ramp_are_shown() {
+        let mut t = sample(false);
+        assert!(
+            table(&t, &[]).contains("load 0.000 kg at (0.000, 0.000, 0.000) m in the tip frame\n")
+        );
+        t.load_mass = 0.25;
+        t.load_com = [0.0, 0.0, 0.1];
+        t.load_progress = 0.5;
+        let s = table(&t, &[]);
+        assert!(
+            s.contains("load 0.250 kg at (0.000, 0.000, 0.100) m in the tip frame (announcing: 50 % ramped)"),
+            "{s}"
+        );
+        let v = sample_json(&t, &[]);
+        assert_eq!(
+            v["load"],
+            serde_json::json!({"mass": 0.25, "com": [0.0, 0.0, 0.1], "progress": 0.5})
+        );
     }
 }

@@ -744,6 +744,10 @@ impl ControlCycle {
         t.tau_ext[..n].copy_from_slice(self.contact.residual());
         t.counters = self.counters.telemetry;
         self.setpoints.fill(t);
+        let load = &self.controller.model().load;
+        t.load_mass = load.mass;
+        t.load_com = load.com.into();
+        t.load_progress = self.load_ramp.progress();
         if fresh {
             telemetry::write_law_terms(t, self.controller.output(), self.gravity_compensation);
             t.h += self.output_tank.energy_at_sample();

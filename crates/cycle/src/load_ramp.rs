@@ -42,6 +42,17 @@ impl LoadRamp {
         self.active = true;
     }
 
+    /// The ramp's progress u ∈ [0, 1] (1: none runs).
+    pub(crate) fn progress(&self) -> f64 {
+        if !self.active {
+            1.0
+        } else if self.duration_s > 0.0 {
+            (self.elapsed_s / self.duration_s).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
     /// Whether a ramp runs (the load is being announced).
     pub(crate) fn active(&self) -> bool {
         self.active

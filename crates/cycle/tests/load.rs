@@ -130,11 +130,24 @@ fn a_load_message_is_checked_answered_and_ramped_in() {
     let q: Vec<f64> = sc.q0.iter().copied().collect();
     s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
     let mut masses = Vec::new();
+    let mut progress = Vec::new();
     for k in 1..=60 {
         s.header.seq = k;
         d.decide(&s, k * sc.period_ns());
         masses.push(d.controller().model().load.mass);
+        // The telemetry says what the model carries and how far the ramp is.
+        let t = d.telemetry();
+        assert_eq!(t.load_mass, masses[masses.len() - 1]);
+        progress.push(t.load_progress);
     }
+    assert!(progress[0] > 0.0 && progress[0] < 0.05, "{progress:?}");
+    assert!(progress.windows(2).all(|w| w[1] >= w[0]));
+    assert_eq!(progress[49..], [1.0; 11]);
+    let com = d.telemetry().load_com;
+    assert!(
+        (com[2] - 0.1).abs() < 1e-15 && com[0] == 0.0 && com[1] == 0.0,
+        "{com:?}"
+    );
     assert!(masses[0] > 0.0 && masses[0] < 0.01, "{masses:?}");
     assert!(masses.windows(2).all(|w| w[1] >= w[0]));
     assert_eq!(masses[49..], [1.0; 11]);

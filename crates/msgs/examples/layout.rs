@@ -92,7 +92,7 @@ fn main() {
                 singular_levels, flags, tau, tau_level, tau_mu, tau_gravity, task_error,
                 storage, min_singular_value, p_mu, counters, timings, goal, stiffness_diag,
                 damping_diag, transition_progress, setpoint_answers, tau_ext, h, potential, tank,
-                tank_valve),
+                tank_valve, load_mass, load_com, load_progress),
         ),
         (
             "Setpoint",

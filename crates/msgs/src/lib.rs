@@ -117,7 +117,7 @@
 //! layout bumps both. The version sits in every header
 //! (`header.schema_version`, checked by [`check_schema`]) and, as
 //! `@driver<N>` / `@client<N>`, in the iceoryx2 type name of every payload
-//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client7`), so
+//! (`hcc_msgs::JointState@driver3`, `hcc_msgs::Telemetry@client8`), so
 //! iceoryx2 itself refuses to connect peers of different versions of one
 //! part when a service is opened (`IncompatibleTypes`; size and alignment
 //! are compared too). Both parts started at 3, the single schema they were
@@ -221,8 +221,11 @@ pub const DRIVER_SCHEMA_VERSION: u32 = 3;
 /// [`SetpointAnswer::knot`] (the knot a path message was refused for; the
 /// slot grows by 8 bytes) and a path's knots with their derivatives
 /// ([`PATH_DERIVATIVES`], [`PathKnots::velocity`],
-/// [`PathKnots::acceleration`]).
-pub const CLIENT_SCHEMA_VERSION: u32 = 7;
+/// [`PathKnots::acceleration`]), and [`LoadSetpoint`] (a new service);
+/// client schema 8: [`Telemetry::load_mass`], [`Telemetry::load_com`] and
+/// [`Telemetry::load_progress`] (the load the model carries; appended after
+/// every older field).
+pub const CLIENT_SCHEMA_VERSION: u32 = 8;
 
 /// The two parts of the contract, each with its own version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -143,7 +143,7 @@ impl std::error::Error for LoadRefusal {}
 
 /// The load the robot's hand holds from now on (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::LoadSetpoint@client7")]
+#[type_name("hcc_msgs::LoadSetpoint@client8")]
 #[repr(C)]
 pub struct LoadSetpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.

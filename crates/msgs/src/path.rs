@@ -289,7 +289,7 @@ impl std::error::Error for KnotsRefusal {}
 /// slot is the client's), `apply_at_state_seq` as a setpoint's: a new path's
 /// t = 0 is the cycle of that state (0: on receipt).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::PathKnots@client7")]
+#[type_name("hcc_msgs::PathKnots@client8")]
 #[repr(C)]
 pub struct PathKnots {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.

@@ -267,7 +267,7 @@ pub const fn answer_code(result: Result<(), SetpointRejection>) -> u32 {
 /// `fields`, `dim` and `gain_layout` select are ignored (writers keep them
 /// zero).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Setpoint@client7")]
+#[type_name("hcc_msgs::Setpoint@client8")]
 #[repr(C)]
 pub struct Setpoint {
     /// `seq`: the client's sequence number; `stamp_ns`: send time.

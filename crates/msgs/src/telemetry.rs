@@ -98,7 +98,7 @@ macro_rules! define_counters {
 define_counters! {
     /// Per-cycle event counters of the controller (totals since start).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-    #[type_name("hcc_msgs::TelemetryCounters@client7")]
+    #[type_name("hcc_msgs::TelemetryCounters@client8")]
     #[repr(C)]
     pub struct TelemetryCounters {
         /// Control cycles run.
@@ -138,7 +138,7 @@ define_counters! {
 
 /// Timing of one controller cycle, in ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("hcc_msgs::TelemetryTimings@client7")]
+#[type_name("hcc_msgs::TelemetryTimings@client8")]
 #[repr(C)]
 pub struct TelemetryTimings {
     /// Wake-up latency: wake time minus the state's `stamp_ns` (can be negative
@@ -162,7 +162,7 @@ pub const NO_KNOT: u32 = u32::MAX;
 /// The controller's answer to the last setpoint (or path message) of one
 /// client.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::SetpointAnswer@client7")]
+#[type_name("hcc_msgs::SetpointAnswer@client8")]
 #[repr(C)]
 pub struct SetpointAnswer {
     /// The client's `Setpoint::client_id`.
@@ -225,7 +225,7 @@ impl Default for SetpointAnswer {
 /// the total τ (Eq. (19)), task errors x̃_i, storage functions S_i (Eqs. (26),
 /// (28)), P_μ = τ_μᵀ q̇ (zero in theory, Sec. IV-C).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hcc_msgs::Telemetry@client7")]
+#[type_name("hcc_msgs::Telemetry@client8")]
 #[repr(C)]
 pub struct Telemetry {
     /// `seq`: controller cycle counter; `stamp_ns`: publication time; `n_joints`: n.
@@ -296,6 +296,16 @@ pub struct Telemetry {
     /// the level's fade; 1: the paper's law; 0: the spring point follows what
     /// the levels above do to it). Client schema 6; appended.
     pub tank_valve: [f64; MAX_LEVELS],
+    /// The load the controller's model carries at the tip now (docs/load.md):
+    /// its mass (kg) — while a load is announced, the ramp's mixture. Client
+    /// schema 8; appended.
+    pub load_mass: f64,
+    /// Its centre of mass in the tip frame (m; zeros without a load).
+    /// Client schema 8; appended.
+    pub load_com: [f64; 3],
+    /// The announced load's ramp ∈ [0, 1] (1: the model carries the load
+    /// told last, no ramp running). Client schema 8; appended.
+    pub load_progress: f64,
 }
 
 impl Telemetry {
@@ -335,6 +345,9 @@ impl Telemetry {
             potential: [0.0; MAX_LEVELS],
             tank: [0.0; MAX_LEVELS],
             tank_valve: [0.0; MAX_LEVELS],
+            load_mass: 0.0,
+            load_com: [0.0; 3],
+            load_progress: 1.0,
         }
     }
 

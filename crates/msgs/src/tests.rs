@@ -43,12 +43,17 @@ fn layout_has_no_hidden_padding() {
         + size_of::<SetpointAnswer>() * MAX_SETPOINT_CLIENTS
         + 8 * MAX_JOINTS
         + 8
-        + 3 * 8 * MAX_LEVELS;
+        + 3 * 8 * MAX_LEVELS
+        + 5 * 8;
     assert_eq!(size_of::<Telemetry>(), telemetry_fields);
-    // Client schemas 4 and 6 appended tau_ext, then h, potential, tank and
-    // tank_valve: every
-    // older field kept its offset.
-    let appended_6 = 8 + 3 * 8 * MAX_LEVELS;
+    // Client schemas 4, 6 and 8 appended tau_ext, then h, potential, tank and
+    // tank_valve, then the load: every older field kept its offset.
+    let appended_8 = 5 * 8;
+    assert_eq!(
+        offset_of!(Telemetry, load_mass),
+        telemetry_fields - appended_8
+    );
+    let appended_6 = 8 + 3 * 8 * MAX_LEVELS + appended_8;
     assert_eq!(
         offset_of!(Telemetry, tau_ext),
         telemetry_fields - appended_6 - 8 * MAX_JOINTS

@@ -48,7 +48,7 @@ pub const COMMAND_FLAGS_KNOWN: u32 = COMMAND_FLAG_GRAVITY_INCLUDED;
 /// Header shared by all messages. It belongs to both parts of the contract:
 /// a change of its layout bumps both versions (its type name carries both).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("hcc_msgs::Header@driver3@client7")]
+#[type_name("hcc_msgs::Header@driver3@client8")]
 #[repr(C)]
 pub struct Header {
     /// The writer's version of the message's part of the contract

@@ -54,6 +54,9 @@ fn telemetry(k: u64) -> Box<Telemetry> {
     t.setpoint_answers[2].client_id = 42;
     t.setpoint_answers[2].answered = 1;
     t.setpoint_answers[2].seq = 7;
+    t.load_mass = 0.5 + 1.0 / 3.0;
+    t.load_com = [0.0, -1e-17, 0.1];
+    t.load_progress = k as f64 / 49.0;
     t
 }
 

@@ -258,11 +258,39 @@ pub struct TelemetryMsg {
     /// in recordings made before it).
     #[serde(rename = "H", default = "nan", deserialize_with = "num")]
     pub h: f64,
+    /// The load the controller's model carries (client schema 8; no load in
+    /// recordings made before it).
+    #[serde(default)]
+    pub load: TelemetryLoadMsg,
     pub levels: Vec<LevelMsg>,
     pub counters: BTreeMap<String, u64>,
     pub timings: TimingsMsg,
     /// Non-empty answer slots only.
     pub setpoint_answers: Vec<AnswerMsg>,
+}
+
+/// The load in [`Telemetry`]: `load_mass`, `load_com`, `load_progress`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TelemetryLoadMsg {
+    /// kg.
+    #[serde(deserialize_with = "num")]
+    pub mass: f64,
+    /// Centre of mass in the tip frame, m.
+    #[serde(deserialize_with = "nums")]
+    pub com: Vec<f64>,
+    /// The announced load's ramp in [0, 1] (1: none runs).
+    #[serde(deserialize_with = "num")]
+    pub progress: f64,
+}
+
+impl Default for TelemetryLoadMsg {
+    fn default() -> Self {
+        TelemetryLoadMsg {
+            mass: 0.0,
+            com: vec![0.0; 3],
+            progress: 1.0,
+        }
+    }
 }
 
 /// [`TelemetryTimings`].
@@ -342,6 +370,11 @@ impl From<&Telemetry> for TelemetryMsg {
             tau_ext: t.tau_ext().to_vec(),
             p_mu: t.p_mu,
             h: t.h,
+            load: TelemetryLoadMsg {
+                mass: t.load_mass,
+                com: t.load_com.to_vec(),
+                progress: t.load_progress,
+            },
             levels,
             counters: t
                 .counters
@@ -400,6 +433,9 @@ impl TelemetryMsg {
         }
         t.p_mu = self.p_mu;
         t.h = self.h;
+        t.load_mass = self.load.mass;
+        fill(&mut t.load_com, &self.load.com, "load.com")?;
+        t.load_progress = self.load.progress;
         if self.levels.len() > MAX_LEVELS {
             return Err(format!("{} levels", self.levels.len()));
         }

@@ -43,8 +43,8 @@ pub mod schemas;
 
 pub use load_msg::LoadMsg;
 pub use messages::{
-    AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryMsg,
-    TimingsMsg, TorqueCommandMsg, mode_name, status_name,
+    AnswerMsg, JointStateMsg, LevelMsg, RecorderMsg, SetpointMsg, StreamStats, TelemetryLoadMsg,
+    TelemetryMsg, TimingsMsg, TorqueCommandMsg, mode_name, status_name,
 };
 pub use path_msg::PathMsg;
 pub use schemas::schema;

@@ -140,6 +140,16 @@ fn telemetry() -> Value {
             "tau_gravity": numbers("gravity torque g(q), N·m"),
             "tau_ext": numbers("estimate r of the external joint torque (momentum observer), N·m"),
             "P_mu": number("power of τ_μ, P_μ = τ_μᵀ q̇ (≈ 0), W"),
+            "H": number("storage H of the arm and the controller, J"),
+            "load": {
+                "type": "object",
+                "properties": {
+                    "mass": number("mass of the load the controller's model carries, kg"),
+                    "com": numbers("its centre of mass in the tip frame, m"),
+                    "progress": number("the announced load's ramp, 0 to 1 (1: none runs)"),
+                },
+                "description": "the load in the hand as the controller's model has it"
+            },
             "levels": {"type": "array", "items": level, "description": "per hierarchy level"},
             "counters": {
                 "type": "object",
