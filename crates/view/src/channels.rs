@@ -9,7 +9,7 @@
 //! | `/path`              | `hcc.PathKnots` (JSON)                    | every path message                     |
 //! | `/load`              | `hcc.LoadSetpoint` (JSON)                 | every load message                     |
 //! | `/tf`                | `foxglove.FrameTransforms` (protobuf)     | the chain's links, TCP and goal frames |
-//! | `/chain`            | `foxglove.SceneUpdate` (protobuf)         | the chain as a stick figure (joint origins) |
+//! | `/chain`            | `foxglove.SceneUpdate` (protobuf)         | the chain as a stick figure (joint origins); the load in the hand as a sphere at its centre of mass |
 //! | `/joint_limits`      | `hcc.JointLimits` (JSON)                  | q, q̇, τ against the URDF's limits     |
 //! | `/robot_description` | `hcc.RobotDescription` (JSON, `data`)     | the URDF text                          |
 //! | `/view`              | `hcc.View` (JSON)                         | what the server received, published and lost |
@@ -22,7 +22,8 @@
 use anyhow::Context as _;
 use foxglove::messages::{
     Color, FrameTransform, FrameTransforms, LinePrimitive, Point3, Quaternion, SceneEntity,
-    SceneUpdate, SpherePrimitive, Timestamp, Vector3, line_primitive,
+    SceneEntityDeletion, SceneUpdate, SpherePrimitive, Timestamp, Vector3, line_primitive,
+    scene_entity_deletion,
 };
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use hcc_record::mcap_log::schemas::{integer, number, numbers, object};
@@ -296,11 +297,17 @@ impl Channels {
 }
 
 impl Channels {
-    /// Publishes the chain's stick figure through `points` (world frame).
-    pub fn chain(&self, points: &[nalgebra::Vector3<f64>], log_time: u64) {
+    /// Publishes the chain's stick figure through `points` (world frame),
+    /// and the load in the hand when there is one.
+    pub fn chain(
+        &self,
+        points: &[nalgebra::Vector3<f64>],
+        load: Option<LoadMarker>,
+        log_time: u64,
+    ) {
         if self.chain.has_sinks() {
             self.chain.log_with_meta(
-                &stick_figure(points, log_time),
+                &stick_figure(points, load, log_time),
                 PartialMetadata::with_log_time(log_time),
             );
         }
@@ -314,9 +321,60 @@ fn stamp(log_time: u64) -> Timestamp {
     )
 }
 
+/// The load in the hand as the view draws it: its centre of mass in the
+/// world and its mass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoadMarker {
+    pub com: nalgebra::Vector3<f64>,
+    pub mass: f64,
+}
+
+/// Id of the load's scene entity on `/chain`.
+pub const LOAD_ENTITY: &str = "load";
+
+impl LoadMarker {
+    /// The sphere's diameter, m: a ball of water of the load's mass (1 kg:
+    /// 12.4 cm), at least 2 cm so that a light load shows.
+    pub fn diameter(&self) -> f64 {
+        (6.0 * self.mass.max(0.0) / (std::f64::consts::PI * 1000.0))
+            .cbrt()
+            .max(0.02)
+    }
+}
+
+fn sphere(p: &nalgebra::Vector3<f64>, diameter: f64, color: Color) -> SpherePrimitive {
+    SpherePrimitive {
+        pose: Some(foxglove::messages::Pose {
+            position: Some(Vector3 {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            }),
+            orientation: Some(Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            }),
+        }),
+        size: Some(Vector3 {
+            x: diameter,
+            y: diameter,
+            z: diameter,
+        }),
+        color: Some(color),
+    }
+}
+
 /// The chain through `points` as one scene entity: a line strip and a
-/// sphere at every joint.
-pub fn stick_figure(points: &[nalgebra::Vector3<f64>], log_time: u64) -> SceneUpdate {
+/// sphere at every joint; and the load in the hand as a second entity
+/// ([`LOAD_ENTITY`], a translucent sphere at its centre of mass), deleted
+/// when the hand holds nothing.
+pub fn stick_figure(
+    points: &[nalgebra::Vector3<f64>],
+    load: Option<LoadMarker>,
+    log_time: u64,
+) -> SceneUpdate {
     let point = |p: &nalgebra::Vector3<f64>| Point3 {
         x: p.x,
         y: p.y,
@@ -328,7 +386,7 @@ pub fn stick_figure(points: &[nalgebra::Vector3<f64>], log_time: u64) -> SceneUp
         b: 0.1,
         a: 1.0,
     };
-    SceneUpdate {
+    let mut update = SceneUpdate {
         deletions: Vec::new(),
         entities: vec![SceneEntity {
             timestamp: Some(stamp(log_time)),
@@ -342,33 +400,34 @@ pub fn stick_figure(points: &[nalgebra::Vector3<f64>], log_time: u64) -> SceneUp
                 color: Some(color),
                 ..Default::default()
             }],
-            spheres: points
-                .iter()
-                .map(|p| SpherePrimitive {
-                    pose: Some(foxglove::messages::Pose {
-                        position: Some(Vector3 {
-                            x: p.x,
-                            y: p.y,
-                            z: p.z,
-                        }),
-                        orientation: Some(Quaternion {
-                            x: 0.0,
-                            y: 0.0,
-                            z: 0.0,
-                            w: 1.0,
-                        }),
-                    }),
-                    size: Some(Vector3 {
-                        x: 0.04,
-                        y: 0.04,
-                        z: 0.04,
-                    }),
-                    color: Some(color),
-                })
-                .collect(),
+            spheres: points.iter().map(|p| sphere(p, 0.04, color)).collect(),
             ..Default::default()
         }],
+    };
+    match load {
+        Some(l) => update.entities.push(SceneEntity {
+            timestamp: Some(stamp(log_time)),
+            frame_id: crate::frames::WORLD.to_string(),
+            id: LOAD_ENTITY.to_string(),
+            spheres: vec![sphere(
+                &l.com,
+                l.diameter(),
+                Color {
+                    r: 0.2,
+                    g: 0.5,
+                    b: 0.95,
+                    a: 0.6,
+                },
+            )],
+            ..Default::default()
+        }),
+        None => update.deletions.push(SceneEntityDeletion {
+            timestamp: Some(stamp(log_time)),
+            r#type: scene_entity_deletion::Type::MatchingId as i32,
+            id: LOAD_ENTITY.to_string(),
+        }),
     }
+    update
 }
 
 /// The tree as `foxglove.FrameTransforms`.
@@ -472,6 +531,32 @@ mod tests {
                 schema["title"]
             );
         }
+    }
+
+    #[test]
+    fn the_load_is_a_sphere_at_its_centre_of_mass_and_deleted_without_one() {
+        let points = [
+            nalgebra::Vector3::zeros(),
+            nalgebra::Vector3::new(0.0, 0.0, 0.3),
+        ];
+        let load = LoadMarker {
+            com: nalgebra::Vector3::new(0.1, 0.2, 0.4),
+            mass: 1.0,
+        };
+        let u = stick_figure(&points, Some(load), 5);
+        assert!(u.deletions.is_empty());
+        let e = u.entities.iter().find(|e| e.id == LOAD_ENTITY).unwrap();
+        let s = &e.spheres[0];
+        let p = s.pose.as_ref().unwrap().position.unwrap();
+        assert_eq!((p.x, p.y, p.z), (0.1, 0.2, 0.4));
+        // A ball of water of 1 kg: 12.4 cm across.
+        assert!((s.size.unwrap().x - 0.1241).abs() < 1e-4, "{:?}", s.size);
+        let light = LoadMarker { mass: 1e-3, ..load };
+        assert_eq!(light.diameter(), 0.02);
+        let u = stick_figure(&points, None, 5);
+        assert_eq!(u.entities.len(), 1, "the chain alone");
+        assert_eq!(u.deletions.len(), 1);
+        assert_eq!(u.deletions[0].id, LOAD_ENTITY);
     }
 
     #[test]

@@ -187,6 +187,13 @@ impl FrameTree {
         Some(&self.out)
     }
 
+    /// A point given in the tip frame, in the world, at the state of the
+    /// last [`FrameTree::at`] (the load's centre of mass).
+    pub fn tip_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let tip = hcc_model::frame_placement(&self.model, &self.data, self.model.tip_frame());
+        tip.transform_point(&(*p).into()).coords
+    }
+
     /// The chain as a polyline in the world (root link, every joint origin,
     /// the tip link) at the state of the last [`FrameTree::at`]: a stick
     /// figure of the arm for robots whose URDF has no visuals to draw.
@@ -376,6 +383,21 @@ mod tests {
         assert_eq!(g.translation.vector, Vector3::new(0.1, 0.2, 0.3));
         assert!(goal_pose(&tcp, &tasks, &goal[..5], &[0.0; 6]).is_none());
         assert!(goal_pose(&tcp, &tasks, &[f64::NAN; 6], &[0.0; 6]).is_none());
+    }
+
+    /// The load's centre of mass: the tip pose (composed along the published
+    /// tree) applied to the point in the tip frame.
+    #[test]
+    fn a_point_in_the_tip_frame_is_placed_by_the_tip_pose() {
+        let (s, urdf) = scenario("panda-pose-posture.toml");
+        let mut tree = FrameTree::new(&s, &urdf).unwrap();
+        let q: Vec<f64> = s.q0.iter().map(|x| x + 0.1).collect();
+        let tip = compose(tree.at(&q, |_| None).unwrap(), &s.model.tip_link);
+        let com = Vector3::new(0.01, -0.02, 0.1);
+        let want = tip * nalgebra::Point3::from(com);
+        assert!((tree.tip_point(&com) - want.coords).norm() < 1e-12);
+        let end = tree.chain_points()[tree.chain_points().len() - 1];
+        assert!((tree.tip_point(&Vector3::zeros()) - end).norm() < 1e-15);
     }
 
     #[test]

@@ -16,7 +16,7 @@ use hcc_record::mcap_log::{
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use crate::channels::{Channels, JointLimitsMsg, Stream, StreamCounts, ViewMsg};
+use crate::channels::{Channels, JointLimitsMsg, LoadMarker, Stream, StreamCounts, ViewMsg};
 use crate::frames::FrameTree;
 
 /// Admits one sample per period of its stamps.
@@ -172,6 +172,9 @@ pub struct Viewer {
     goals: Vec<(Vec<f64>, Vec<f64>)>,
     /// τ of the newest published command.
     tau: Vec<f64>,
+    /// The load the controller's model carries, from the newest published
+    /// telemetry: mass (kg) and centre of mass in the tip frame.
+    load: (f64, nalgebra::Vector3<f64>),
     started: Instant,
     next_stats: Instant,
 }
@@ -201,6 +204,7 @@ impl Viewer {
             },
             goals: Vec::new(),
             tau: Vec::new(),
+            load: (0.0, nalgebra::Vector3::zeros()),
             started: now,
             next_stats: now + STATS_INTERVAL,
         }
@@ -256,7 +260,12 @@ impl Viewer {
         }) {
             Some(tf) => {
                 self.channels.tf(tf, log_time);
-                self.channels.chain(tree.chain_points(), log_time);
+                let (mass, com) = self.load;
+                let load = (mass > 0.0 && com.iter().all(|c| c.is_finite())).then(|| LoadMarker {
+                    com: tree.tip_point(&com),
+                    mass,
+                });
+                self.channels.chain(tree.chain_points(), load, log_time);
                 self.counts.tf_published += 1;
             }
             None => self.counts.bad_states += 1,
@@ -306,6 +315,9 @@ impl Viewer {
         let m = msg();
         self.channels.recorded(Stream::Telemetry, &m, log_time);
         self.counts.telemetry.published += 1;
+        if let [x, y, z] = m.load.com[..] {
+            self.load = (m.load.mass, nalgebra::Vector3::new(x, y, z));
+        }
         self.goals = m.levels.into_iter().map(|l| (l.goal, l.error)).collect();
     }
 
