@@ -37,7 +37,9 @@
 //!
 //! **Gravity.** When the driver adds g itself, it applies τ + g, so g cancels
 //! from the balance: β = Cᵀ q̇ and τ is the command as sent
-//! ([`ObserverInput::gravity_in_command`]).
+//! ([`ObserverInput::gravity_in_command`]); where the command carries the
+//! load's gravity torque (the driver's model does not know the load), that
+//! part enters as −g would.
 //!
 //! **Measured joint torques.** A driver's `tau_measured` is not used: the
 //! observer needs only what was commanded, which is what a torque-controlled
@@ -80,9 +82,11 @@ pub struct ObserverInput<'a> {
     /// The torque applied since the previous update (the previous command as
     /// sent), length n; ignored at the first update after a (re)start.
     pub tau_applied: &'a [f64],
-    /// Whether `tau_applied` contains g (the controller adds gravity), so that
-    /// −g enters the balance; when the driver adds g both cancel.
-    pub gravity_in_command: bool,
+    /// The gravity torque `tau_applied` contains, which enters the balance
+    /// with −: g when the controller adds gravity; the load's alone when the
+    /// driver adds the arm's (its model without the load: what it adds and
+    /// the arm's own gravity cancel); `None` when the driver adds it all.
+    pub gravity_in_command: Option<&'a [f64]>,
     /// The time since the previous update, s (the control period).
     pub dt: f64,
 }
@@ -162,10 +166,9 @@ pub fn observe(obs: &mut MomentumObserver, terms: &Data, input: &ObserverInput<'
             b += terms.c[(j, i)] * v;
         }
         obs.p[i] = p;
-        obs.beta[i] = if input.gravity_in_command {
-            b - terms.g[i]
-        } else {
-            b
+        obs.beta[i] = match input.gravity_in_command {
+            Some(g) => b - g[i],
+            None => b,
         };
     }
     if !(obs.p.iter().chain(obs.beta.iter()).all(|x| x.is_finite())) {

@@ -81,7 +81,7 @@ impl ContactWatch {
         state: &JointState,
         terms: &Data,
         previous: &TorqueCommand,
-        gravity_in_command: bool,
+        gravity_in_command: Option<&[f64]>,
         (period_s, announcing): (f64, bool),
         counters: &mut CoreCounters,
     ) {

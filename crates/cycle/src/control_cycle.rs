@@ -124,8 +124,13 @@ pub struct ControlCycle {
     counters: CycleCounters,
     command_seq: u64,
     telemetry_seq: u64,
-    /// g(q_v) at the last valid state.
+    /// The gravity torque the commands carry at the last valid state: g(q_v)
+    /// with gravity compensation; the load's alone when the driver
+    /// compensates the arm's and the model carries a load
+    /// (hcc_control::StepOutput::gravity_load; docs/load.md).
     gravity_last: [f64; MAX_JOINTS],
+    /// Whether the commands carry `gravity_last`.
+    gravity_carried: bool,
     have_valid: bool,
     peer_lost: bool,
     /// Duration of `Controller::step` in the last decision, ns.
@@ -215,6 +220,7 @@ impl ControlCycle {
             command_seq: 0,
             telemetry_seq: 0,
             gravity_last: [0.0; MAX_JOINTS],
+            gravity_carried: settings.gravity_compensation,
             have_valid: false,
             peer_lost: false,
             step_ns: None,
@@ -423,9 +429,9 @@ impl ControlCycle {
             self.contact.reset();
             self.wrench.clear();
         }
-        // Whether tau contains g(q_v) = gravity_last (for the saturation).
+        // Whether tau contains gravity_last (for the saturation).
         let gravity_in_tau = match law_mode {
-            Some(_) => self.gravity_compensation,
+            Some(_) => self.gravity_carried,
             None => self.safe_command(&mut tau, gravity_conflict),
         };
         // Saturation to the torque limits: the control part is scaled as a
@@ -600,10 +606,11 @@ impl ControlCycle {
     ) {
         let n = self.n;
         let rate = self.filter.rate_limit(n);
+        let gravity = gravity_in_tau.then_some(&self.gravity_last[..n]);
         let out = self.velocity_limit.apply(
             &self.controller,
             &state.qd()[..n],
-            gravity_in_tau,
+            gravity,
             rate,
             &mut tau[..n],
         );
@@ -663,8 +670,14 @@ impl ControlCycle {
             return None;
         };
         tau[..n].copy_from_slice(out.tau.as_slice());
-        self.gravity_last[..n].copy_from_slice(out.gravity.as_slice());
-        let gravity = self.gravity_compensation.then_some(&self.gravity_last[..n]);
+        let carried = if self.gravity_compensation {
+            &out.gravity
+        } else {
+            &out.gravity_load
+        };
+        self.gravity_last[..n].copy_from_slice(carried.as_slice());
+        self.gravity_carried = self.gravity_compensation || out.load_gravity_in_tau;
+        let gravity = self.gravity_carried.then_some(&self.gravity_last[..n]);
         self.reaction.blend(&mut tau[..n], gravity, state.qd());
         self.output_tank.set_law(&tau[..n]);
         self.have_valid = true;
@@ -675,7 +688,7 @@ impl ControlCycle {
             state,
             self.controller.model_terms(),
             &self.command,
-            self.gravity_compensation,
+            self.gravity_carried.then_some(&self.gravity_last[..n]),
             (self.period_s, announcing),
             &mut self.counters.core,
         );
@@ -696,7 +709,7 @@ impl ControlCycle {
     /// not add g itself, else 0. Returns whether `tau` contains g(q_v).
     fn safe_command(&self, tau: &mut [f64; MAX_JOINTS], gravity_conflict: bool) -> bool {
         let n = self.n;
-        let hold_gravity = self.gravity_compensation && self.have_valid && !gravity_conflict;
+        let hold_gravity = self.gravity_carried && self.have_valid && !gravity_conflict;
         if hold_gravity {
             tau[..n].copy_from_slice(&self.gravity_last[..n]);
         } else {
@@ -749,7 +762,8 @@ impl ControlCycle {
         t.load_com = load.com.into();
         t.load_progress = self.load_ramp.progress();
         if fresh {
-            telemetry::write_law_terms(t, self.controller.output(), self.gravity_compensation);
+            let gravity = self.gravity_carried.then_some(&self.gravity_last[..n]);
+            telemetry::write_law_terms(t, self.controller.output(), gravity);
             t.h += self.output_tank.energy_at_sample();
         }
     }

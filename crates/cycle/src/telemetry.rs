@@ -6,10 +6,11 @@ use hcc_msgs::{MAX_LEVELS, MAX_TASK_DIM, Telemetry};
 /// Writes what the law computed in its last step (`out`) into `t`: per level
 /// τ_i (Eqs. (20), (21)), the task error x̃_i, the storage S_i (Eqs. (26),
 /// (28)), the conditioning and the singular flag; τ_μ (Eq. (22)) and its
-/// power P_μ = τ_μᵀ q̇ (Sec. IV-C); g(q) when the controller adds it; the
+/// power P_μ = τ_μᵀ q̇ (Sec. IV-C); the gravity torque the command carries
+/// (`gravity`: g(q), or the load's alone where the driver adds the arm's); the
 /// storage H, each level's potential in it, its energy tank and valve.
 /// Allocation-free.
-pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compensation: bool) {
+pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity: Option<&[f64]>) {
     let n = out.tau.len();
     let mut singular = 0u32;
     for i in 0..out.storage.len().min(MAX_LEVELS) {
@@ -30,8 +31,8 @@ pub(crate) fn write_law_terms(t: &mut Telemetry, out: &StepOutput, gravity_compe
     t.h = out.safety.h;
     t.singular_levels = singular;
     t.tau_mu[..n].copy_from_slice(out.tau_mu.as_slice());
-    if gravity_compensation {
-        t.tau_gravity[..n].copy_from_slice(out.gravity.as_slice());
+    if let Some(g) = gravity {
+        t.tau_gravity[..n].copy_from_slice(g);
     }
     t.p_mu = out.p_mu;
 }

@@ -64,14 +64,14 @@ impl VelocityLimit {
     }
 
     /// Corrects `tau` (length n, saturated and filtered, to be sent) at the
-    /// state with velocity `qd` the law just ran on; `gravity_in_tau`: τ
-    /// contains g(q); `rate`: the rate limit in force, if any. `None` where
+    /// state with velocity `qd` the law just ran on; `gravity_in_tau`: the
+    /// gravity torque τ contains (g(q), or the load's alone); `rate`: the rate limit in force, if any. `None` where
     /// the limit is off. Allocation-free.
     pub(crate) fn apply(
         &mut self,
         controller: &Controller,
         qd: &[f64],
-        gravity_in_tau: bool,
+        gravity_in_tau: Option<&[f64]>,
         rate: Option<RateLimit<'_>>,
         tau: &mut [f64],
     ) -> Option<VelocityLimitOutcome> {
@@ -79,10 +79,9 @@ impl VelocityLimit {
             return None;
         }
         let terms = controller.model_terms();
-        if gravity_in_tau {
-            self.g.copy_from(&terms.g);
-        } else {
-            self.g.fill(0.0);
+        match gravity_in_tau {
+            Some(g) => self.g.as_mut_slice().copy_from_slice(g),
+            None => self.g.fill(0.0),
         }
         if let Some(rate) = rate {
             let model = BrakeModel {

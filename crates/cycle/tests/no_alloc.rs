@@ -177,3 +177,70 @@ fn allocates_nothing_with(reaction: Reaction) {
     assert_eq!(during.system_allocs, 0, "{during:?}");
     assert_eq!(during.fallbacks, 0, "{during:?}");
 }
+
+/// A driver that adds gravity itself (the FR3 scenario) and loads told
+/// every 200 cycles, ramped over 0.05 s and taken off again: the model's
+/// load, its ramp and the load's own gravity torque in the command allocate
+/// nothing.
+#[test]
+fn loads_and_their_gravity_allocate_nothing() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/fr3-pose-posture.toml");
+    let scenario = Scenario::load(&path).unwrap();
+    assert!(!scenario.spec.gravity_compensation);
+    let n = scenario.model.nq();
+    let controller = Controller::new(&scenario.model, scenario.spec.clone(), &scenario.q0).unwrap();
+    let mut cycle =
+        ControlCycle::new(controller, &CycleSettings::from_scenario(&scenario)).unwrap();
+    let q0: Vec<f64> = scenario.q0.iter().copied().collect();
+    let states: Vec<JointState> = (0..2 * WARM_UP)
+        .map(|k| {
+            let mut s = JointState::zeroed();
+            let q: Vec<f64> = q0
+                .iter()
+                .map(|q| q + 0.02 * (k as f64 * 1e-3).sin())
+                .collect();
+            s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+            s.header.seq = k + 1;
+            s.flags |= hcc_msgs::STATE_FLAG_DRIVER_GRAVITY_COMPENSATION;
+            s
+        })
+        .collect();
+    let loads: Vec<hcc_msgs::LoadSetpoint> = (0..2 * WARM_UP / 200)
+        .map(|j| {
+            let mass = if j.is_multiple_of(2) {
+                1.0 + 0.1 * j as f64
+            } else {
+                0.0
+            };
+            let mut l = hcc_msgs::LoadSetpoint::point(5, j + 1, mass, [0.0, 0.01, 0.1]);
+            l.ramp_s = 0.05;
+            l
+        })
+        .collect();
+    let step = |cycle: &mut ControlCycle, k: u64| {
+        if k.is_multiple_of(200) {
+            assert_eq!(cycle.take_load(&loads[(k / 200) as usize]), 0);
+        }
+        cycle.decide(&states[k as usize], (k + 1) * 1_000_000)
+    };
+    let rt = RtSection::enter();
+    for k in 0..WARM_UP {
+        step(&mut cycle, k);
+    }
+    let before = thread_stats();
+    let mut carried = 0.0_f64;
+    for k in WARM_UP..2 * WARM_UP {
+        step(&mut cycle, k);
+        let g = &cycle.telemetry().tau_gravity[..n];
+        carried = carried.max(g.iter().fold(0.0, |m, x| m.max(x.abs())));
+    }
+    let during = thread_stats().since(before);
+    drop(rt);
+    println!(
+        "loads with the driver adding gravity: the load's torque up to {carried:.3} N·m; {during:?}"
+    );
+    assert!(carried > 1.0, "{carried}");
+    assert_eq!(during.pool_allocs, 0, "{during:?}");
+    assert_eq!(during.system_allocs, 0, "{during:?}");
+    assert_eq!(during.fallbacks, 0, "{during:?}");
+}

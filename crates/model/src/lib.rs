@@ -23,7 +23,7 @@ pub use hcc_linalg as linalg;
 
 pub use algorithms::*;
 pub use error::ModelError;
-pub use load::{Load, LoadError, set_load};
+pub use load::{Load, LoadError, load_gravity, set_load};
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3, Vector6};
 

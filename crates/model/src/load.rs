@@ -166,3 +166,37 @@ pub fn combined(a: &SpatialInertia, b: &SpatialInertia) -> SpatialInertia {
         inertia: 0.5 * (inertia + inertia.transpose()),
     }
 }
+
+/// The gravity torque of the model's load alone, −J_cᵀ m g₀ (J_c the
+/// Jacobian of its centre of mass c: the tip frame's [`frame_jacobian`]
+/// shifted by ω × r, r = R_tip c; g₀ = [`Model::gravity`]), at the state of
+/// the last kinematics pass, into `out` (length n). `jacobian` is the 6×n
+/// workspace of the tip's Jacobian. What a controller adds when the driver
+/// compensates the arm's gravity but not the load's. Zero without a load or
+/// with the tip on the root link. Allocation-free.
+///
+/// [`frame_jacobian`]: crate::frame_jacobian
+pub fn load_gravity(
+    model: &Model,
+    data: &crate::Data,
+    jacobian: &mut nalgebra::DMatrix<f64>,
+    out: &mut nalgebra::DVector<f64>,
+) {
+    out.fill(0.0);
+    let load = &model.load;
+    if load.mass == 0.0 || tip_body(model).is_none() {
+        return;
+    }
+    let tip = model.tip_frame();
+    crate::frame_jacobian(model, data, tip, jacobian);
+    let r = crate::frame_placement(model, data, tip).rotation * load.com;
+    // v_c = v_tip + ω × r, so J_cᵀ m g₀ = m (J_vᵀ g₀ + J_ωᵀ (r × g₀)).
+    let f = load.mass * model.gravity;
+    let moment = r.cross(&f);
+    for (j, o) in out.iter_mut().enumerate() {
+        let col = jacobian.column(j);
+        let lin = col[0] * f.x + col[1] * f.y + col[2] * f.z;
+        let ang = col[3] * moment.x + col[4] * moment.y + col[5] * moment.z;
+        *o = -(lin + ang);
+    }
+}

@@ -9,7 +9,7 @@ mod common;
 use common::panda;
 use hcc_model::{
     Data, Load, LoadError, Model, crba, forward_kinematics, frame_jacobian, frame_placement,
-    gravity, set_load,
+    gravity, load_gravity, set_load,
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -80,6 +80,38 @@ fn a_load_adds_its_gravity_torque_and_its_inertia() {
     );
     assert!(worst_g < 1e-12, "{worst_g:e}");
     assert!(worst_m < 1e-12, "{worst_m:e}");
+}
+
+/// What a controller adds when the driver compensates the arm's gravity but
+/// not the load's: the loaded model's g less the bare model's, for a load
+/// off the tip's axis (r × g₀ matters), from the loaded model alone.
+#[test]
+fn the_load_s_own_gravity_torque_is_the_difference_of_the_two_models() {
+    let bare = panda();
+    let mut loaded = bare.clone();
+    let load = Load {
+        mass: 1.5,
+        com: Vector3::new(0.04, -0.03, 0.12),
+        inertia: Matrix3::from_diagonal(&Vector3::new(2e-3, 3e-3, 4e-3)),
+    };
+    set_load(&mut loaded, &load);
+    let n = bare.nq();
+    let (mut jac, mut g_load) = (DMatrix::zeros(6, n), DVector::zeros(n));
+    let mut worst = 0.0_f64;
+    for q in configurations() {
+        let mut data = Data::new(&loaded);
+        forward_kinematics(&loaded, &mut data, &q);
+        load_gravity(&loaded, &data, &mut jac, &mut g_load);
+        let want = gravity_at(&loaded, &q) - gravity_at(&bare, &q);
+        worst = worst.max((&g_load - &want).amax() / want.amax());
+    }
+    println!("the load's own gravity torque off g(loaded) − g(bare) by {worst:.1e} (relative)");
+    assert!(worst < 1e-12, "{worst:e}");
+    // No load: zero.
+    let mut data = Data::new(&bare);
+    forward_kinematics(&bare, &mut data, &configurations()[1]);
+    load_gravity(&bare, &data, &mut jac, &mut g_load);
+    assert!(g_load.iter().all(|x| *x == 0.0));
 }
 
 #[test]

@@ -251,7 +251,9 @@ pub struct Telemetry {
     pub tau_level: [[f64; MAX_JOINTS]; MAX_LEVELS],
     /// Coupling compensation τ_μ, Eq. (22).
     pub tau_mu: [f64; MAX_JOINTS],
-    /// Gravity torque g(q) (zero when gravity is not included).
+    /// The gravity torque the command carries: g(q) when the controller adds
+    /// gravity; the load's alone where the driver adds the arm's (its model
+    /// does not know the load, docs/load.md); zero otherwise.
     pub tau_gravity: [f64; MAX_JOINTS],
     /// Task errors x̃_i per level (first m_i entries valid).
     pub task_error: [[f64; MAX_TASK_DIM]; MAX_LEVELS],

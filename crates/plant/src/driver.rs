@@ -30,7 +30,10 @@
 //! When the controller does not include gravity (the scenario's
 //! `gravity_compensation = false`), the simulated driver compensates gravity
 //! itself like many commercial arms ([`Gravity::DriverAdds`]): it sets
-//! `STATE_FLAG_DRIVER_GRAVITY_COMPENSATION` and adds g(q_k) to every command.
+//! `STATE_FLAG_DRIVER_GRAVITY_COMPENSATION` and adds g(q_k) to every command —
+//! g of the robot's own model, which knows no load in the hand (as a robot
+//! that was not told one): the load's gravity is the controller's to add
+//! (docs/load.md).
 //!
 //! [`SimDriver::advance`] allocates nothing.
 
@@ -84,6 +87,9 @@ pub struct DriverCounters {
 /// The plant plus the driver's command handling.
 pub struct SimDriver {
     plant: Plant,
+    /// The robot's own model (its gravity when the driver adds it): the
+    /// plant's without any load.
+    robot: Model,
     data: Data,
     n: usize,
     step: PeriodStep,
@@ -103,8 +109,11 @@ impl SimDriver {
         let n = plant.model().nq();
         // The same arithmetic as run_zoh.
         let period_s = scenario.period_s();
+        let mut robot = plant.model().clone();
+        hcc_model::set_load(&mut robot, &hcc_model::Load::none());
         Ok(SimDriver {
             data: Data::new(plant.model()),
+            robot,
             n,
             step: PeriodStep::new(period_s, s.substeps)?,
             period_s,
@@ -241,7 +250,7 @@ impl SimDriver {
     pub fn advance(&mut self, newest: Option<&TorqueCommand>) -> Result<Applied, SimError> {
         let command =
             newest.filter(|c| self.logic.offer(c, self.k) == Offer::Applicable { current: true });
-        let (model, data, q) = (self.plant.model(), &mut self.data, self.plant.q());
+        let (model, data, q) = (&self.robot, &mut self.data, self.plant.q());
         let gravity = |g: &mut [f64]| {
             hcc_model::gravity(model, data, q);
             g.copy_from_slice(data.g.as_slice());

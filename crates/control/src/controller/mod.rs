@@ -96,6 +96,8 @@ pub struct Controller {
     safety: crate::safety::Safety,
     /// The acceleration the law's torque gives (the velocity barrier's input).
     barrier_qdd: DVector<f64>,
+    /// The tip's 6×n Jacobian (the load's gravity torque, hcc_model::load_gravity).
+    load_jacobian: DMatrix<f64>,
     /// The torque the robot applies now (the previous command, after the torque
     /// filter), when the cycle reports it ([`Controller::set_applied_torque`]).
     applied_tau: DVector<f64>,
@@ -167,6 +169,7 @@ impl Controller {
             mu: MuWork::new(n, r),
             safety,
             barrier_qdd: DVector::zeros(n),
+            load_jacobian: DMatrix::zeros(6, n),
             applied_tau: DVector::zeros(n),
             have_applied: false,
             applied_qdd: DVector::zeros(n),
@@ -262,10 +265,14 @@ impl Controller {
         match res {
             Ok(()) => Ok(&self.out),
             Err(e) => {
-                let gc = self.spec.gravity_compensation
-                    && self.out.gravity.iter().all(|x| x.is_finite());
+                let g = match (self.spec.gravity_compensation, self.out.load_gravity_in_tau) {
+                    (true, _) => Some(&self.out.gravity),
+                    (false, true) => Some(&self.out.gravity_load),
+                    (false, false) => None,
+                };
+                let g = g.filter(|g| g.iter().all(|x| x.is_finite()));
                 for i in 0..self.n {
-                    self.out.tau[i] = if gc { self.out.gravity[i] } else { 0.0 };
+                    self.out.tau[i] = g.map_or(0.0, |g| g[i]);
                 }
                 Err(e)
             }
@@ -335,6 +342,20 @@ impl Controller {
             .map_err(|_| ControlError::Numerical("M is not positive definite"))?;
         sym_sum_transpose(&mut self.mdot, &self.data.c);
         copy(&mut self.out.gravity, &self.data.g);
+        // The driver compensates the arm's gravity with its own model, which
+        // does not know the load: the law adds the load's (docs/load.md).
+        let out = &mut self.out;
+        out.load_gravity_in_tau = !self.spec.gravity_compensation && self.model.load.mass > 0.0;
+        if out.load_gravity_in_tau {
+            hcc_model::load_gravity(
+                &self.model,
+                &self.data,
+                &mut self.load_jacobian,
+                &mut out.gravity_load,
+            );
+        } else {
+            out.gravity_load.fill(0.0);
+        }
         Ok(())
     }
 
@@ -361,6 +382,8 @@ impl Controller {
         self.velocity_barrier(q, qd);
         if self.spec.gravity_compensation {
             self.out.tau += &self.data.g;
+        } else if self.out.load_gravity_in_tau {
+            self.out.tau += &self.out.gravity_load;
         }
         if self.out.tau.iter().any(|x| !x.is_finite()) {
             return Err(ControlError::Numerical("non-finite torque"));

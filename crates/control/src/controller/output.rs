@@ -8,7 +8,9 @@ use nalgebra::{DMatrix, DVector};
 /// What one control cycle produced (all preallocated; valid after [`Controller::step`](super::Controller::step)).
 #[derive(Clone, Debug)]
 pub struct StepOutput {
-    /// τ = Σ τ_i + τ_μ + g (eq. 19); g only with gravity compensation.
+    /// τ = Σ τ_i + τ_μ + g (eq. 19); g only with gravity compensation (and,
+    /// when the driver compensates the arm's gravity, the load's alone:
+    /// [`StepOutput::gravity_load`]).
     pub tau: DVector<f64>,
     /// τ_i of each level (eqs. 20, 21).
     pub tau_level: Vec<DVector<f64>>,
@@ -19,6 +21,13 @@ pub struct StepOutput {
     pub tau_feed_forward: DVector<f64>,
     /// g(q) (also when it is not added to τ).
     pub gravity: DVector<f64>,
+    /// The load's own gravity torque −J_cᵀ m g₀ (hcc_model::load_gravity),
+    /// added to τ when the driver compensates the arm's gravity but not the
+    /// load's ([`StepOutput::load_gravity_in_tau`]); zero otherwise.
+    pub gravity_load: DVector<f64>,
+    /// Whether τ carries [`StepOutput::gravity_load`]: the driver compensates
+    /// gravity (no gravity compensation here) and the model carries a load.
+    pub load_gravity_in_tau: bool,
     /// x_i − x_{i,d} per level (orientation: 2·R_d·ε ≈ the rotation vector, world axes).
     pub task_error: Vec<DVector<f64>>,
     /// v_i = J̄_i q̇ (eq. 3); the lowest level has n − Σ_{j<r} m_j entries.
@@ -63,6 +72,8 @@ impl StepOutput {
             tau_mu: DVector::zeros(n),
             tau_feed_forward: DVector::zeros(n),
             gravity: DVector::zeros(n),
+            gravity_load: DVector::zeros(n),
+            load_gravity_in_tau: false,
             task_error: dims.iter().map(|&m| DVector::zeros(m)).collect(),
             v: v_dims.iter().map(|&d| DVector::zeros(d)).collect(),
             potential: vec![0.0; r],

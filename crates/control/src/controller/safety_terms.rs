@@ -45,7 +45,8 @@ impl Controller {
 
     /// The acceleration the applied torque ([`Controller::set_applied_torque`])
     /// gives on the model, M⁻¹ (τ_applied − g − C q̇) (g only where the
-    /// controller adds it: the robot adds it itself otherwise), into
+    /// controller adds it: the robot adds it itself otherwise, and then the
+    /// load's alone where the controller adds that), into
     /// `applied_qdd`; `have_applied` false when there is none or the solve fails.
     pub(super) fn applied_acceleration(&mut self, qd: &DVector<f64>) {
         if !self.have_applied {
@@ -56,6 +57,8 @@ impl Controller {
         *a += &self.applied_tau;
         if self.spec.gravity_compensation {
             *a -= &self.data.g;
+        } else if self.out.load_gravity_in_tau {
+            *a -= &self.out.gravity_load;
         }
         self.have_applied = hcc_model::linalg::cholesky_solve_in_place(&self.chol, a).is_ok();
     }

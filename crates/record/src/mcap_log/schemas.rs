@@ -137,7 +137,7 @@ fn telemetry() -> Value {
             "singular_levels": integer("bit i: level i+1 singular"),
             "tau": numbers("total torque τ = Σ τ_i + τ_μ + g, eq. (19), N·m"),
             "tau_mu": numbers("coupling compensation τ_μ, eq. (22), N·m"),
-            "tau_gravity": numbers("gravity torque g(q), N·m"),
+            "tau_gravity": numbers("the gravity torque the command carries: g(q), or the load's alone where the driver adds the arm's, N·m"),
             "tau_ext": numbers("estimate r of the external joint torque (momentum observer), N·m"),
             "P_mu": number("power of τ_μ, P_μ = τ_μᵀ q̇ (≈ 0), W"),
             "H": number("storage H of the arm and the controller, J"),
