@@ -35,6 +35,30 @@ class Wrench:
 
 
 @dataclass
+class Load:
+    """A load held rigidly at the tip frame (``[robot.load]``, ``[[simulation.load]]``;
+    docs/load.md): mass (kg), centre of mass in the tip frame (m), rotational inertia
+    about it in the tip's axes (kg·m²: ixx, ixy, ixz, iyy, iyz, izz)."""
+
+    mass: float
+    com: list[float]
+    inertia: list[float]
+
+    def inertia_matrix(self) -> list[list[float]]:
+        """The symmetric 3×3 inertia."""
+        xx, xy, xz, yy, yz, zz = self.inertia
+        return [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+
+
+@dataclass
+class TimedLoad:
+    """From ``start_s`` on the plant's tip carries ``load`` (replacing the one before)."""
+
+    start_s: float
+    load: Load
+
+
+@dataclass
 class Scenario:
     """Robot, initial state, plant and driver settings of a scenario."""
 
@@ -57,6 +81,10 @@ class Scenario:
     hold_cycles: int
     fallback_damping: float | list[float]
     levels: list[dict[str, Any]] = field(default_factory=list)
+    #: The load the tip carries from the start (``[robot.load]``), if any.
+    robot_load: Load | None = None
+    #: Loads the plant's tip takes at a time (``[[simulation.load]]``), by time.
+    loads: list[TimedLoad] = field(default_factory=list)
 
     @property
     def period_s(self) -> float:
@@ -112,6 +140,23 @@ def _per_joint(path: pathlib.Path, name: str, v: Any) -> float | list[float]:
     return out if isinstance(v, list) else out[0]
 
 
+def _load(path: pathlib.Path, name: str, section: Any) -> Load:
+    """A ``[robot.load]``-shaped table: mass ≥ 0, com (3), inertia (6, a point mass
+    without); the controller checks the physics (triangle inequalities, payload)."""
+    if not isinstance(section, dict):
+        raise ScenarioError(f"{path}: {name} must be a table")
+    if "mass" not in section:
+        raise ScenarioError(f"{path}: {name} needs mass")
+    mass = _number(path, f"{name}.mass", section["mass"])
+    if mass < 0:
+        raise ScenarioError(f"{path}: {name}.mass must not be negative, got {mass}")
+    return Load(
+        mass=mass,
+        com=_vector(path, f"{name}.com", section.get("com", [0.0] * 3), 3),
+        inertia=_vector(path, f"{name}.inertia", section.get("inertia", [0.0] * 6), 6),
+    )
+
+
 def _table(path: pathlib.Path, doc: dict[str, Any], name: str) -> dict[str, Any]:
     t = doc.get(name, {})
     if not isinstance(t, dict):
@@ -154,6 +199,16 @@ def _parse(path: pathlib.Path, doc: dict[str, Any]) -> Scenario:
                 torque=_vector(path, f"{p}.torque", w.get("torque", [0.0] * 3), 3),
             )
         )
+    robot_load = _load(path, "robot.load", robot["load"]) if "load" in robot else None
+    loads = []
+    for i, section in enumerate(sim.get("load", [])):
+        p = f"simulation.load[{i}]"
+        if not isinstance(section, dict) or "start_s" not in section:
+            raise ScenarioError(f"{path}: {p} needs start_s")
+        start = _number(path, f"{p}.start_s", section["start_s"])
+        rest = {k: v for k, v in section.items() if k != "start_s"}
+        loads.append(TimedLoad(start, _load(path, p, rest)))
+    loads.sort(key=lambda tl: tl.start_s)
     daemon = _table(path, doc, "sim_daemon")
     mode = daemon.get("mode", "realtime")
     if mode not in ("realtime", "lockstep"):
@@ -183,4 +238,6 @@ def _parse(path: pathlib.Path, doc: dict[str, Any]) -> Scenario:
             path, "sim_daemon.fallback_damping", daemon.get("fallback_damping", 2.0)
         ),
         levels=list(doc.get("level", [])),
+        robot_load=robot_load,
+        loads=loads,
     )

@@ -139,3 +139,46 @@ def test_short_window_misses_are_told_apart() -> None:
     assert not is_short_window_miss(3, 4, published + window, published, window)
     # No miss in this tick: nothing to tell apart.
     assert not is_short_window_miss(4, 4, published + 100_000, published, window)
+
+
+PANDA = ROOT / "config" / "panda-pose-posture.toml"
+
+
+def test_a_load_in_the_hand_adds_its_weight_and_the_robot_s_own_gravity_knows_none(
+    tmp_path: pathlib.Path,
+) -> None:
+    """docs/load.md: the plant's g gains −J_cᵀ m g₀ of the load (J_c at its centre
+    of mass, placed by the tip body's pose), the robot's own g stays the bare arm's,
+    and a ``[[simulation.load]]`` is taken at its time."""
+    from hcc.scenario import Load
+    import mujoco
+
+    text = PANDA.read_text().replace('urdf = "', f'urdf = "{(ROOT / "config").as_posix()}/', 1)
+    scenario = tmp_path / "loaded.toml"
+    scenario.write_text(text + "\n[[simulation.load]]\nstart_s = 0.005\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\n")
+    s = Scenario.load(scenario)
+    assert [(tl.start_s, tl.load.mass) for tl in s.loads] == [(0.005, 1.0)]
+    plant = Plant(s)
+    bare = plant.gravity()
+    load = Load(1.5, [0.04, -0.03, 0.12], [2e-3, 0.0, 0.0, 3e-3, 0.0, 4e-3])
+    plant.set_load(load)
+    loaded = plant.gravity()
+    # Independently: the point c = p_tip + R_tip com, its Jacobian, −J_cᵀ m g₀.
+    d = plant._scratch
+    tip = plant.robot.link_bodies[s.tip_link]
+    point = d.xpos[tip] + d.xmat[tip].reshape(3, 3) @ np.array(load.com)
+    jacp = np.zeros((3, plant.model.nv))
+    mujoco.mj_jac(plant.model, d, jacp, None, point, tip)
+    want = -(jacp.T @ (load.mass * np.array(s.gravity)))[plant.robot.dof_adr]
+    off = np.max(np.abs(loaded - bare - want)) / np.max(np.abs(want))
+    print(f"MuJoCo plant: the load's gravity torque off −J_cᵀ m g₀ by {off:.1e} (relative)")
+    assert off < 1e-10
+    assert np.max(np.abs(plant.robot_gravity() - bare)) < 1e-12
+    # The timed load: taken at 5 ms.
+    plant.set_load(Load(0.0, [0.0] * 3, [0.0] * 6))
+    for _ in range(4):
+        plant.advance(bare)
+    assert plant.load.mass == 0.0
+    for _ in range(2):
+        plant.advance(bare)
+    assert plant.load.mass == 1.0

@@ -137,7 +137,8 @@ class MujocoDriver:
         return command.mode_or_none()
 
     def _fallback_torque(self) -> None:
-        self.tau = self.plant.gravity() - self.fallback_damping * self.plant.qd
+        # The robot holds its own g(q), which knows no load (as hcc-sim's driver).
+        self.tau = self.plant.robot_gravity() - self.fallback_damping * self.plant.qd
 
     def advance(self, newest: TorqueCommand | None) -> Applied:
         """Chooses the torque for [t_k, t_{k+1}], integrates the period and advances k."""
@@ -150,7 +151,7 @@ class MujocoDriver:
         elif mode is not None and newest is not None:
             self.tau = np.array(newest.tau[: self.n])
             if self.driver_gravity:
-                self.tau = self.tau + self.plant.gravity()
+                self.tau = self.tau + self.plant.robot_gravity()
             self.last_command_tau = self.tau.copy()
             self.have_command = True
             self.consecutive_misses = 0

@@ -7,6 +7,14 @@ External wrenches of the scenario act at their link frame's origin (world
 axes) during their time window; they are evaluated at every RK4 stage (a
 control callback), like the Rust plant evaluates them at every stage.
 
+Loads (docs/load.md): a massless body ``hcc_load`` welded to the tip link
+carries the load in the hand — ``[robot.load]`` from the start, each
+``[[simulation.load]]`` from its ``start_s`` (taken at the first RK4 step that
+begins at or after it, as the Rust plant takes it), its mass, centre of mass
+and inertia written into the compiled model (MuJoCo recomputes the composite
+inertia from them every step). :meth:`Plant.robot_gravity` is the robot's own
+g(q), which knows no load: what a driver that adds gravity adds.
+
 Scene ``wall``: a rigid, frictionless box whose face passes through
 ``point`` with outward normal ``normal``, and a sphere of ``tool_radius``
 (massless) at the tip link, the only shape of the robot that touches it.
@@ -24,8 +32,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..scenario import Scenario, ScenarioError, load_toml
+from ..scenario import Load, Scenario, ScenarioError, load_toml
 from .model import RobotModel, build_spec, compile_robot
+
+#: The body welded to the tip link that carries the load in the hand.
+LOAD_BODY: str = "hcc_load"
 
 
 @dataclass
@@ -114,6 +125,12 @@ class Plant:
         self._tool_geom = "hcc_tool"
         if self.wall is not None:
             self._add_wall(spec, scenario.tip_link, self.wall)
+        tip_body = spec.body(scenario.tip_link)
+        if tip_body is None:
+            raise ScenarioError(f"tip link {scenario.tip_link!r} is not a body of the MuJoCo model")
+        load_body = tip_body.add_body(name=LOAD_BODY)
+        load_body.mass = 0.0
+        load_body.inertia = [0.0, 0.0, 0.0]
         self.robot: RobotModel = compile_robot(scenario, spec, chain)
         m = self.robot.model
         if self.wall is None:
@@ -143,6 +160,45 @@ class Plant:
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, self._tool_geom) if self.wall else -1
         )
         self._tip = self.robot.link_bodies[scenario.tip_link]
+        self._load_body = self.robot.link_bodies[LOAD_BODY]
+        self._jacp = np.zeros((3, m.nv))
+        self.load = Load(0.0, [0.0] * 3, [0.0] * 6)
+        if scenario.robot_load is not None:
+            self.set_load(scenario.robot_load)
+        self._loads = list(scenario.loads)
+        self._loads_taken = 0
+        mujoco.mj_forward(m, self.data)
+
+    def set_load(self, load: Load) -> None:
+        """The tip carries ``load`` from now on (replacing the one before): the
+        ``hcc_load`` body's mass, centre of mass (tip frame) and principal
+        inertia with its axes."""
+        if not (load.mass >= 0.0 and math.isfinite(load.mass)):
+            raise ScenarioError(f"load mass {load.mass} must be finite and non-negative")
+        moments, axes = np.linalg.eigh(np.array(load.inertia_matrix(), dtype=float))
+        if moments[0] < -1e-12 * max(1.0, abs(moments[-1])):
+            raise ScenarioError(f"load inertia {load.inertia} is not positive semidefinite")
+        if np.linalg.det(axes) < 0:
+            axes[:, 2] = -axes[:, 2]
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, axes.flatten())
+        m, b = self.model, self._load_body
+        m.body_mass[b] = load.mass
+        m.body_ipos[b] = load.com
+        m.body_inertia[b] = np.maximum(moments, 0.0)
+        m.body_iquat[b] = quat
+        # Compiled with its inertial frame at the body's: MuJoCo would keep
+        # skipping the offset (body_sameframe); and the composite inertia of
+        # the tip's branch is no longer that of a simple body.
+        m.body_sameframe[b] = 0
+        m.body_simple[b] = 0
+        self.load = load
+
+    def _take_loads(self, t: float) -> None:
+        """Takes the timed loads whose time has come at ``t``."""
+        while self._loads_taken < len(self._loads) and self._loads[self._loads_taken].start_s <= t + 1e-12:
+            self.set_load(self._loads[self._loads_taken].load)
+            self._loads_taken += 1
 
     @staticmethod
     def _add_wall(spec: mujoco.MjSpec, tip: str, wall: WallScene) -> None:
@@ -212,12 +268,29 @@ class Plant:
         mujoco.mj_rne(self.model, s, 0, self._g)
         return self._g[self.robot.dof_adr].copy()
 
+    def robot_gravity(self) -> np.ndarray:
+        """The robot's own g(q), which knows no load in the hand: :meth:`gravity`
+        less the load's −J_cᵀ m g₀ (J_c at the load's centre of mass)."""
+        g = self.gravity()
+        if self.load.mass == 0.0:
+            return g
+        s, b = self._scratch, self._load_body
+        mujoco.mj_jac(self.model, s, self._jacp, None, s.xipos[b], b)
+        held = -(self._jacp.T @ (self.load.mass * self.model.opt.gravity))
+        return g - held[self.robot.dof_adr]
+
     def advance(self, tau: np.ndarray) -> None:
         """Integrates one control period with ``tau`` held; raises on divergence."""
         m, d = self.model, self.data
         d.qfrc_applied[:] = 0.0
         d.qfrc_applied[self.robot.dof_adr] = tau
-        mujoco.mj_step(m, d, nstep=self.substeps)
+        if self._loads_taken < len(self._loads):
+            # Step by step while a load is still to come, to take it on time.
+            for i in range(self.substeps):
+                self._take_loads(self.k * self.period_s + i * self.scenario.integrator_dt_s)
+                mujoco.mj_step(m, d)
+        else:
+            mujoco.mj_step(m, d, nstep=self.substeps)
         bad = int(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
         if bad or not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise FloatingPointError(f"the MuJoCo plant diverged at t = {d.time:.6f} s")
