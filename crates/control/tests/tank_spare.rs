@@ -56,3 +56,60 @@ fn without_the_tanks_there_is_no_spare() {
     assert_eq!(c.tank_spare(), 0.0);
     assert_eq!(c.draw_tank_spare(1.0), 0.0);
 }
+
+/// A change of the storage the model itself makes (a load ramping in):
+/// a rise paid from the spare, a fall into the fade's tank, a rise the
+/// spare cannot pay refused with nothing taken.
+#[test]
+fn a_model_change_is_booked_or_refused_whole() {
+    let model = panda();
+    let spec = panda_spec(&model);
+    let mut c = Controller::new(&model, spec, &DVector::from_vec(Q0.to_vec())).expect("ctl");
+    for _ in 0..50 {
+        c.step(&Q0, &QD).expect("step");
+    }
+    let spare = c.tank_spare();
+    assert!(c.book_model_change(0.25));
+    assert!((c.tank_spare() - (spare - 0.25)).abs() < 1e-9);
+    assert!(c.book_model_change(-0.1), "a fall is always booked");
+    assert!((c.tank_spare() - (spare - 0.15)).abs() < 1e-9);
+    let left = c.tank_spare();
+    assert!(!c.book_model_change(left + 1.0), "more than the spare");
+    assert!((c.tank_spare() - left).abs() < 1e-9, "nothing taken");
+    assert!(c.book_model_change(0.0) && c.book_model_change(f64::NAN));
+}
+
+/// The kinetic energy of a load at the tip's twist is what it adds to the
+/// arm's: ½ q̇ᵀ (M_loaded − M_bare) q̇, for a load with its own inertia off
+/// the tip's axis.
+#[test]
+fn a_load_s_kinetic_energy_is_what_it_adds_to_the_arm_s() {
+    use hcc_model::{Data, Load, crba, set_load};
+    use nalgebra::{Matrix3, Vector3};
+    let bare = panda();
+    let load = Load {
+        mass: 1.5,
+        com: Vector3::new(0.04, -0.03, 0.12),
+        inertia: Matrix3::from_diagonal(&Vector3::new(2e-3, 3e-3, 4e-3)),
+    };
+    let mut loaded = bare.clone();
+    set_load(&mut loaded, &load);
+    let mut c =
+        Controller::new(&bare, panda_spec(&bare), &DVector::from_vec(Q0.to_vec())).expect("ctl");
+    c.step(&Q0, &QD).expect("step");
+    let t = c.load_kinetic_energy(&load, &QD);
+    let q = DVector::from_vec(Q0.to_vec());
+    let qd = DVector::from_vec(QD.to_vec());
+    let m = |model: &hcc_model::Model| {
+        let mut d = Data::new(model);
+        crba(model, &mut d, &q);
+        d.m.clone()
+    };
+    let want = 0.5 * qd.dot(&((m(&loaded) - m(&bare)) * &qd));
+    println!("a load's kinetic energy {t:.6e} J, ½ q̇ᵀ ΔM q̇ {want:.6e} J");
+    assert!(
+        (t - want).abs() < 1e-12 * want.abs().max(1e-3),
+        "{t} vs {want}"
+    );
+    assert_eq!(c.load_kinetic_energy(&Load::none(), &QD), 0.0);
+}

@@ -648,7 +648,12 @@ impl ControlCycle {
         self.counters.core.streams_stopped = self.setpoints.streams_stopped;
         // A load being announced moves the model on (module `load_ramp`).
         let announcing = self.load_ramp.active();
-        self.load_ramp.advance(self.period_s, &mut self.controller);
+        if !self
+            .load_ramp
+            .advance(self.period_s, &mut self.controller, state.qd())
+        {
+            self.counters.core.load_ramp_held += 1;
+        }
         // The contact reaction, from the flag of the previous state (module `reaction`).
         self.reaction.before_law(
             self.contact.in_contact(),

@@ -38,6 +38,9 @@ hcc_msgs::define_counters! {
         /// Setpoint streams (goal and velocity) that stopped: their velocity
         /// feed-forward faded to zero (module `setpoints`).
         streams_stopped: "setpoint streams that stopped (feed-forward faded)",
+        /// Cycles in which a load's ramp held: the energy tanks could not
+        /// pay the storage it adds (module `load_ramp`).
+        load_ramp_held: "cycles a load's ramp held (the tanks could not pay it)",
     }
 }
 

@@ -7,6 +7,14 @@
 //! of the ramp's progress u, so every intermediate load is a physical one
 //! (a mixture of the two). While it ramps the contact detection stays quiet
 //! (the cycle's `contact` module): the change is announced, not a collision.
+//!
+//! **Energy.** The model's storage H counts the load's kinetic energy
+//! T(load) at the tip's twist, linear in the parameters the ramp mixes: a
+//! step Δs of the ramp changes H by Δs (T(to) − T(from)) with no power behind
+//! it. The tanks book it (`Controller::book_model_change`): a rise is paid
+//! from their spare, a fall fills the fade's tank; a rise they cannot pay
+//! holds the ramp for the cycle (counted, `load_ramp_held`) until the arm
+//! is slower — at rest (q̇ = 0) it is free.
 
 use hcc_control::Controller;
 use hcc_model::Load;
@@ -58,21 +66,31 @@ impl LoadRamp {
         self.active
     }
 
-    /// One cycle of `dt` s on: the controller's model takes the ramp's load
-    /// at its new progress. Allocation-free.
-    pub(crate) fn advance(&mut self, dt: f64, controller: &mut Controller) {
+    /// One cycle of `dt` s on at joint velocity `qd`: the controller's model
+    /// takes the ramp's load at its new progress, its change of the storage
+    /// booked by the tanks (module docs). Returns false when the tanks could
+    /// not pay it and the ramp held. Allocation-free.
+    pub(crate) fn advance(&mut self, dt: f64, controller: &mut Controller, qd: &[f64]) -> bool {
         if !self.active {
-            return;
+            return true;
         }
-        if dt.is_finite() && dt > 0.0 {
-            self.elapsed_s += dt;
-        }
-        let u = if self.duration_s > 0.0 {
-            (self.elapsed_s / self.duration_s).clamp(0.0, 1.0)
-        } else {
-            1.0
+        let smooth = |u: f64| u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+        let progress = |elapsed: f64| {
+            if self.duration_s > 0.0 {
+                (elapsed / self.duration_s).clamp(0.0, 1.0)
+            } else {
+                1.0
+            }
         };
-        let s = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+        let step = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
+        let (u0, u) = (progress(self.elapsed_s), progress(self.elapsed_s + step));
+        let (s0, s) = (smooth(u0), smooth(u));
+        let gain = controller.load_kinetic_energy(&self.to, qd)
+            - controller.load_kinetic_energy(&self.from, qd);
+        if !controller.book_model_change((s - s0) * gain) {
+            return false;
+        }
+        self.elapsed_s += step;
         let load = if u >= 1.0 {
             self.active = false;
             self.to
@@ -80,6 +98,7 @@ impl LoadRamp {
             mixture(&self.from, &self.to, s)
         };
         controller.set_load(&load);
+        true
     }
 }
 

@@ -125,6 +125,55 @@ impl Controller {
         energy - left
     }
 
+    /// Books a change `energy` (J) of the storage H that the model itself
+    /// makes (a load announced at run time, hcc-cycle's `load_ramp`): a rise
+    /// is paid from the [spare](Controller::tank_spare), a fall goes into the
+    /// fade's tank, so that H plus the tanks does not change by it. Returns
+    /// false, and books nothing, when the spare cannot pay the rise: the
+    /// change must wait. Always true with the tanks off (nothing is booked).
+    pub fn book_model_change(&mut self, energy: f64) -> bool {
+        if !self.tanks_on() || energy.is_nan() || energy == 0.0 {
+            return true;
+        }
+        if energy < 0.0 {
+            self.safety.fill_fade_tank(-energy);
+            return true;
+        }
+        if self.tank_spare() < energy {
+            return false;
+        }
+        self.draw_tank_spare(energy);
+        true
+    }
+
+    /// The kinetic energy `load`, held at the tip, has at the tip's twist
+    /// J_tip q̇ (J): ½ m |v_c|² + ½ ωᵀ R I_c Rᵀ ω with v_c = v + ω × R c, at
+    /// the kinematics of the last cycle (0 with the tip on the root link).
+    /// The mixture of two loads is linear in their parameters, and so is this
+    /// energy: what the model's storage gains as a load ramps in. Allocation-free.
+    pub fn load_kinetic_energy(&mut self, load: &hcc_model::Load, qd: &[f64]) -> f64 {
+        if load.mass == 0.0 && load.inertia == nalgebra::Matrix3::zeros() {
+            return 0.0;
+        }
+        if hcc_model::load::tip_body(&self.model).is_none() || qd.len() != self.n {
+            return 0.0;
+        }
+        let tip = self.model.tip_frame();
+        hcc_model::frame_jacobian(&self.model, &self.data, tip, &mut self.load_jacobian);
+        let mut twist = [0.0; 6];
+        for (k, t) in twist.iter_mut().enumerate() {
+            *t = (0..self.n)
+                .map(|j| self.load_jacobian[(k, j)] * qd[j])
+                .sum();
+        }
+        let v = nalgebra::Vector3::new(twist[0], twist[1], twist[2]);
+        let w = nalgebra::Vector3::new(twist[3], twist[4], twist[5]);
+        let rot = hcc_model::frame_placement(&self.model, &self.data, tip).rotation;
+        let vc = v + w.cross(&(rot * load.com));
+        let wl = rot.inverse() * w;
+        0.5 * load.mass * vc.norm_squared() + 0.5 * wl.dot(&(load.inertia * wl))
+    }
+
     /// A goal or gains changed (a command, an input): in the next cycle every
     /// tank holds at least `tank_initial` plus a share of the storage again.
     pub(super) fn refill_tanks(&mut self) {

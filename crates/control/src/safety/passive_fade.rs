@@ -77,6 +77,14 @@ impl Safety {
         if self.spec.enabled { self.tank } else { 0.0 }
     }
 
+    /// Puts `energy` (J, ≥ 0) into the fade's tank, up to `fade_tank_max`
+    /// (the rest is dissipated); nothing with the safety layer off.
+    pub(crate) fn fill_fade_tank(&mut self, energy: f64) {
+        if self.spec.enabled && energy > 0.0 {
+            self.tank = (self.tank + energy).min(self.spec.fade_tank_max);
+        }
+    }
+
     /// Takes up to `energy` (J) from the fade's tank; returns what it took.
     pub(crate) fn draw_fade_tank(&mut self, energy: f64) -> f64 {
         if !self.spec.enabled || energy.is_nan() {
