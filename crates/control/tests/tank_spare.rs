@@ -12,14 +12,20 @@ use nalgebra::DVector;
 const Q0: [f64; 7] = [0.1, -0.2, 0.05, -2.0, 0.1, 1.9, 0.7];
 const QD: [f64; 7] = [0.1, -0.2, 0.15, 0.1, -0.3, 0.2, 0.25];
 
-#[test]
-fn the_spare_is_drawn_down_to_the_valves_band_and_no_further() {
+/// The Panda's controller after 50 cycles in motion (its tanks filled).
+fn panda_after_50_cycles() -> Controller {
     let model = panda();
     let spec = panda_spec(&model);
     let mut c = Controller::new(&model, spec, &DVector::from_vec(Q0.to_vec())).expect("ctl");
     for _ in 0..50 {
         c.step(&Q0, &QD).expect("step");
     }
+    c
+}
+
+#[test]
+fn the_spare_is_drawn_down_to_the_valves_band_and_no_further() {
+    let mut c = panda_after_50_cycles();
     let spare = c.tank_spare();
     assert!(
         spare > 1.0,
@@ -62,12 +68,7 @@ fn without_the_tanks_there_is_no_spare() {
 /// spare cannot pay refused with nothing taken.
 #[test]
 fn a_model_change_is_booked_or_refused_whole() {
-    let model = panda();
-    let spec = panda_spec(&model);
-    let mut c = Controller::new(&model, spec, &DVector::from_vec(Q0.to_vec())).expect("ctl");
-    for _ in 0..50 {
-        c.step(&Q0, &QD).expect("step");
-    }
+    let mut c = panda_after_50_cycles();
     let spare = c.tank_spare();
     assert!(c.book_model_change(0.25));
     assert!((c.tank_spare() - (spare - 0.25)).abs() < 1e-9);

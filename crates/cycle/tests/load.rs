@@ -20,16 +20,26 @@ struct Run {
     tau: Vec<Vec<f64>>,
 }
 
+/// The shipped scenario `file` whose plant's hand takes `mass` kg at 0.1 m
+/// along the tip's z at `start_s`, and a control cycle of it.
+fn with_load(file: &str, start_s: f64, mass: f64) -> (Scenario, ControlCycle) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(file);
+    let text = std::fs::read_to_string(&path).unwrap()
+        + &format!(
+            "\n[[simulation.load]]\nstart_s = {start_s}\nmass = {mass}\ncom = [0.0, 0.0, 0.1]\n"
+        );
+    let sc = Scenario::from_toml_str(&text, &path).unwrap();
+    let c = hcc_cycle::controller_for(&sc).unwrap();
+    let d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    (sc, d)
+}
+
 /// The Panda holding its pose; its hand takes 1 kg at 0.1 m along the tip's
 /// z at 1 s; announced then over `ramp_s` when `announce` is given.
 fn run(announce: Option<f64>) -> Run {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let text = std::fs::read_to_string(&path).unwrap()
-        + "\n[[simulation.load]]\nstart_s = 1.0\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\n";
-    let sc = Scenario::from_toml_str(&text, &path).unwrap();
-    let c = hcc_cycle::controller_for(&sc).unwrap();
-    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let (sc, mut d) = with_load("panda-pose-posture.toml", 1.0, 1.0);
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
     let attach = 1000;
@@ -164,14 +174,8 @@ fn a_load_message_is_checked_answered_and_ramped_in() {
 #[test]
 fn a_load_the_driver_does_not_know_is_compensated_by_the_controller() {
     let run = |announce: bool| {
-        let path =
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/fr3-pose-posture.toml");
-        let text = std::fs::read_to_string(&path).unwrap()
-            + "\n[[simulation.load]]\nstart_s = 1.0\nmass = 1.0\ncom = [0.0, 0.0, 0.1]\n";
-        let sc = Scenario::from_toml_str(&text, &path).unwrap();
+        let (sc, mut d) = with_load("fr3-pose-posture.toml", 1.0, 1.0);
         assert!(!sc.spec.gravity_compensation);
-        let c = hcc_cycle::controller_for(&sc).unwrap();
-        let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
         let mut driver = hcc_plant::SimDriver::new(&sc).unwrap();
         let (mut err, mut contact, mut tau) = (Vec::new(), Vec::new(), Vec::new());
         let mut gravity = Vec::new();
@@ -234,13 +238,7 @@ fn a_load_the_driver_does_not_know_is_compensated_by_the_controller() {
 /// ramp completes, and the arm reaches its goal without a contact flag.
 #[test]
 fn a_load_announced_in_motion_is_booked_and_ramps_in() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let text = std::fs::read_to_string(&path).unwrap()
-        + "\n[[simulation.load]]\nstart_s = 0.7\nmass = 2.0\ncom = [0.0, 0.0, 0.1]\n";
-    let sc = Scenario::from_toml_str(&text, &path).unwrap();
-    let c = hcc_cycle::controller_for(&sc).unwrap();
-    let mut d = ControlCycle::new(c, &CycleSettings::from_scenario(&sc)).unwrap();
+    let (sc, mut d) = with_load("panda-pose-posture.toml", 0.7, 2.0);
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
     let n = sc.model.nq();
     let timing = LoopTiming {
