@@ -17,6 +17,7 @@ use crate::counters::{Counters, bump};
 use crate::goal::GoalLevel;
 use crate::ipc_side::{IpcReader, Sample};
 use crate::names;
+use crate::names::RosType;
 use crate::rate::RateLimiter;
 use crate::ros::{self, ClockMap, RemoteAnswer, TelemetryExtras};
 use crate::zenoh_side::{Graph, RosPublisher, RosSubscription, zenoh_config};
@@ -427,61 +428,41 @@ impl Goals {
         let ros_names = names::unique_ros_names(level_names, "level");
         let levels = GoalLevel::of_scenario(scenario, &ros_names);
         let (tx, rx) = mpsc::sync_channel(GOAL_BACKLOG);
+        // Each topic hands its messages to the main loop, counted.
+        let mut subscribe = |name: &str, ty: &RosType, level: usize, topic: Topic| {
+            let (tx, c) = (tx.clone(), counters.clone());
+            graph.subscription(&graph.topic(name), ty, move |sample| {
+                let goal = RemoteGoal {
+                    level,
+                    payload: sample.payload().to_bytes().into_owned(),
+                    attachment: Attachment::from_zbytes(sample.attachment()),
+                    topic,
+                };
+                bump(&c.goals_received);
+                if tx.try_send(goal).is_err() {
+                    bump(&c.goals_refused_rate);
+                }
+            })
+        };
         let mut subscriptions = Vec::new();
         for level in &levels {
-            let path_tx = tx.clone();
-            let topic = graph.topic(&format!("{}/goal", level.ros_name));
-            let (tx, index, c) = (tx.clone(), level.index, counters.clone());
-            let sub = graph.subscription(&topic, level.kind.ros_type(), move |sample| {
-                let goal = RemoteGoal {
-                    level: index,
-                    payload: sample.payload().to_bytes().into_owned(),
-                    attachment: Attachment::from_zbytes(sample.attachment()),
-                    topic: Topic::Goal,
-                };
-                bump(&c.goals_received);
-                if tx.try_send(goal).is_err() {
-                    bump(&c.goals_refused_rate);
-                }
-            })?;
-            subscriptions.push(sub);
+            let (name, kind) = (&level.ros_name, &level.kind);
+            subscriptions.push(subscribe(
+                &format!("{name}/goal"),
+                kind.ros_type(),
+                level.index,
+                Topic::Goal,
+            )?);
             // The level's path topic (trajectory.rs).
-            let topic = graph.topic(&format!("{}/path", level.ros_name));
-            let (tx, index, c) = (path_tx, level.index, counters.clone());
-            let ty = trajectory::ros_type(&level.kind);
-            let sub = graph.subscription(&topic, ty, move |sample| {
-                let goal = RemoteGoal {
-                    level: index,
-                    payload: sample.payload().to_bytes().into_owned(),
-                    attachment: Attachment::from_zbytes(sample.attachment()),
-                    topic: Topic::Path,
-                };
-                bump(&c.goals_received);
-                if tx.try_send(goal).is_err() {
-                    bump(&c.goals_refused_rate);
-                }
-            })?;
-            subscriptions.push(sub);
+            subscriptions.push(subscribe(
+                &format!("{name}/path"),
+                trajectory::ros_type(kind),
+                level.index,
+                Topic::Path,
+            )?);
         }
         // The load topic (load.rs).
-        let c = counters.clone();
-        let sub = graph.subscription(
-            &graph.topic("load"),
-            &load::INERTIA_STAMPED,
-            move |sample| {
-                let goal = RemoteGoal {
-                    level: 0,
-                    payload: sample.payload().to_bytes().into_owned(),
-                    attachment: Attachment::from_zbytes(sample.attachment()),
-                    topic: Topic::Load,
-                };
-                bump(&c.goals_received);
-                if tx.try_send(goal).is_err() {
-                    bump(&c.goals_refused_rate);
-                }
-            },
-        )?;
-        subscriptions.push(sub);
+        subscriptions.push(subscribe("load", &load::INERTIA_STAMPED, 0, Topic::Load)?);
         let client = if args.allow_setpoints {
             let c =
                 Client::connect(&args.namespace, file_prefix.as_deref()).with_context(|| {

@@ -50,14 +50,22 @@ impl LoadRamp {
         self.active = true;
     }
 
-    /// The ramp's progress u ∈ [0, 1] (1: none runs).
+    /// The ramp's progress u ∈ [0, 1] (1: none runs; 0: a ramp of no
+    /// duration not yet taken).
     pub(crate) fn progress(&self) -> f64 {
-        if !self.active {
-            1.0
-        } else if self.duration_s > 0.0 {
-            (self.elapsed_s / self.duration_s).clamp(0.0, 1.0)
+        match (self.active, self.duration_s > 0.0) {
+            (false, _) => 1.0,
+            (true, true) => self.u_at(self.elapsed_s),
+            (true, false) => 0.0,
+        }
+    }
+
+    /// The progress after `elapsed` s (a ramp of no duration: done).
+    fn u_at(&self, elapsed: f64) -> f64 {
+        if self.duration_s > 0.0 {
+            (elapsed / self.duration_s).clamp(0.0, 1.0)
         } else {
-            0.0
+            1.0
         }
     }
 
@@ -75,20 +83,15 @@ impl LoadRamp {
             return true;
         }
         let smooth = |u: f64| u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
-        let progress = |elapsed: f64| {
-            if self.duration_s > 0.0 {
-                (elapsed / self.duration_s).clamp(0.0, 1.0)
-            } else {
-                1.0
-            }
-        };
         let step = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
-        let (u0, u) = (progress(self.elapsed_s), progress(self.elapsed_s + step));
-        let (s0, s) = (smooth(u0), smooth(u));
-        let gain = controller.load_kinetic_energy(&self.to, qd)
-            - controller.load_kinetic_energy(&self.from, qd);
-        if !controller.book_model_change((s - s0) * gain) {
-            return false;
+        let u = self.u_at(self.elapsed_s + step);
+        let s = smooth(u);
+        if controller.books_model_changes() {
+            let ds = s - smooth(self.u_at(self.elapsed_s));
+            let gain = controller.load_kinetic_energy_change(&self.from, &self.to, qd);
+            if !controller.book_model_change(ds * gain) {
+                return false;
+            }
         }
         self.elapsed_s += step;
         let load = if u >= 1.0 {

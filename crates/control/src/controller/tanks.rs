@@ -152,26 +152,48 @@ impl Controller {
     /// The mixture of two loads is linear in their parameters, and so is this
     /// energy: what the model's storage gains as a load ramps in. Allocation-free.
     pub fn load_kinetic_energy(&mut self, load: &hcc_model::Load, qd: &[f64]) -> f64 {
-        if load.mass == 0.0 && load.inertia == nalgebra::Matrix3::zeros() {
-            return 0.0;
-        }
-        if hcc_model::load::tip_body(&self.model).is_none() || qd.len() != self.n {
+        self.load_kinetic_energy_change(&hcc_model::Load::none(), load, qd)
+    }
+
+    /// T(`to`) − T(`from`) of [`Controller::load_kinetic_energy`], from one
+    /// tip twist: the storage a load's ramp adds per unit of its progress.
+    /// 0 while the tanks are off (nothing books it). Allocation-free.
+    pub fn load_kinetic_energy_change(
+        &mut self,
+        from: &hcc_model::Load,
+        to: &hcc_model::Load,
+        qd: &[f64],
+    ) -> f64 {
+        let is_none =
+            |l: &hcc_model::Load| l.mass == 0.0 && l.inertia == nalgebra::Matrix3::zeros();
+        if (is_none(from) && is_none(to))
+            || hcc_model::load::tip_body(&self.model).is_none()
+            || qd.len() != self.n
+        {
             return 0.0;
         }
         let tip = self.model.tip_frame();
         hcc_model::frame_jacobian(&self.model, &self.data, tip, &mut self.load_jacobian);
-        let mut twist = [0.0; 6];
-        for (k, t) in twist.iter_mut().enumerate() {
-            *t = (0..self.n)
+        let twist: [f64; 6] = std::array::from_fn(|k| {
+            (0..self.n)
                 .map(|j| self.load_jacobian[(k, j)] * qd[j])
-                .sum();
-        }
+                .sum()
+        });
         let v = nalgebra::Vector3::new(twist[0], twist[1], twist[2]);
         let w = nalgebra::Vector3::new(twist[3], twist[4], twist[5]);
         let rot = hcc_model::frame_placement(&self.model, &self.data, tip).rotation;
-        let vc = v + w.cross(&(rot * load.com));
         let wl = rot.inverse() * w;
-        0.5 * load.mass * vc.norm_squared() + 0.5 * wl.dot(&(load.inertia * wl))
+        let energy = |l: &hcc_model::Load| {
+            let vc = v + w.cross(&(rot * l.com));
+            0.5 * l.mass * vc.norm_squared() + 0.5 * wl.dot(&(l.inertia * wl))
+        };
+        energy(to) - energy(from)
+    }
+
+    /// Whether model changes are booked by the tanks
+    /// ([`Controller::book_model_change`] does something).
+    pub fn books_model_changes(&self) -> bool {
+        self.tanks_on()
     }
 
     /// A goal or gains changed (a command, an input): in the next cycle every
