@@ -480,6 +480,7 @@ impl Derived<'_> {
             "setpoints_dropped_at_controller_restarts": self.replayed.setpoints_dropped_at_restart,
             "stale_telemetry": self.replayed.stale,
             "states_not_answered_by_the_controller": self.replayed.states_skipped,
+            "states_before_the_first_cycle": self.replayed.states_before_first_cycle,
             "states_dropped_unconsumed": self.replayed.states_dropped,
             "driver_missed_commands": last_state.map(|s| s.missed_commands),
             "driver_fallback_cycles": last_state.map(|s| s.fallback_cycles),
@@ -526,13 +527,14 @@ impl Derived<'_> {
             self.latencies_ns.len()
         );
         println!(
-            "  recorder: gaps {} (states {}, commands {}, telemetry {}), cycles before the recording {}, telemetry without state {}, states not answered {}, driver restarts {}",
+            "  recorder: gaps {} (states {}, commands {}, telemetry {}), cycles before the recording {}, telemetry without state {}, states before the first cycle {}, states not answered {}, driver restarts {}",
             rec.gaps(),
             rec.states.checker.missed(),
             rec.commands.checker.missed(),
             rec.telemetry.checker.missed(),
             self.replayed.cycles_before_recording,
             self.replayed.states_missing,
+            self.replayed.states_before_first_cycle,
             self.replayed.states_skipped,
             self.replayed.driver_restarts
         );
