@@ -173,6 +173,22 @@ impl PotentialWork {
         w
     }
 
+    /// ½ eᵀ K e with the stiffness `k` (m × m) at the spring coordinates e of
+    /// the last [`potential`] (quaternion rows 2ε; at the shifted spring point
+    /// where there is one): V_i as it would be with K = `k`, V being linear
+    /// in K. Allocation-free.
+    pub fn spring_energy(&self, k: &DMatrix<f64>) -> f64 {
+        let e = &self.e;
+        let m = e.len().min(k.nrows()).min(k.ncols());
+        let mut v = 0.0;
+        for a in 0..m {
+            for b in 0..m {
+                v += e[a] * k[(a, b)] * e[b];
+            }
+        }
+        0.5 * v
+    }
+
     /// R_d from the roll-pitch-yaw part of the goal of every quaternion task.
     pub fn set_goal(&mut self, tasks: &[TaskSpec], goal: &[f64], n: usize) {
         let mut o = 0;
@@ -271,7 +287,8 @@ struct Rotations<'a> {
 }
 
 /// V = ½ eᵀ K e and its gradient conjugate to ẋ_i at the error `err`, the
-/// quaternion rows from `r`; `e`, `ke` scratch of the stacked case.
+/// quaternion rows from `r`; the spring's coordinates e (quaternion rows 2ε)
+/// left in `e` ([`PotentialWork::spring_energy`]), `ke` scratch.
 #[allow(clippy::too_many_arguments)]
 fn spring(
     tasks: &[TaskSpec],
@@ -292,11 +309,13 @@ fn spring(
         let g = r.goal[0] * f_goal;
         for a in 0..3 {
             grad[a] = g[a];
+            e[a] = 2.0 * eps[a];
         }
         return 2.0 * eps.dot(&keps);
     }
     if tasks.iter().all(|t| t.quaternion_rows().is_none()) {
         // V = ½ x̃ᵀ K x̃ and ∂V/∂x = K x̃.
+        e.copy_from(err);
         gemv(grad, 1.0, stiffness, err, 0.0);
         return 0.5 * err.dot(grad);
     }

@@ -24,6 +24,7 @@ fn ten_thousand_panda_steps_allocate_nothing() {
     c.step(&q, &qd).expect("warm-up");
     let k_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 70.0);
     let d_new = nalgebra::DMatrix::from_diagonal_element(3, 3, 5.0);
+    let mut k_step = k_new.clone();
     let before = hcc_rtalloc::thread_stats().allocs;
     let mut sum = 0.0;
     for k in 0..10_000 {
@@ -39,6 +40,12 @@ fn ten_thousand_panda_steps_allocate_nothing() {
             c.set_goal_velocity(0, &[0.01, 0.0, -0.01])
                 .expect("velocity");
             c.set_gains(1, Some(&k_new), Some(&d_new)).expect("gains");
+        }
+        if k % 1000 == 500 {
+            // A gains transition's step, booked through the tanks.
+            k_step.copy_from(&k_new);
+            k_step *= 1.0 + 1e-3 * (k / 1000) as f64;
+            c.ramp_gains(1, Some(&k_step), None).expect("gains");
         }
         if k == 5000 {
             // The tracking form (docs/tracking.md) from here on: every

@@ -123,15 +123,77 @@ impl Controller {
     /// of Sec. IV: a wrong size, a non-finite or asymmetric matrix, or a
     /// diagonal entry ≤ 0 is an error and changes nothing; full positive
     /// definiteness is the caller's check (`hcc_msgs::Setpoint::validate`).
-    /// Gains equal to those in force change nothing (no tank or budget is
-    /// refilled: only a change is a command).
+    /// A command: a change refills the energy tanks and the passivity budget
+    /// (the energy a command may put in). Gains equal to those in force change
+    /// nothing (no tank or budget is refilled: only a change is a command).
+    /// A transition's steps go through [`Controller::ramp_gains`] instead.
     pub fn set_gains(
         &mut self,
         i: usize,
         stiffness: Option<&DMatrix<f64>>,
         damping: Option<&DMatrix<f64>>,
     ) -> Result<(), ControlError> {
-        let Some(l) = self.levels.get_mut(i) else {
+        if self.gains_change(i, stiffness, damping)? {
+            self.apply_gains(i, stiffness, damping);
+            self.safety.refill_passivity_budget();
+            self.refill_tanks();
+        }
+        Ok(())
+    }
+
+    /// One step of a gains transition (hcc-cycle's setpoints): the gains as
+    /// [`Controller::set_gains`] checks them, but nothing is refilled — the
+    /// change of the storage a new stiffness makes at the spring's present
+    /// stretch ([`Controller::stiffness_change_energy`]) is booked through the
+    /// energy tanks ([`Controller::book_model_change`]): a stiffening is paid
+    /// from their spare, a softening fills the fade's tank, so that H plus
+    /// the tanks does not change by it. `Ok(false)`, and nothing changed, when
+    /// the spare cannot pay it: the transition must wait. A change of the
+    /// damping alone stores nothing and is always taken. Allocation-free.
+    pub fn ramp_gains(
+        &mut self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) -> Result<bool, ControlError> {
+        if !self.gains_change(i, stiffness, damping)? {
+            return Ok(true);
+        }
+        let energy = stiffness.map_or(0.0, |k| self.stiffness_change_energy(i, k));
+        if !self.book_model_change(energy) {
+            return Ok(false);
+        }
+        self.apply_gains(i, stiffness, damping);
+        Ok(true)
+    }
+
+    /// The change of the storage H (J) that the stiffness `k` in place of
+    /// level `i`'s makes at the spring coordinates e of the last cycle:
+    /// β_i κ ½ eᵀ (k − K_i) e (V_i is linear in K_i; β_i the level's fade, 1
+    /// for level 1, κ the stiffness scale). With `spring_saturation` the
+    /// unsaturated spring's change. 0 for an unknown level or a matrix of
+    /// another size. Allocation-free.
+    pub fn stiffness_change_energy(&self, i: usize, k: &DMatrix<f64>) -> f64 {
+        let Some(l) = self.levels.get(i) else {
+            return 0.0;
+        };
+        if k.shape() != l.stiffness.shape() {
+            return 0.0;
+        }
+        let fade = if i == 0 { 1.0 } else { self.out.fade[i] };
+        let change = l.pot.spring_energy(k) - l.pot.spring_energy(&l.stiffness);
+        fade * self.stiffness_scale * change
+    }
+
+    /// Whether `stiffness`, `damping` differ from level `i`'s gains, after
+    /// checking them ([`Controller::set_gains`]'s errors).
+    fn gains_change(
+        &self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) -> Result<bool, ControlError> {
+        let Some(l) = self.levels.get(i) else {
             return Err(ControlError::BadInput("no such level"));
         };
         for g in [stiffness, damping].into_iter().flatten() {
@@ -145,13 +207,22 @@ impl Controller {
                 ));
             }
         }
-        let changed = stiffness.is_some_and(|k| *k != l.stiffness)
-            || damping.is_some_and(|d| *d != l.damping);
-        if !changed {
-            // The same gains again (a transition that moves only the goal
-            // hands them on every cycle): nothing is commanded, nothing refilled.
-            return Ok(());
-        }
+        // The same gains again (a transition that moves only the goal hands
+        // them on every cycle): nothing is commanded, nothing refilled.
+        Ok(
+            stiffness.is_some_and(|k| *k != l.stiffness)
+                || damping.is_some_and(|d| *d != l.damping),
+        )
+    }
+
+    /// Puts checked gains in force (the spring saturation's radius follows).
+    fn apply_gains(
+        &mut self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) {
+        let l = &mut self.levels[i];
         if let Some(k) = stiffness {
             l.stiffness.copy_from(k);
         }
@@ -159,9 +230,6 @@ impl Controller {
             l.damping.copy_from(d);
         }
         self.safety.set_spring_radius(i, &l.stiffness, &l.damping);
-        self.safety.refill_passivity_budget();
-        self.refill_tanks();
-        Ok(())
     }
 
     /// Sets the velocity ẋ_{i,d} of level `i`'s equilibrium (m_i values, the

@@ -125,8 +125,9 @@ impl Controller {
         energy - left
     }
 
-    /// Books a change `energy` (J) of the storage H that the model itself
-    /// makes (a load announced at run time, hcc-cycle's `load_ramp`): a rise
+    /// Books a change `energy` (J) of the storage H that no motion makes: the
+    /// model's (a load announced at run time, hcc-cycle's `load_ramp`) or a
+    /// spring's (a gains transition, [`Controller::ramp_gains`]): a rise
     /// is paid from the [spare](Controller::tank_spare), a fall goes into the
     /// fade's tank, so that H plus the tanks does not change by it. Returns
     /// false, and books nothing, when the spare cannot pay the rise: the

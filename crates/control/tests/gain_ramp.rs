@@ -1,0 +1,131 @@
+//! A gains transition's steps booked through the energy tanks
+//! (`Controller::ramp_gains`): a stiffer spring stores β κ ½ eᵀ ΔK e more at
+//! its present stretch, paid from the tanks' spare; a softer one gives it to
+//! the fade's tank; H plus the tanks does not change by either. A stiffening
+//! the spare cannot pay is refused whole.
+
+mod common;
+use common::*;
+use hcc_control::Controller;
+use nalgebra::{DMatrix, DVector};
+
+const Q0: [f64; 7] = [0.1, -0.2, 0.05, -2.0, 0.1, 1.9, 0.7];
+const REST: [f64; 7] = [0.0; 7];
+
+/// The Panda's controller at rest at `Q0`, its TCP 5 cm from its goal along
+/// x, the orientation and the posture at theirs (V = ½ · 800 · 0.05² = 1 J;
+/// every tank filled with `tank_initial` plus half of it, below `tank_max`).
+fn panda_stretched_5cm() -> Controller {
+    let model = panda();
+    let mut spec = panda_spec(&model);
+    let q0 = DVector::from_vec(Q0.to_vec());
+    let mut data = hcc_model::Data::new(&model);
+    hcc_model::forward_kinematics(&model, &mut data, &q0);
+    let tcp = model.frame_id("panda_hand_tcp").expect("tcp");
+    let placement = hcc_model::frame_placement(&model, &data, tcp);
+    let p = placement.translation.vector;
+    let (roll, pitch, yaw) = placement.rotation.euler_angles();
+    spec.levels[0].goal = DVector::from_vec(vec![p[0] + 0.05, p[1], p[2]]);
+    spec.levels[1].goal = DVector::from_vec(vec![roll, pitch, yaw]);
+    spec.levels[2].goal = q0.clone();
+    let mut c = Controller::new(&model, spec, &q0).expect("ctl");
+    c.step(&Q0, &REST).expect("step");
+    c
+}
+
+fn h(c: &mut Controller) -> f64 {
+    c.step(&Q0, &REST).expect("step").safety.h
+}
+
+fn k1(c: &Controller) -> DMatrix<f64> {
+    c.level_target(0).expect("level").stiffness.clone()
+}
+
+#[test]
+fn a_stiffening_is_paid_from_the_spare_and_h_does_not_change() {
+    let mut c = panda_stretched_5cm();
+    let before = h(&mut c);
+    assert!((h(&mut c) - before).abs() < 1e-12, "at rest H stands still");
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!((out.potential[0] - 1.0).abs() < 1e-9, "{:?}", out.potential);
+    assert!(out.potential[1].abs() < 1e-12 && out.potential[2].abs() < 1e-12);
+    let k = k1(&c) * 1.5;
+    // ½ eᵀ ΔK e with e = 5 cm, ΔK = 400 N/m.
+    let energy = c.stiffness_change_energy(0, &k);
+    assert!((energy - 0.5).abs() < 1e-9, "{energy}");
+    let spare = c.tank_spare();
+    assert!(spare > energy, "{spare}");
+    assert!(c.ramp_gains(0, Some(&k), None).expect("gains"));
+    assert_eq!(k1(&c), k);
+    assert!((c.tank_spare() - (spare - energy)).abs() < 1e-9);
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!((out.potential[0] - 1.5).abs() < 1e-9);
+    let after = out.safety.h;
+    assert!(
+        (after - before).abs() < 1e-9,
+        "H {before} → {after}: the tanks paid the spring's rise"
+    );
+}
+
+#[test]
+fn a_softening_fills_the_fade_tank_and_h_does_not_change() {
+    let mut c = panda_stretched_5cm();
+    let before = h(&mut c);
+    let spare = c.tank_spare();
+    let k = k1(&c) * 0.75;
+    let energy = c.stiffness_change_energy(0, &k);
+    assert!((energy + 0.25).abs() < 1e-9, "{energy}");
+    assert!(c.ramp_gains(0, Some(&k), None).expect("gains"));
+    assert!((c.tank_spare() - (spare + 0.25)).abs() < 1e-9);
+    let after = h(&mut c);
+    assert!((after - before).abs() < 1e-9, "H {before} → {after}");
+}
+
+#[test]
+fn a_stiffening_the_spare_cannot_pay_waits_and_the_damping_alone_is_taken() {
+    let mut c = panda_stretched_5cm();
+    h(&mut c);
+    let (k, spare) = (k1(&c), c.tank_spare());
+    // ½ · 0.05² · 799 200 N/m ≈ 999 J: more than the tanks hold.
+    assert!(!c.ramp_gains(0, Some(&(&k * 1000.0)), None).expect("gains"));
+    assert_eq!(k1(&c), k, "nothing changed");
+    assert!((c.tank_spare() - spare).abs() < 1e-12, "nothing taken");
+    // A damping stores nothing.
+    let d = c.level_target(0).expect("level").damping * 2.0;
+    assert!(c.ramp_gains(0, None, Some(&d)).expect("gains"));
+    assert_eq!(c.level_target(0).expect("level").damping, &d);
+    assert!((c.tank_spare() - spare).abs() < 1e-12);
+    // Bad gains are errors, as for set_gains.
+    assert!(c.ramp_gains(0, Some(&(-&k)), None).is_err());
+    assert!(c.ramp_gains(9, Some(&k), None).is_err());
+}
+
+#[test]
+fn without_the_tanks_a_ramp_is_taken_as_it_comes() {
+    let model = panda();
+    let mut spec = panda_spec(&model);
+    spec.safety.energy_tanks = false;
+    let mut c = Controller::new(&model, spec, &DVector::from_vec(Q0.to_vec())).expect("ctl");
+    c.step(&Q0, &REST).expect("step");
+    let k = k1(&c) * 1000.0;
+    assert!(c.ramp_gains(0, Some(&k), None).expect("gains"));
+    assert_eq!(k1(&c), k);
+}
+
+/// On quaternion rows (V = 2 εᵀ K ε) too, the booked change is the change of
+/// the potential: doubling K doubles V.
+#[test]
+fn an_orientation_level_s_change_is_its_potential_s() {
+    let mut c = panda_stretched_5cm();
+    let rpy = c.level_target(1).expect("level").goal.to_vec();
+    c.set_goal(1, &[rpy[0], rpy[1] + 0.1, rpy[2] + 0.2])
+        .expect("goal");
+    let v = c.step(&Q0, &REST).expect("step").potential[1];
+    assert!(v > 0.1, "{v}");
+    let k = c.level_target(1).expect("level").stiffness * 2.0;
+    let energy = c.stiffness_change_energy(1, &k);
+    assert!((energy - v).abs() < 1e-12 * v.max(1.0), "{energy} vs {v}");
+    assert!(c.ramp_gains(1, Some(&k), None).expect("gains"));
+    let after = c.step(&Q0, &REST).expect("step").potential[1];
+    assert!((after - 2.0 * v).abs() < 1e-9, "{after} vs {}", 2.0 * v);
+}
