@@ -646,6 +646,7 @@ impl ControlCycle {
             .advance(self.period_s, &mut self.controller, &mut self.setpoints);
         self.counters.core.paths_stopped = self.paths.stopped;
         self.counters.core.streams_stopped = self.setpoints.streams_stopped;
+        self.counters.core.gain_ramp_held = self.setpoints.gains_held;
         // A load being announced moves the model on (module `load_ramp`).
         let announcing = self.load_ramp.active();
         if !self

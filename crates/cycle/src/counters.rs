@@ -41,6 +41,9 @@ hcc_msgs::define_counters! {
         /// Cycles in which a load's ramp held: the energy tanks could not
         /// pay the storage it adds (module `load_ramp`).
         load_ramp_held: "cycles a load's ramp held (the tanks could not pay it)",
+        /// Level-cycles in which a gains transition held: the energy tanks
+        /// could not pay the stiffening (module `setpoints`).
+        gain_ramp_held: "level-cycles a gains transition held (the tanks could not pay it)",
     }
 }
 

@@ -141,6 +141,15 @@ impl Controller {
         Ok(())
     }
 
+    /// A client's command was taken (a setpoint: hcc-cycle's setpoints): in
+    /// the next cycle the energy tanks and the passivity budget are refilled,
+    /// the energy a command may put in; its transition's steps are then
+    /// booked against them ([`Controller::ramp_gains`]).
+    pub fn command_taken(&mut self) {
+        self.safety.refill_passivity_budget();
+        self.refill_tanks();
+    }
+
     /// One step of a gains transition (hcc-cycle's setpoints): the gains as
     /// [`Controller::set_gains`] checks them, but nothing is refilled — the
     /// change of the storage a new stiffness makes at the spring's present

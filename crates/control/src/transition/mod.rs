@@ -236,6 +236,22 @@ impl Transition {
         self.update();
     }
 
+    /// Time elapsed on the gains' clock (s).
+    pub fn gain_elapsed(&self) -> f64 {
+        self.gain_elapsed
+    }
+
+    /// Sets the gains' clock back to `elapsed` (s, clamped to the gains'
+    /// transition) and updates the gains: a step the law could not take
+    /// (its energy tanks could not pay a stiffening) is taken again later.
+    /// Allocation-free.
+    pub fn rewind_gains(&mut self, elapsed: f64) {
+        if elapsed.is_finite() {
+            self.gain_elapsed = elapsed.clamp(0.0, self.gain_duration);
+            self.update();
+        }
+    }
+
     /// Progress σ = t / T in [0, 1] of the goal's transition (1 when none runs).
     pub fn goal_progress(&self) -> f64 {
         sigma(self.elapsed, self.duration)

@@ -26,9 +26,12 @@
 //!
 //! [`SetpointHandler::advance`] moves every transition by one period and hands
 //! x_{i,d}(t), K_i(t), D_i(t) and — with `relative_damping` — ẋ_{i,d}(t) to
-//! the law (`set_goal`, `set_gains`, `set_goal_velocity`). Nothing changes
-//! for a level that never received a setpoint, so a run without setpoints is
-//! bit-identical to one without this module.
+//! the law (`set_goal`, `ramp_gains`, `set_goal_velocity`). A taken setpoint
+//! is a command: the law refills its energy tanks (`command_taken`); each step
+//! of the gains is then booked against them, and a stiffening they cannot pay
+//! holds the gains' clock until they can (counted, `gain_ramp_held`). Nothing
+//! changes for a level that never received a setpoint, so a run without
+//! setpoints is bit-identical to one without this module.
 
 use hcc_control::transition::{GoalKind, Target, Transition};
 use hcc_control::{Controller, TaskSpec};
@@ -95,6 +98,9 @@ pub struct SetpointHandler {
     accepted: u64,
     /// Setpoint streams whose feed-forward faded because they stopped.
     pub(crate) streams_stopped: u64,
+    /// Cycles in which a level's gains transition held: the energy tanks
+    /// could not pay its stiffening (`Controller::ramp_gains`).
+    pub(crate) gains_held: u64,
 }
 
 impl SetpointHandler {
@@ -163,6 +169,7 @@ impl SetpointHandler {
             pending: Pending::new(),
             accepted: 0,
             streams_stopped: 0,
+            gains_held: 0,
         })
     }
 
@@ -183,7 +190,7 @@ impl SetpointHandler {
             .check(setpoint)
             .and_then(|()| self.check_gain_rate(setpoint, controller));
         let duration = match result {
-            Ok(()) => self.start(setpoint),
+            Ok(()) => self.start(setpoint, controller),
             Err(_) => 0.0,
         };
         let code = answer_code(result);
@@ -305,7 +312,7 @@ impl SetpointHandler {
     /// Starts the accepted setpoint's transition (its gains symmetrised by
     /// [`SetpointHandler::check_gain_rate`]); returns its duration (s),
     /// stretched to the level's speed limit.
-    fn start(&mut self, sp: &Setpoint) -> f64 {
+    fn start(&mut self, sp: &Setpoint, controller: &mut Controller) -> f64 {
         let level = &mut self.levels[sp.level as usize];
         let mut duration = sp.duration_s;
         if sp.sets(SETPOINT_GOAL) {
@@ -320,6 +327,7 @@ impl SetpointHandler {
             damping: sp.sets(SETPOINT_DAMPING).then_some(&level.d),
         };
         level.transition.start(target, duration);
+        controller.command_taken();
         if sp.sets(SETPOINT_VELOCITY) {
             level.transition.set_feed_forward(sp.velocity());
             let m = sp.velocity().len();
@@ -367,12 +375,14 @@ impl SetpointHandler {
 
     /// Advances every active transition by `dt` s and hands the equilibrium,
     /// the gains and (with relative damping) the equilibrium's velocity to
-    /// the law. Levels without a setpoint are not touched. Allocation-free.
+    /// the law; a gains step the law's tanks cannot pay is held (module
+    /// docs). Levels without a setpoint are not touched. Allocation-free.
     pub fn advance(&mut self, dt: f64, controller: &mut Controller) {
         for (i, level) in self.levels.iter_mut().enumerate() {
             if !level.active {
                 continue;
             }
+            let gain_clock = level.transition.gain_elapsed();
             level.transition.advance(dt);
             if level.transition.has_feed_forward() {
                 // A stream that stopped: its feed-forward fades to zero.
@@ -394,14 +404,24 @@ impl SetpointHandler {
             let t = &level.transition;
             // The values come from checked setpoints: these calls cannot fail.
             let _ = controller.set_goal(i, t.goal());
-            let _ = controller.set_gains(i, Some(t.stiffness()), Some(t.damping()));
+            // The gains' step is booked through the energy tanks: a
+            // stiffening they cannot pay holds the gains' clock (counted)
+            // and is taken again in the next cycle.
+            let held = !controller
+                .ramp_gains(i, Some(t.stiffness()), Some(t.damping()))
+                .unwrap_or(true);
+            if held {
+                level.transition.rewind_gains(gain_clock);
+                self.gains_held += 1;
+            }
+            let t = &level.transition;
             let velocity = if self.relative_damping {
                 t.goal_velocity()
             } else {
                 &self.zeros[..t.dim()]
             };
             let _ = controller.set_goal_velocity(i, velocity);
-            level.active = t.is_moving() || t.has_feed_forward();
+            level.active = t.is_moving() || t.has_feed_forward() || held;
         }
     }
 
