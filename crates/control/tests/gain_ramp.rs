@@ -2,7 +2,8 @@
 //! (`Controller::ramp_gains`): a stiffer spring stores β κ ½ eᵀ ΔK e more at
 //! its present stretch, paid from the tanks' spare; a softer one gives it to
 //! the fade's tank; H plus the tanks does not change by either. A stiffening
-//! the spare cannot pay is refused whole.
+//! the spare cannot pay is refused whole. A contact reaction's stiffness
+//! scale κ (`Controller::ramp_stiffness_scale`) goes the same way.
 
 mod common;
 use common::*;
@@ -128,4 +129,38 @@ fn an_orientation_level_s_change_is_its_potential_s() {
     assert!(c.ramp_gains(1, Some(&k), None).expect("gains"));
     let after = c.step(&Q0, &REST).expect("step").potential[1];
     assert!((after - 2.0 * v).abs() < 1e-9, "{after} vs {}", 2.0 * v);
+}
+
+/// A contact reaction's κ through the same bookkeeping: softening puts the
+/// springs' share into the fade's tank, restoring takes it back, H with the
+/// tanks the same throughout; a restore the spare cannot pay is refused.
+#[test]
+fn the_stiffness_scale_is_booked_both_ways() {
+    let mut c = panda_stretched_5cm();
+    let before = h(&mut c);
+    let spare = c.tank_spare();
+    // V_1 = 1 J, the others 0: half of it leaves the springs.
+    assert!(c.ramp_stiffness_scale(0.5));
+    assert_eq!(c.stiffness_scale(), 0.5);
+    assert!((c.tank_spare() - (spare + 0.5)).abs() < 1e-9);
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!((out.potential[0] - 0.5).abs() < 1e-9);
+    assert!(
+        (out.safety.h - before).abs() < 1e-9,
+        "H {before} → {}",
+        out.safety.h
+    );
+    assert!(c.ramp_stiffness_scale(1.0));
+    assert!((c.tank_spare() - spare).abs() < 1e-9);
+    let after = h(&mut c);
+    assert!((after - before).abs() < 1e-9, "H {before} → {after}");
+    // Softened again, the spare spent: the restore waits.
+    assert!(c.ramp_stiffness_scale(0.5));
+    h(&mut c);
+    c.draw_tank_spare(1e6);
+    assert!(!c.ramp_stiffness_scale(1.0));
+    assert_eq!(c.stiffness_scale(), 0.5);
+    // Out of range: ignored, nothing to wait for.
+    assert!(c.ramp_stiffness_scale(1.5) && c.ramp_stiffness_scale(f64::NAN));
+    assert_eq!(c.stiffness_scale(), 0.5);
 }

@@ -663,6 +663,7 @@ impl ControlCycle {
             self.period_s,
             &mut self.controller,
         );
+        self.counters.core.reaction_restore_held = self.reaction.restore_held;
         // With a rate limit the robot's torque lags the law's: the law's
         // velocity barrier is told what is applied (hcc_control::safety).
         let applied = self.filter.rate_limited_previous().map(|p| &p[..n]);

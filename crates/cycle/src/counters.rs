@@ -44,6 +44,9 @@ hcc_msgs::define_counters! {
         /// Level-cycles in which a gains transition held: the energy tanks
         /// could not pay the stiffening (module `setpoints`).
         gain_ramp_held: "level-cycles a gains transition held (the tanks could not pay it)",
+        /// Cycles in which a `soften` contact reaction's restore held: the
+        /// energy tanks could not pay the springs' return (module `reaction`).
+        reaction_restore_held: "cycles a soften reaction's restore held (the tanks could not pay it)",
     }
 }
 

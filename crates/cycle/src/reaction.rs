@@ -22,8 +22,13 @@
 //! the power κ̇ Σ V_i: ≤ 0 while softening (κ falls: the springs' energy
 //! drops), ≥ 0 while restoring, at most (1 − κ_min) Σ V_i over a whole
 //! restore — the spring energy taken away while softening, at most, as the
-//! potentials of a stationary arm. `crates/in-process/tests/contact_reaction.rs`
-//! checks the balance E_k − E_0 ≤ Σ Δκ Σ V_i/κ + external work along a push.
+//! potentials of a stationary arm. With the energy tanks on, each step of κ
+//! is booked through them (`Controller::ramp_stiffness_scale`): what the
+//! softening takes from the springs goes into the fade's tank, the restore
+//! is paid from the tanks' spare, and a restore they cannot pay waits
+//! (counted, `reaction_restore_held`): H with the tanks does not change by κ.
+//! `crates/in-process/tests/contact_reaction.rs` checks the balance E_k − E_0
+//! ≤ Σ Δκ Σ V_i/κ + external work along a push.
 //!
 //! **hold.** A contact's onset latches the hold (target h = 1); a client's
 //! accepted setpoint (any level, any field) releases it (target h = 0); a
@@ -47,6 +52,9 @@ use hcc_control::Controller;
 use hcc_control::transition::quintic;
 use hcc_msgs::MAX_JOINTS;
 use hcc_spec::contact::{Contact, Reaction};
+
+#[cfg(test)]
+mod tests;
 
 /// h's ramp: from `from` to `to` over `duration` s.
 #[derive(Clone, Copy, Debug)]
@@ -95,6 +103,9 @@ pub(crate) struct ContactReaction {
     held: bool,
     /// The setpoint handler's count of accepted setpoints, as last seen.
     accepted_seen: u64,
+    /// Cycles in which `soften`'s restore held: the energy tanks could not
+    /// pay the springs' return (`Controller::ramp_stiffness_scale`).
+    pub(crate) restore_held: u64,
 }
 
 impl ContactReaction {
@@ -117,6 +128,7 @@ impl ContactReaction {
             h: 0.0,
             held: false,
             accepted_seen: 0,
+            restore_held: 0,
         }
     }
 
@@ -159,12 +171,19 @@ impl ContactReaction {
             }
         };
         self.ramp.aim(if target { 1.0 } else { 0.0 }, self.ramp_s);
+        let elapsed = self.ramp.elapsed;
         self.ramp.advance(dt);
-        self.h = self.ramp.value();
         if self.kind == Reaction::Soften {
-            let kappa = 1.0 - (1.0 - self.soften_fraction) * self.h;
-            controller.set_stiffness_scale(kappa);
+            // The springs' energy changes with κ: booked through the law's
+            // energy tanks; a restore they cannot pay waits (counted).
+            let kappa = 1.0 - (1.0 - self.soften_fraction) * self.ramp.value();
+            if !controller.ramp_stiffness_scale(kappa) {
+                self.ramp.elapsed = elapsed;
+                self.restore_held += 1;
+            }
+            self.h = self.ramp.value();
         } else {
+            self.h = self.ramp.value();
             // The law's share of the blended torque (`blend`), for the energy
             // tanks' booking.
             controller.set_law_share(1.0 - self.h);

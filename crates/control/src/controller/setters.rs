@@ -80,6 +80,32 @@ impl Controller {
         }
     }
 
+    /// A step of a contact reaction's κ ([`Controller::set_stiffness_scale`];
+    /// hcc-cycle's reaction) booked through the energy tanks: the springs'
+    /// storage changes by (κ′/κ − 1) Σ_i β_i V_i at the last cycle's stretch
+    /// (β_i the fades, 1 for level 1), paid from the tanks' spare when κ
+    /// rises, into the fade's tank when it falls
+    /// ([`Controller::book_model_change`]), so that H with the tanks does not
+    /// change by it. `false`, and κ kept, when the spare cannot pay a rise:
+    /// the restore must wait. A value outside (0, 1] is ignored (`true`).
+    /// Allocation-free.
+    pub fn ramp_stiffness_scale(&mut self, kappa: f64) -> bool {
+        if !(kappa > 0.0 && kappa <= 1.0) || kappa == self.stiffness_scale {
+            return true;
+        }
+        let stored: f64 = self
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| if i == 0 { 1.0 } else { self.out.fade[i] } * l.potential)
+            .sum();
+        if !self.book_model_change((kappa / self.stiffness_scale - 1.0) * stored) {
+            return false;
+        }
+        self.stiffness_scale = kappa;
+        true
+    }
+
     /// The share s ∈ [0, 1] of the law's torque the robot receives from the
     /// next cycle on: 1 − h while a contact reaction `hold` blends the
     /// torque towards its own (hcc-cycle). The energy tanks (crate::energy_tank)

@@ -1,0 +1,49 @@
+//! `soften`'s κ through the law's energy tanks: a restore the tanks cannot
+//! pay waits (counted) and goes on once a command refills them.
+
+use super::ContactReaction;
+use hcc_config::Scenario;
+use hcc_control::Controller;
+use hcc_spec::contact::{Contact, Reaction};
+use std::path::PathBuf;
+
+#[test]
+fn a_restore_the_tanks_cannot_pay_waits_for_them() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let sc = Scenario::load(&path).unwrap();
+    let n = sc.model.nq();
+    let mut spec = sc.spec.clone();
+    // The TCP goal 10 cm off the start: a stretched spring.
+    spec.levels[0].goal[1] += 0.1;
+    let mut c = Controller::new(&sc.model, spec, &sc.q0).unwrap();
+    let (q, rest) = (sc.q0.as_slice().to_vec(), vec![0.0; n]);
+    c.step(&q, &rest).unwrap();
+    let mut contact = Contact::defaults(n);
+    contact.reaction = Reaction::Soften;
+    contact.soften_fraction = 0.5;
+    contact.ramp_s = 0.05;
+    let mut r = ContactReaction::new(&contact);
+    let dt = 1e-3;
+    for _ in 0..100 {
+        r.before_law(true, false, 0, dt, &mut c);
+        c.step(&q, &rest).unwrap();
+    }
+    assert_eq!((r.level(), c.stiffness_scale()), (1.0, 0.5));
+    // The contact is over, but the tanks hold nothing to spare.
+    c.draw_tank_spare(1e9);
+    for _ in 0..100 {
+        r.before_law(false, false, 0, dt, &mut c);
+    }
+    assert_eq!((r.level(), c.stiffness_scale()), (1.0, 0.5));
+    assert_eq!(r.restore_held, 100);
+    // A command refills them (in the law's next cycle): the restore goes on.
+    c.command_taken();
+    c.step(&q, &rest).unwrap();
+    for _ in 0..100 {
+        r.before_law(false, false, 0, dt, &mut c);
+        c.step(&q, &rest).unwrap();
+    }
+    assert_eq!((r.level(), c.stiffness_scale()), (0.0, 1.0));
+    assert_eq!(r.restore_held, 100);
+}
