@@ -10,7 +10,6 @@ use std::process::ExitCode;
 
 mod capture;
 mod daemons;
-mod derive;
 mod follow_cmd;
 mod jitter;
 mod load_cmd;
@@ -18,7 +17,6 @@ mod model_cmd;
 mod monitor_cmd;
 mod plot_cmd;
 mod record_cmd;
-mod replay;
 mod replay_cmd;
 mod run_cmd;
 mod run_schedule;

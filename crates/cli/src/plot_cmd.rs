@@ -9,7 +9,7 @@ use hcc_record::{RecordError, RowSink};
 use hcc_report::CsvWriter;
 use std::path::{Path, PathBuf};
 
-use crate::derive;
+use hcc_replay::derive;
 
 #[derive(clap::Args, Debug)]
 pub struct PlotArgs {

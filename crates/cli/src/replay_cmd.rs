@@ -2,7 +2,7 @@
 //! and setpoints through the control cycle again — the code the controller
 //! daemon runs each cycle ([`hcc_cycle::ControlCycle`]: stream checks, the
 //! law of eq. 19, the torque filter, saturation), in process, see
-//! [`crate::replay`] — and compares its torque commands with the recorded
+//! [`hcc_replay::replay`] — and compares its torque commands with the recorded
 //! ones, bit for bit.
 //!
 //! For a recording of the same build and scenario every torque is
@@ -10,13 +10,12 @@
 //! and the exit status is non-zero. A regression tool (does a change alter
 //! the torques?) and the proof that the loop is deterministic.
 
-use anyhow::{anyhow, bail};
+use anyhow::bail;
 use hcc_cycle::Answer;
-use hcc_record::mcap_log::{self, Entry};
+use hcc_record::mcap_log;
+use hcc_replay::derive;
+use hcc_replay::replay::{Replayed, replay_file};
 use std::path::PathBuf;
-
-use crate::derive;
-use crate::replay::{Replay, Replayed};
 
 #[derive(clap::Args, Debug)]
 pub struct ReplayArgs {
@@ -122,32 +121,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let scenario = derive::scenario_of(&args.recording, args.config.as_deref())?;
     let n = scenario.model.nq();
     let period = scenario.period_s();
-    let mut replay = Replay::new(&scenario)?;
     let mut cmp = Comparison::default();
-    let mut going = true;
-    let path = args.recording.clone();
-    let bad = |e: String| anyhow!("{}: {e}", path.display());
-    let mut each = |r: &Replayed<'_>| cmp.cycle(r, n);
-    let read = mcap_log::read::<anyhow::Error>(&args.recording, |_, entry| {
-        if !going {
-            return Ok(());
-        }
-        match entry {
-            Entry::JointState(s) => replay.on_state(s.to_msg().map_err(bad)?),
-            Entry::TorqueCommand(c) => replay.on_command(c.to_msg().map_err(bad)?),
-            Entry::Telemetry(t) => replay.on_telemetry(t.to_msg().map_err(bad)?),
-            Entry::Setpoint(s) => replay.on_setpoint(s.to_msg().map_err(bad)?),
-            Entry::Path(p) => replay.on_path(p.to_msg().map_err(bad)?),
-            Entry::Load(l) => replay.on_load(l.to_msg().map_err(bad)?),
-            Entry::Recorder(_) | Entry::Metadata(..) => {}
-        }
-        going = replay.advance(false, &mut each)?;
-        Ok(())
-    })?;
-    if going {
-        replay.advance(true, &mut each)?;
-    }
-    let counts = replay.counts();
+    let read = replay_file(&args.recording, &scenario, &mut |r| cmp.cycle(r, n))?;
+    let counts = read.counts;
     if let Some(reason) = &read.truncated {
         println!(
             "note: {} is truncated ({reason}); replayed up to its last complete chunk",

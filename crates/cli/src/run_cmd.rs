@@ -576,8 +576,8 @@ fn write_derived(
     no_plots: bool,
     schedule: Option<serde_json::Value>,
 ) -> anyhow::Result<bool> {
-    let mut writer = crate::derive::results_writer(scenario, out, no_plots)?;
-    let mut d = crate::derive::derive(recording, scenario, &mut writer)?;
+    let mut writer = hcc_replay::derive::results_writer(scenario, out, no_plots)?;
+    let mut d = hcc_replay::derive::derive(recording, scenario, &mut writer)?;
     if let Some(report) = schedule
         && let Some(ipc) = d.description.settings.get_mut("ipc")
     {

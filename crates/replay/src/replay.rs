@@ -49,6 +49,54 @@ use hcc_msgs::{
     TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
 };
 
+/// What [`replay_file`] went through.
+#[derive(Debug, Clone, Default)]
+pub struct FileReplay {
+    /// The replay's counts.
+    pub counts: ReplayCounts,
+    /// Why the file ends early (the recorder was killed: replayed up to its
+    /// last complete chunk), or `None` for a complete file.
+    pub truncated: Option<String>,
+}
+
+/// Replays the recording at `path`, made with `scenario`: reads it in file
+/// order, feeds every state, command, telemetry sample and client message
+/// to a [`Replay`] and hands each replayed cycle to `each`, which returns
+/// whether to go on. Allocates (it reads a file).
+pub fn replay_file(
+    path: &std::path::Path,
+    scenario: &Scenario,
+    each: &mut dyn FnMut(&Replayed<'_>) -> anyhow::Result<bool>,
+) -> anyhow::Result<FileReplay> {
+    use hcc_record::mcap_log::{self, Entry};
+    let mut replay = Replay::new(scenario)?;
+    let mut going = true;
+    let bad = |e: String| anyhow!("{}: {e}", path.display());
+    let read = mcap_log::read::<anyhow::Error>(path, |_, entry| {
+        if !going {
+            return Ok(());
+        }
+        match entry {
+            Entry::JointState(s) => replay.on_state(s.to_msg().map_err(bad)?),
+            Entry::TorqueCommand(c) => replay.on_command(c.to_msg().map_err(bad)?),
+            Entry::Telemetry(t) => replay.on_telemetry(t.to_msg().map_err(bad)?),
+            Entry::Setpoint(s) => replay.on_setpoint(s.to_msg().map_err(bad)?),
+            Entry::Path(p) => replay.on_path(p.to_msg().map_err(bad)?),
+            Entry::Load(l) => replay.on_load(l.to_msg().map_err(bad)?),
+            Entry::Recorder(_) | Entry::Metadata(..) => {}
+        }
+        going = replay.advance(false, each)?;
+        Ok(())
+    })?;
+    if going {
+        replay.advance(true, each)?;
+    }
+    Ok(FileReplay {
+        counts: replay.counts(),
+        truncated: read.truncated,
+    })
+}
+
 /// The most telemetry samples held back waiting for their inputs. The
 /// recorder drains at most [`hcc_msgs::ipc::MAX_SUBSCRIBER_BUFFER`] samples of
 /// a stream at a time, so a cycle's inputs follow it within a drain or two;
@@ -122,6 +170,14 @@ pub struct Replayed<'a> {
     /// A cycle at the start of a recording that began mid-run: its state or
     /// command precedes the first recorded one (module docs); not replayed.
     pub before_recording: bool,
+}
+
+impl Replayed<'_> {
+    /// The replay's command of this cycle (`None` when the replay did not
+    /// answer with one: not replayed, or the state taken for a duplicate).
+    pub fn replayed_command(&self) -> Option<&TorqueCommand> {
+        matches!(self.answer, Some(Answer::Command(_))).then(|| self.cycle.command())
+    }
 }
 
 /// A client's message: a setpoint, a path or a load message (numbered

@@ -1,0 +1,38 @@
+//! A recording's cycles again, as a library: [`replay`] runs a recording's
+//! controller cycles through the control cycle ([`hcc_cycle::ControlCycle`],
+//! the code the controller daemon runs) and hands each one on with the
+//! recorded and the replayed torque; [`derive`](mod@derive) builds a recorded run's
+//! results from it — the rows of `trajectory.csv` in the layout of `hcc
+//! simulate`, the metrics and the IPC figures. `hcc replay`, `hcc plot` and
+//! `hcc run` parse their arguments and print; the work is here.
+//!
+//! Replaying a recording and comparing every command, as `hcc replay` does:
+//!
+//! ```no_run
+//! use hcc_replay::derive::scenario_of;
+//! use hcc_replay::replay::replay_file;
+//!
+//! # fn main() -> anyhow::Result<()> {
+//! let file = std::path::Path::new("out/run.mcap");
+//! // The scenario the recording was made with (the file holds it).
+//! let scenario = scenario_of(file, None)?;
+//! let (mut compared, mut largest) = (0u64, 0.0f64);
+//! let done = replay_file(file, &scenario, &mut |cycle| {
+//!     if let (Some(recorded), Some(replayed)) = (cycle.recorded, cycle.replayed_command()) {
+//!         for (a, b) in recorded.tau().iter().zip(replayed.tau()) {
+//!             largest = largest.max((a - b).abs());
+//!         }
+//!         compared += 1;
+//!     }
+//!     Ok(true) // go on
+//! })?;
+//! println!(
+//!     "{compared} cycles compared ({} setpoints taken): largest difference {largest:e} N·m",
+//!     done.counts.setpoints_taken
+//! );
+//! # Ok(())
+//! # }
+//! ```
+
+pub mod derive;
+pub mod replay;
