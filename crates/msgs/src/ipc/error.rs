@@ -25,6 +25,9 @@ pub enum IpcError {
         port: &'static str,
         reason: String,
     },
+    /// A subscriber's queue could not be read.
+    #[error("service {service:?}: receive failed: {reason}")]
+    Receive { service: String, reason: String },
     /// Listing the nodes (for cleanup) failed.
     #[error("cannot list the ipc nodes: {reason}")]
     List { reason: String },

@@ -57,7 +57,8 @@
 //! - `preloan`: samples loaned ahead of time, [`PreLoan`];
 //! - `cleanup`: what crashed processes leave behind, [`leftover_files`];
 //! - `services`: the six services of a namespace, [`Services`];
-//! - `driver_ports`: the ports of a robot driver, [`DriverPorts`].
+//! - `driver_ports`: the ports of a robot driver, [`DriverPorts`];
+//! - `tap`: a namespace's streams for a tool that listens, [`Tap`].
 //!
 //! [`JointState`]: crate::JointState
 //! [`TorqueCommand`]: crate::TorqueCommand
@@ -75,6 +76,7 @@ mod pubsub;
 mod scenario;
 mod services;
 mod settings;
+mod tap;
 #[cfg(test)]
 mod testing;
 
@@ -100,6 +102,7 @@ pub use settings::{
     MAX_SETPOINT_SUBSCRIBERS, MAX_STATE_SUBSCRIBERS, MAX_SUBSCRIBER_BUFFER,
     MAX_TELEMETRY_SUBSCRIBERS, SETPOINT_BUFFER,
 };
+pub use tap::{StreamCounts, TAP_BURST, Tap, TapCounts, TapStreams, Tapped};
 
 /// `update_connections` of iceoryx2's ports (see `hcc_rt::ConnectionUpkeep`).
 pub use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};

@@ -1,0 +1,241 @@
+//! The tap: one listener of a namespace's streams for every tool that reads
+//! them without taking part in the loop (the recorder, the live view, the
+//! bridge). It subscribes with the largest queues the services allow
+//! ([`MAX_SUBSCRIBER_BUFFER`] samples of each loop stream, [`SETPOINT_BUFFER`]
+//! of each client stream), empties them on each [`Tap::drain`] and hands every
+//! sample on in the contract's order: the client's messages first (a client
+//! numbers its setpoints, path and load messages together, so they go on in
+//! that order across the three queues), then the joint states, the torque
+//! commands and the telemetry (a command or telemetry sample always follows
+//! the state and the messages its cycle took). It checks each loop stream's
+//! sequence numbers as it goes: the samples a full queue lost before the tap
+//! read them are counted as gaps, and a source that numbers from the start
+//! again (a restarted driver or controller) is counted and followed
+//! ([`TapCounts`]).
+//!
+//! A tap never makes a publisher wait (the services' overflow is safe), so a
+//! slow tool loses samples, counted, and never slows the loop. It allocates
+//! while it drains client messages (to order them); it is not for a
+//! real-time loop.
+
+use super::{
+    CommandSubscriber, IpcError, LoadSubscriber, MAX_SUBSCRIBER_BUFFER, PathSubscriber,
+    SETPOINT_BUFFER, Services, SetpointSubscriber, StateSubscriber, TelemetrySubscriber,
+};
+use crate::{
+    JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, Setpoint, Telemetry,
+    TorqueCommand,
+};
+
+/// A drain that found this many samples in one queue should be followed by
+/// another at once (the queue may have overflowed meanwhile).
+pub const TAP_BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
+
+/// One sample as the tap read it (borrowed from shared memory until the
+/// callback returns).
+#[derive(Debug, Clone, Copy)]
+pub enum Tapped<'a> {
+    /// A joint state (driver → controller).
+    State(&'a JointState),
+    /// A torque command (controller → driver).
+    Command(&'a TorqueCommand),
+    /// A telemetry sample (controller → tools).
+    Telemetry(&'a Telemetry),
+    /// A client's setpoint.
+    Setpoint(&'a Setpoint),
+    /// A client's path message.
+    Path(&'a PathKnots),
+    /// A client's load message.
+    Load(&'a LoadSetpoint),
+}
+
+/// Which streams a tap subscribes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TapStreams {
+    /// The loop's: joint states, torque commands, telemetry.
+    Loop,
+    /// The loop's and the clients' (setpoints, paths, loads).
+    All,
+}
+
+/// One loop stream's counts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StreamCounts {
+    /// Samples read.
+    pub received: u64,
+    /// Samples lost before the tap read them (sequence gaps).
+    pub missed: u64,
+    /// Times the source numbered from the start again (a restart).
+    pub restarts: u64,
+}
+
+/// What a tap has read and lost so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TapCounts {
+    /// The joint states.
+    pub joint_state: StreamCounts,
+    /// The torque commands.
+    pub torque_command: StreamCounts,
+    /// The telemetry.
+    pub telemetry: StreamCounts,
+    /// The clients' messages read (setpoints, paths, loads).
+    pub client_messages: u64,
+}
+
+impl TapCounts {
+    /// Samples lost on the three loop streams.
+    pub fn missed(&self) -> u64 {
+        self.joint_state.missed + self.torque_command.missed + self.telemetry.missed
+    }
+}
+
+/// The clients' subscribers.
+struct ClientPorts {
+    setpoints: SetpointSubscriber,
+    paths: PathSubscriber,
+    loads: LoadSubscriber,
+}
+
+/// A client's message held until the three queues are ordered.
+enum ClientSample {
+    Setpoint(iceoryx2::sample::Sample<super::Ipc, Setpoint, ()>),
+    Path(iceoryx2::sample::Sample<super::Ipc, PathKnots, ()>),
+    Load(iceoryx2::sample::Sample<super::Ipc, LoadSetpoint, ()>),
+}
+
+impl ClientSample {
+    fn seq(&self) -> u64 {
+        match self {
+            Self::Setpoint(s) => s.header.seq,
+            Self::Path(p) => p.header.seq,
+            Self::Load(l) => l.header.seq,
+        }
+    }
+
+    fn tapped(&self) -> Tapped<'_> {
+        match self {
+            Self::Setpoint(s) => Tapped::Setpoint(s),
+            Self::Path(p) => Tapped::Path(p),
+            Self::Load(l) => Tapped::Load(l),
+        }
+    }
+}
+
+/// A namespace's streams, subscribed (module docs).
+pub struct Tap {
+    states: StateSubscriber,
+    commands: CommandSubscriber,
+    telemetry: TelemetrySubscriber,
+    client: Option<ClientPorts>,
+    /// The sequence checks of the states, commands and telemetry.
+    checkers: [SequenceChecker; 3],
+    counts: TapCounts,
+}
+
+/// Why a queue could not be read.
+fn receive_error(service: &str, e: impl std::fmt::Debug) -> IpcError {
+    IpcError::Receive {
+        service: service.into(),
+        reason: format!("{e:?}"),
+    }
+}
+
+/// Counts one loop sample's sequence number into `counts`.
+fn check(checker: &mut SequenceChecker, counts: &mut StreamCounts, seq: u64) {
+    counts.received += 1;
+    let restarts = checker.restarts();
+    if let SeqEvent::Gap { missed } = checker.observe_restarting(seq) {
+        counts.missed += missed;
+    }
+    counts.restarts += checker.restarts() - restarts;
+}
+
+impl Tap {
+    /// Subscribes to `streams` of the services `services` opened.
+    pub fn open(services: &Services, streams: TapStreams) -> Result<Tap, IpcError> {
+        let client = match streams {
+            TapStreams::Loop => None,
+            TapStreams::All => Some(ClientPorts {
+                setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
+                paths: services.path_subscriber(SETPOINT_BUFFER)?,
+                loads: services.load_subscriber(SETPOINT_BUFFER)?,
+            }),
+        };
+        Ok(Tap {
+            states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+            commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+            telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
+            client,
+            checkers: Default::default(),
+            counts: TapCounts::default(),
+        })
+    }
+
+    /// Empties every queue once and hands each sample to `each` in the
+    /// contract's order (module docs). Returns the most samples one queue
+    /// held: at [`TAP_BURST`] or more, drain again at once.
+    pub fn drain(&mut self, each: &mut dyn FnMut(Tapped<'_>)) -> Result<usize, IpcError> {
+        let mut most = 0;
+        if let Some(c) = &self.client {
+            let mut held = Vec::new();
+            while let Some(s) = c
+                .setpoints
+                .receive()
+                .map_err(|e| receive_error("setpoint", e))?
+            {
+                held.push(ClientSample::Setpoint(s));
+            }
+            while let Some(p) = c.paths.receive().map_err(|e| receive_error("path", e))? {
+                held.push(ClientSample::Path(p));
+            }
+            while let Some(l) = c.loads.receive().map_err(|e| receive_error("load", e))? {
+                held.push(ClientSample::Load(l));
+            }
+            held.sort_by_key(ClientSample::seq);
+            for m in &held {
+                each(m.tapped());
+            }
+            self.counts.client_messages += held.len() as u64;
+            most = held.len();
+        }
+        let [states, commands, telemetry] = &mut self.checkers;
+        let mut k = 0;
+        while let Some(s) = self
+            .states
+            .receive()
+            .map_err(|e| receive_error("joint_state", e))?
+        {
+            check(states, &mut self.counts.joint_state, s.header.seq);
+            each(Tapped::State(&s));
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(c) = self
+            .commands
+            .receive()
+            .map_err(|e| receive_error("torque_command", e))?
+        {
+            check(commands, &mut self.counts.torque_command, c.header.seq);
+            each(Tapped::Command(&c));
+            k += 1;
+        }
+        most = most.max(k);
+        k = 0;
+        while let Some(t) = self
+            .telemetry
+            .receive()
+            .map_err(|e| receive_error("telemetry", e))?
+        {
+            check(telemetry, &mut self.counts.telemetry, t.header.seq);
+            each(Tapped::Telemetry(&t));
+            k += 1;
+        }
+        Ok(most.max(k))
+    }
+
+    /// What the tap has read and lost so far.
+    pub fn counts(&self) -> TapCounts {
+        self.counts
+    }
+}
