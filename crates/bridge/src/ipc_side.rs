@@ -1,7 +1,7 @@
 //! The iceoryx2 side: a thread that subscribes to the joint states, torque
-//! commands and telemetry of a namespace as a pure subscriber (like
-//! `hcc record`), drains the queues every [`POLL`], counts what the queues
-//! lost before it read them (sequence gaps), decimates each stream to the
+//! commands and telemetry of a namespace through a tap (`hcc_msgs::ipc::Tap`,
+//! as `hcc record` and `hcc view` do), drains the queues every [`POLL`],
+//! counts what the queues lost before it read them (sequence gaps), decimates each stream to the
 //! bridge's rate by sequence number ([`Decimator`]) and hands the rest to the Zenoh side
 //! through a bounded channel of [`BACKLOG`] samples. A full channel drops
 //! the sample and counts it: nothing here ever waits for Zenoh, and the
@@ -12,14 +12,9 @@ use std::sync::{Arc, mpsc};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, Services};
-use hcc_msgs::{
-    Header, JointState, SeqEvent, SequenceChecker, ServiceNames, Telemetry, TorqueCommand,
-};
-use iceoryx2::port::subscriber::Subscriber;
+use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
+use hcc_msgs::{JointState, ServiceNames, Telemetry, TorqueCommand};
 use iceoryx2::prelude::SignalHandlingMode;
-use iceoryx2::prelude::ZeroCopySend;
-use std::fmt::Debug;
 
 use crate::counters::{Counters, add, bump};
 use crate::rate::Decimator;
@@ -42,100 +37,49 @@ pub enum Sample {
     Failed(String),
 }
 
-/// One stream's bookkeeping: sequence checks and decimation.
-struct Stream {
-    checker: SequenceChecker,
-    decimator: Decimator,
-}
-
-impl Stream {
-    fn new(source_hz: f64, rate_hz: f64) -> Stream {
-        Stream {
-            checker: SequenceChecker::default(),
-            decimator: Decimator::new(source_hz, rate_hz),
-        }
-    }
-
-    /// Counts gaps; whether the sample passes the decimation.
-    fn admit(&mut self, seq: u64, counters: &Counters) -> bool {
-        // A restarted source starts the stream again.
-        if let SeqEvent::Gap { missed } = self.checker.observe_restarting(seq) {
-            add(&counters.ipc_lost, missed);
-        }
-        let pass = self.decimator.pass(seq);
-        if !pass {
-            bump(&counters.decimated);
-        }
-        pass
-    }
-}
-
-struct Ports {
-    states: ipc::StateSubscriber,
-    commands: ipc::CommandSubscriber,
-    telemetry: ipc::TelemetrySubscriber,
-}
-
-/// The reading thread's state.
+/// The reading thread's state: the tap, one decimator per stream, the
+/// channel to the Zenoh side.
 struct Drain {
-    ports: Ports,
-    streams: [Stream; 3],
+    tap: Tap,
+    /// The joint states', torque commands' and telemetry's decimators.
+    decimators: [Decimator; 3],
     tx: mpsc::SyncSender<Sample>,
     counters: Arc<Counters>,
+    /// The tap's gaps already added to `ipc_lost`.
+    lost: u64,
 }
 
 impl Drain {
-    /// Empties every queue once; returns how many samples were read.
+    /// Empties every queue once: counts every sample, and hands those that
+    /// pass the decimation on (a full channel drops and counts). Returns the
+    /// most samples one queue held.
     fn drain(&mut self) -> Result<usize, String> {
-        let (p, [s, c, t]) = (&self.ports, &mut self.streams);
-        let out = (&self.tx, &*self.counters);
-        Ok(drain_port(
-            &p.states,
-            "joint_state",
-            s,
-            out,
-            |x| &x.header,
-            Sample::State,
-        )? + drain_port(
-            &p.commands,
-            "torque_command",
-            c,
-            out,
-            |x| &x.header,
-            Sample::Command,
-        )? + drain_port(
-            &p.telemetry,
-            "telemetry",
-            t,
-            out,
-            |x| &x.header,
-            Sample::Telemetry,
-        )?)
+        let (decimators, tx, counters) = (&mut self.decimators, &self.tx, &*self.counters);
+        let most = self
+            .tap
+            .drain(&mut |m| {
+                bump(&counters.received);
+                let (k, seq, sample) = match m {
+                    Tapped::State(s) => (0, s.header.seq, Sample::State(Box::new(*s))),
+                    Tapped::Command(c) => (1, c.header.seq, Sample::Command(Box::new(*c))),
+                    Tapped::Telemetry(t) => (2, t.header.seq, Sample::Telemetry(Box::new(*t))),
+                    // A loop tap reads no client message.
+                    Tapped::Setpoint(_) | Tapped::Path(_) | Tapped::Load(_) => return,
+                };
+                if !decimators[k].pass(seq) {
+                    bump(&counters.decimated);
+                } else if let Err(mpsc::TrySendError::Full(_)) = tx.try_send(sample) {
+                    bump(&counters.dropped_behind);
+                }
+            })
+            .map_err(|e| e.to_string())?;
+        // The queues' losses, counted by the tap (a restarted source starts
+        // its stream again).
+        let lost = self.tap.counts().missed();
+        add(&self.counters.ipc_lost, lost - self.lost);
+        self.lost = lost;
+        Ok(most)
     }
-}
-
-/// Empties one queue: counts every sample, checks its sequence, and hands
-/// those that pass the decimation on (a full channel drops and counts).
-fn drain_port<T: Debug + ZeroCopySend + Copy>(
-    port: &Subscriber<ipc::Ipc, T, ()>,
-    name: &str,
-    stream: &mut Stream,
-    (tx, counters): (&mpsc::SyncSender<Sample>, &Counters),
-    header: impl Fn(&T) -> &Header,
-    wrap: impl Fn(Box<T>) -> Sample,
-) -> Result<usize, String> {
-    let mut k = 0;
-    while let Some(sample) = port.receive().map_err(|e| format!("{name}: {e:?}"))? {
-        k += 1;
-        bump(&counters.received);
-        let h = header(&sample);
-        if stream.admit(h.seq, counters)
-            && let Err(mpsc::TrySendError::Full(_)) = tx.try_send(wrap(Box::new(*sample)))
-        {
-            bump(&counters.dropped_behind);
-        }
-    }
-    Ok(k)
 }
 
 /// The running reader.
@@ -171,14 +115,10 @@ impl IpcReader {
                         file_prefix.as_deref(),
                     )?;
                     let services = Services::open(&node, &names)?;
-                    let ports = Ports {
-                        states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                        commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                        telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                    };
-                    Ok((node, services, ports))
+                    let tap = Tap::open(&services, TapStreams::Loop)?;
+                    Ok((node, services, tap))
                 };
-                let (node, services, ports) = match setup() {
+                let (node, services, tap) = match setup() {
                     Ok(x) => x,
                     Err(e) => {
                         let _ = ready_tx.send(Err(format!("{e:#}")));
@@ -187,14 +127,15 @@ impl IpcReader {
                 };
                 let _ = ready_tx.send(Ok(()));
                 let mut drain = Drain {
-                    ports,
-                    streams: std::array::from_fn(|_| Stream::new(source_hz, rate_hz)),
+                    tap,
+                    decimators: std::array::from_fn(|_| Decimator::new(source_hz, rate_hz)),
                     tx,
                     counters,
+                    lost: 0,
                 };
                 while !stop_flag.load(Ordering::Relaxed) {
                     match drain.drain() {
-                        Ok(k) if k >= MAX_SUBSCRIBER_BUFFER / 2 => {}
+                        Ok(k) if k >= TAP_BURST => {}
                         Ok(_) => std::thread::sleep(POLL),
                         Err(e) => {
                             let _ = drain.tx.send(Sample::Failed(e));

@@ -1,7 +1,8 @@
 //! Capturing a namespace's streams into an MCAP recording, as a pure
 //! subscriber: the receiver thread copies every joint state, torque command,
-//! telemetry sample, setpoint, path and load message out of the iceoryx2 queues (the largest
-//! queues the services allow, [`MAX_SUBSCRIBER_BUFFER`] samples, i.e. 128 ms
+//! telemetry sample, setpoint, path and load message out of the iceoryx2
+//! queues through a tap (`hcc_msgs::ipc::Tap`: the largest queues the
+//! services allow, 128 samples, i.e. 128 ms
 //! at 1 kHz, drained every [`POLL`] — at once again when a drain found half a
 //! queue, as in lockstep runs faster than real time — so that publishers,
 //! which never block, lose nothing to the recorder), and the
@@ -21,7 +22,7 @@
 //! memory stays bounded whatever the load.
 
 use anyhow::{Context, bail};
-use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
+use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
 use hcc_msgs::{
     JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint,
     Telemetry, TorqueCommand,
@@ -60,13 +61,10 @@ pub const BACKLOG: usize = 6_000;
 pub const POLL: Duration = Duration::from_millis(1);
 
 /// The receiver's sleep between drains in a lockstep run, whose daemons turn
-/// as fast as they can (tens of kHz): a queue of [`MAX_SUBSCRIBER_BUFFER`]
+/// as fast as they can (tens of kHz): a queue of [`MAX_SUBSCRIBER_BUFFER`](hcc_msgs::ipc::MAX_SUBSCRIBER_BUFFER)
 /// samples then lasts a few milliseconds, and there is no real-time loop
 /// whose core the wake-ups would disturb.
 pub const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
-
-/// A drain that found this many samples is followed by another at once.
-const BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
 
 /// The subscribers, on a thread of their own that does nothing but copy
 /// samples out of the queues into a bounded channel, so that writing the
@@ -96,74 +94,15 @@ impl Sink {
     }
 }
 
-struct Subscribers {
-    states: ipc::StateSubscriber,
-    commands: ipc::CommandSubscriber,
-    telemetry: ipc::TelemetrySubscriber,
-    setpoints: ipc::SetpointSubscriber,
-    paths: ipc::PathSubscriber,
-    loads: ipc::LoadSubscriber,
-}
-
-impl Subscribers {
-    /// Reads every queued sample into `tx`; returns how many.
-    fn drain_into(&self, tx: &Sink) -> Result<usize, String> {
-        // Setpoints, paths, loads and states first: a command or telemetry
-        // always follows them. A client numbers its setpoints, path and load
-        // messages together: they are handed on in that order (a message of
-        // one queue seen here was sent before any later one of the others).
-        let mut clients = Vec::new();
-        while let Some(s) = self
-            .setpoints
-            .receive()
-            .map_err(|e| format!("receive setpoint: {e:?}"))?
-        {
-            clients.push((s.header.seq, Received::Setpoint(Box::new(*s))));
-        }
-        while let Some(p) = self
-            .paths
-            .receive()
-            .map_err(|e| format!("receive path: {e:?}"))?
-        {
-            clients.push((p.header.seq, Received::Path(Box::new(*p))));
-        }
-        while let Some(l) = self
-            .loads
-            .receive()
-            .map_err(|e| format!("receive load: {e:?}"))?
-        {
-            clients.push((l.header.seq, Received::Load(Box::new(*l))));
-        }
-        clients.sort_by_key(|(seq, _)| *seq);
-        let mut k = clients.len();
-        for (_, m) in clients {
-            tx.send(m);
-        }
-        while let Some(s) = self
-            .states
-            .receive()
-            .map_err(|e| format!("receive joint_state: {e:?}"))?
-        {
-            tx.send(Received::State(Box::new(*s)));
-            k += 1;
-        }
-        while let Some(c) = self
-            .commands
-            .receive()
-            .map_err(|e| format!("receive torque_command: {e:?}"))?
-        {
-            tx.send(Received::Command(Box::new(*c)));
-            k += 1;
-        }
-        while let Some(t) = self
-            .telemetry
-            .receive()
-            .map_err(|e| format!("receive telemetry: {e:?}"))?
-        {
-            tx.send(Received::Telemetry(Box::new(*t)));
-            k += 1;
-        }
-        Ok(k)
+/// A tapped sample, copied out of shared memory.
+fn received(m: Tapped<'_>) -> Received {
+    match m {
+        Tapped::State(s) => Received::State(Box::new(*s)),
+        Tapped::Command(c) => Received::Command(Box::new(*c)),
+        Tapped::Telemetry(t) => Received::Telemetry(Box::new(*t)),
+        Tapped::Setpoint(s) => Received::Setpoint(Box::new(*s)),
+        Tapped::Path(p) => Received::Path(Box::new(*p)),
+        Tapped::Load(l) => Received::Load(Box::new(*l)),
     }
 }
 
@@ -208,17 +147,10 @@ impl Receiver {
                         file_prefix.as_deref(),
                     )?;
                     let services = Services::open(&node, &names)?;
-                    let subs = Subscribers {
-                        states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                        commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                        telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-                        setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
-                        paths: services.path_subscriber(SETPOINT_BUFFER)?,
-                        loads: services.load_subscriber(SETPOINT_BUFFER)?,
-                    };
-                    Ok((node, services, subs))
+                    let tap = Tap::open(&services, TapStreams::All)?;
+                    Ok((node, services, tap))
                 };
-                let (node, services, subs) = match setup() {
+                let (node, services, mut tap) = match setup() {
                     Ok(x) => {
                         let _ = ready_tx.send(Ok(warning));
                         x
@@ -234,18 +166,18 @@ impl Receiver {
                     // then the thread ends, whether or not the publishers
                     // are still running.
                     let last = stop_flag.load(Ordering::SeqCst);
-                    match subs.drain_into(&tx) {
+                    match tap.drain(&mut |m| tx.send(received(m))) {
                         Ok(_) if last => break,
-                        Ok(k) if k >= BURST => {}
+                        Ok(k) if k >= TAP_BURST => {}
                         Ok(_) => std::thread::sleep(poll),
                         Err(e) => {
                             // Blocking: the failure must reach the writer.
-                            let _ = tx.tx.send(Received::Failed(e));
+                            let _ = tx.tx.send(Received::Failed(e.to_string()));
                             break;
                         }
                     }
                 }
-                drop(subs);
+                drop(tap);
                 drop(services);
                 drop(node);
             })

@@ -1,7 +1,8 @@
-//! The live server: one thread drains the namespace's four streams from
-//! iceoryx2 (the largest queues the services allow, 128 samples = 128 ms at
-//! 1 kHz, drained every millisecond, at once again after a drain that found
-//! half a queue) and hands every sample to the [`Viewer`]; the Foxglove
+//! The live server: one thread drains the namespace's streams from iceoryx2
+//! through a tap (`hcc_msgs::ipc::Tap`: the largest queues the services
+//! allow, 128 samples = 128 ms at 1 kHz, drained every millisecond, at once
+//! again after a drain that found half a queue) and hands every sample to
+//! the [`Viewer`]; the Foxglove
 //! SDK's own runtime sends to the clients. Samples lost because the queue
 //! overflowed are counted as gaps; a restarted controller or driver (its
 //! sequence numbers start again) is counted and followed.
@@ -9,7 +10,7 @@
 use anyhow::Context as _;
 use hcc_config::ToolScenarioError;
 use hcc_msgs::ServiceNames;
-use hcc_msgs::ipc::{self, MAX_SUBSCRIBER_BUFFER, SETPOINT_BUFFER, Services};
+use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
 use hcc_record::mcap_log::{
     self, JointStateMsg, LoadMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
 };
@@ -21,19 +22,8 @@ use crate::{Args, Server};
 
 /// Sleep between drains.
 const POLL: Duration = Duration::from_millis(1);
-/// A drain that found this many samples on a stream is followed by another at once.
-const BURST: usize = MAX_SUBSCRIBER_BUFFER / 2;
 /// Interval of the progress line on stderr.
 const PROGRESS: Duration = Duration::from_secs(10);
-
-struct Subscribers {
-    states: ipc::StateSubscriber,
-    commands: ipc::CommandSubscriber,
-    telemetry: ipc::TelemetrySubscriber,
-    setpoints: ipc::SetpointSubscriber,
-    paths: ipc::PathSubscriber,
-    loads: ipc::LoadSubscriber,
-}
 
 /// Monotonic stamps onto Unix time (the offset measured at the start).
 struct Clock {
@@ -57,72 +47,31 @@ impl Clock {
     }
 }
 
-impl Subscribers {
-    /// Hands every queued sample to the server; the largest count of one stream.
-    fn drain(&self, server: &mut Server, clock: &Clock) -> Result<usize, String> {
-        let v = &mut server.viewer;
-        let mut most = 0;
-        let mut k = 0;
-        while let Some(s) = self
-            .setpoints
-            .receive()
-            .map_err(|e| format!("setpoint: {e:?}"))?
-        {
-            v.setpoint(clock.unix(s.header.stamp_ns), &SetpointMsg::from(&*s));
-            k += 1;
-        }
-        most = most.max(k);
-        k = 0;
-        while let Some(p) = self.paths.receive().map_err(|e| format!("path: {e:?}"))? {
-            v.path(clock.unix(p.header.stamp_ns), &PathMsg::from(&*p));
-            k += 1;
-        }
-        most = most.max(k);
-        k = 0;
-        while let Some(l) = self.loads.receive().map_err(|e| format!("load: {e:?}"))? {
-            v.load(clock.unix(l.header.stamp_ns), &LoadMsg::from(&*l));
-            k += 1;
-        }
-        most = most.max(k);
-        k = 0;
-        while let Some(s) = self
-            .states
-            .receive()
-            .map_err(|e| format!("joint_state: {e:?}"))?
-        {
+/// Hands one sample to the viewer.
+fn show(server: &mut Server, clock: &Clock, m: Tapped<'_>) {
+    let v = &mut server.viewer;
+    match m {
+        Tapped::Setpoint(s) => v.setpoint(clock.unix(s.header.stamp_ns), &SetpointMsg::from(s)),
+        Tapped::Path(p) => v.path(clock.unix(p.header.stamp_ns), &PathMsg::from(p)),
+        Tapped::Load(l) => v.load(clock.unix(l.header.stamp_ns), &LoadMsg::from(l)),
+        Tapped::State(s) => {
             let h = s.header;
             v.joint_state(h.seq, h.stamp_ns, clock.unix(h.stamp_ns), || {
-                JointStateMsg::from(&*s)
+                JointStateMsg::from(s)
             });
-            k += 1;
         }
-        most = most.max(k);
-        k = 0;
-        while let Some(c) = self
-            .commands
-            .receive()
-            .map_err(|e| format!("torque_command: {e:?}"))?
-        {
+        Tapped::Command(c) => {
             let h = c.header;
             v.torque_command(h.seq, c.state_seq, clock.unix(h.stamp_ns), || {
-                TorqueCommandMsg::from(&*c)
+                TorqueCommandMsg::from(c)
             });
-            k += 1;
         }
-        most = most.max(k);
-        k = 0;
-        while let Some(t) = self
-            .telemetry
-            .receive()
-            .map_err(|e| format!("telemetry: {e:?}"))?
-        {
+        Tapped::Telemetry(t) => {
             let h = t.header;
             v.telemetry(h.seq, t.state_seq, clock.unix(h.stamp_ns), || {
-                TelemetryMsg::from(&*t)
+                TelemetryMsg::from(t)
             });
-            k += 1;
         }
-        Ok(most.max(k))
     }
 }
 
@@ -158,20 +107,13 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
         file_prefix.as_deref(),
     )?;
     let services = Services::open(&node, &names)?;
-    let subs = Subscribers {
-        states: services.joint_state_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-        commands: services.torque_command_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-        telemetry: services.telemetry_subscriber(MAX_SUBSCRIBER_BUFFER)?,
-        setpoints: services.setpoint_subscriber(SETPOINT_BUFFER)?,
-        paths: services.path_subscriber(SETPOINT_BUFFER)?,
-        loads: services.load_subscriber(SETPOINT_BUFFER)?,
-    };
+    let mut tap = Tap::open(&services, TapStreams::All)?;
     let mut server = crate::start(args, scenario.as_ref(), &format!("namespace {namespace}"))?;
     let clock = Clock::new();
     let mut next_progress = Instant::now() + PROGRESS;
     let mut receive_errors = 0u64;
     while !hcc_rt::stop_requested() {
-        let most = match subs.drain(&mut server, &clock) {
+        let most = match tap.drain(&mut |m| show(&mut server, &clock, m)) {
             Ok(k) => k,
             Err(e) => {
                 // The server outlives a broken peer: counted and said, once a power of two.
@@ -191,13 +133,13 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
             eprintln!("hcc view: {}", stats_line(server.viewer.counts()));
             next_progress += PROGRESS;
         }
-        if most < BURST {
+        if most < TAP_BURST {
             std::thread::sleep(POLL);
         }
     }
     println!("hcc view: stopped; {}", stats_line(server.viewer.counts()));
     server.handle.stop().wait_blocking();
-    drop(subs);
+    drop(tap);
     drop(services);
     drop(node);
     Ok(())

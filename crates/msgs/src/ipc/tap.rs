@@ -14,9 +14,9 @@
 //! ([`TapCounts`]).
 //!
 //! A tap never makes a publisher wait (the services' overflow is safe), so a
-//! slow tool loses samples, counted, and never slows the loop. It allocates
-//! while it drains client messages (to order them); it is not for a
-//! real-time loop.
+//! slow tool loses samples, counted, and never slows the loop. It copies the
+//! client messages out while it orders them (a subscriber may hold only a
+//! few samples at once), so it allocates: it is not for a real-time loop.
 
 use super::{
     CommandSubscriber, IpcError, LoadSubscriber, MAX_SUBSCRIBER_BUFFER, PathSubscriber,
@@ -96,11 +96,12 @@ struct ClientPorts {
     loads: LoadSubscriber,
 }
 
-/// A client's message held until the three queues are ordered.
+/// A client's message held until the three queues are ordered: a copy (a
+/// subscriber may hold only a few samples out of shared memory at once).
 enum ClientSample {
-    Setpoint(iceoryx2::sample::Sample<super::Ipc, Setpoint, ()>),
-    Path(iceoryx2::sample::Sample<super::Ipc, PathKnots, ()>),
-    Load(iceoryx2::sample::Sample<super::Ipc, LoadSetpoint, ()>),
+    Setpoint(Box<Setpoint>),
+    Path(Box<PathKnots>),
+    Load(Box<LoadSetpoint>),
 }
 
 impl ClientSample {
@@ -183,13 +184,13 @@ impl Tap {
                 .receive()
                 .map_err(|e| receive_error("setpoint", e))?
             {
-                held.push(ClientSample::Setpoint(s));
+                held.push(ClientSample::Setpoint(Box::new(*s)));
             }
             while let Some(p) = c.paths.receive().map_err(|e| receive_error("path", e))? {
-                held.push(ClientSample::Path(p));
+                held.push(ClientSample::Path(Box::new(*p)));
             }
             while let Some(l) = c.loads.receive().map_err(|e| receive_error("load", e))? {
-                held.push(ClientSample::Load(l));
+                held.push(ClientSample::Load(Box::new(*l)));
             }
             held.sort_by_key(ClientSample::seq);
             for m in &held {
