@@ -3,12 +3,14 @@
 //! the tanks that the command refilled; where they run out the transition
 //! holds (counted, `gain_ramp_held`) instead of putting energy in.
 
+mod common;
+
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
 use hcc_control::Controller;
 use hcc_cycle::{ControlCycle, CycleSettings};
-use hcc_msgs::{ANSWER_ACCEPTED, JointState, Setpoint};
+use hcc_msgs::{ANSWER_ACCEPTED, Setpoint};
 
 const PERIOD: u64 = 1_000_000;
 
@@ -18,15 +20,7 @@ fn scenario() -> Scenario {
     Scenario::load(&path).unwrap()
 }
 
-/// The arm held at the scenario's start (every state the same, at rest).
-fn state(scenario: &Scenario, seq: u64) -> JointState {
-    let n = scenario.model.nq();
-    let q: Vec<f64> = scenario.q0.iter().copied().collect();
-    let mut s = JointState::zeroed();
-    s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
-    s.header.seq = seq;
-    s
-}
+use common::state_at_start as state;
 
 /// A cycle whose TCP goal has been moved 20 cm away from the held arm and
 /// reached (the spring stretched, V_1 = ½ · 350 · 0.2² = 7 J), and the

@@ -3,6 +3,8 @@
 //! speed limit), every bad kind is rejected with its code and changes
 //! nothing, and every setpoint is answered in telemetry.
 
+mod common;
+
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -24,14 +26,7 @@ fn decider(scenario: &Scenario) -> ControlCycle {
     ControlCycle::new(c, &settings).unwrap()
 }
 
-fn state(scenario: &Scenario, seq: u64) -> JointState {
-    let n = scenario.model.nq();
-    let q: Vec<f64> = scenario.q0.iter().copied().collect();
-    let mut s = JointState::zeroed();
-    s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
-    s.header.seq = seq;
-    s
-}
+use common::state_at_start as state;
 
 #[test]
 fn a_goal_moves_the_equilibrium_smoothly_and_is_answered() {

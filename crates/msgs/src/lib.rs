@@ -151,6 +151,7 @@
 //! are meant for the control loop. Entries beyond `n_joints` are kept zero by
 //! writers and ignored by readers.
 
+mod client_message;
 pub mod driver;
 mod error;
 pub mod ipc;
@@ -163,6 +164,7 @@ mod setpoint;
 mod telemetry;
 mod types;
 
+pub use client_message::ClientMessage;
 pub use error::{MsgError, NamespaceError};
 pub use load::{DEFAULT_LOAD_RAMP_S, LoadRefusal, LoadRejection, LoadSetpoint};
 pub use path::{

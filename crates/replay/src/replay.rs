@@ -45,8 +45,8 @@ use anyhow::anyhow;
 use hcc_config::Scenario;
 use hcc_cycle::{Answer, ControlCycle, CycleSettings};
 use hcc_msgs::{
-    JointState, KnotsRefusal, LoadSetpoint, PathKnots, PathRejection, Setpoint, SetpointAnswer,
-    TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
+    ClientMessage, JointState, KnotsRefusal, LoadSetpoint, PathKnots, PathRejection, Setpoint,
+    SetpointAnswer, TELEMETRY_FLAG_PEER_LOST, Telemetry, TorqueCommand,
 };
 
 /// What [`replay_file`] went through.
@@ -177,25 +177,6 @@ impl Replayed<'_> {
     /// answer with one: not replayed, or the state taken for a duplicate).
     pub fn replayed_command(&self) -> Option<&TorqueCommand> {
         matches!(self.answer, Some(Answer::Command(_))).then(|| self.cycle.command())
-    }
-}
-
-/// A client's message: a setpoint, a path or a load message (numbered
-/// together).
-#[derive(Clone, Debug)]
-enum ClientMessage {
-    Setpoint(Box<Setpoint>),
-    Path(Box<PathKnots>),
-    Load(Box<LoadSetpoint>),
-}
-
-impl ClientMessage {
-    fn seq(&self) -> u64 {
-        match self {
-            Self::Setpoint(s) => s.header.seq,
-            Self::Path(p) => p.header.seq,
-            Self::Load(l) => l.header.seq,
-        }
     }
 }
 

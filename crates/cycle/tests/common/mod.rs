@@ -1,4 +1,18 @@
-//! Helpers the cycle's integration tests share.
+//! Helpers the cycle's integration tests share (each test file uses some).
+#![allow(dead_code)]
+
+use hcc_config::Scenario;
+use hcc_msgs::JointState;
+
+/// The arm held at `scenario`'s start: its joint state number `seq`, at rest.
+pub fn state_at_start(scenario: &Scenario, seq: u64) -> JointState {
+    let n = scenario.model.nq();
+    let q: Vec<f64> = scenario.q0.iter().copied().collect();
+    let mut s = JointState::zeroed();
+    s.set_joints(&q, &vec![0.0; n], &vec![0.0; n]).unwrap();
+    s.header.seq = seq;
+    s
+}
 
 /// The largest change of a joint torque from one cycle to the next in
 /// `tau` (one command per cycle), N·m.

@@ -23,8 +23,8 @@ use super::{
     SETPOINT_BUFFER, Services, SetpointSubscriber, StateSubscriber, TelemetrySubscriber,
 };
 use crate::{
-    JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, Setpoint, Telemetry,
-    TorqueCommand,
+    ClientMessage, JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, Setpoint,
+    Telemetry, TorqueCommand,
 };
 
 /// A drain that found this many samples in one queue should be followed by
@@ -96,29 +96,12 @@ struct ClientPorts {
     loads: LoadSubscriber,
 }
 
-/// A client's message held until the three queues are ordered: a copy (a
-/// subscriber may hold only a few samples out of shared memory at once).
-enum ClientSample {
-    Setpoint(Box<Setpoint>),
-    Path(Box<PathKnots>),
-    Load(Box<LoadSetpoint>),
-}
-
-impl ClientSample {
-    fn seq(&self) -> u64 {
-        match self {
-            Self::Setpoint(s) => s.header.seq,
-            Self::Path(p) => p.header.seq,
-            Self::Load(l) => l.header.seq,
-        }
-    }
-
-    fn tapped(&self) -> Tapped<'_> {
-        match self {
-            Self::Setpoint(s) => Tapped::Setpoint(s),
-            Self::Path(p) => Tapped::Path(p),
-            Self::Load(l) => Tapped::Load(l),
-        }
+/// A client's message as a tapped sample.
+fn tapped(m: &ClientMessage) -> Tapped<'_> {
+    match m {
+        ClientMessage::Setpoint(s) => Tapped::Setpoint(s),
+        ClientMessage::Path(p) => Tapped::Path(p),
+        ClientMessage::Load(l) => Tapped::Load(l),
     }
 }
 
@@ -184,17 +167,19 @@ impl Tap {
                 .receive()
                 .map_err(|e| receive_error("setpoint", e))?
             {
-                held.push(ClientSample::Setpoint(Box::new(*s)));
+                held.push(ClientMessage::Setpoint(Box::new(*s)));
             }
             while let Some(p) = c.paths.receive().map_err(|e| receive_error("path", e))? {
-                held.push(ClientSample::Path(Box::new(*p)));
+                held.push(ClientMessage::Path(Box::new(*p)));
             }
             while let Some(l) = c.loads.receive().map_err(|e| receive_error("load", e))? {
-                held.push(ClientSample::Load(Box::new(*l)));
+                held.push(ClientMessage::Load(Box::new(*l)));
             }
-            held.sort_by_key(ClientSample::seq);
+            // Copies (a subscriber may hold only a few samples out of shared
+            // memory at once), ordered by the client's common sequence.
+            held.sort_by_key(ClientMessage::seq);
             for m in &held {
-                each(m.tapped());
+                each(tapped(m));
             }
             self.counts.client_messages += held.len() as u64;
             most = held.len();
