@@ -8,7 +8,6 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-mod capture;
 mod daemons;
 mod follow_cmd;
 mod jitter;

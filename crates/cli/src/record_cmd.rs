@@ -18,8 +18,8 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use crate::capture::{self, Received, Receiver, StreamRecorder};
 use crate::daemons::{install_signal_handlers, interrupted};
+use hcc_record::capture::{self, Received, Receiver, StreamRecorder};
 
 // The help texts name the scenario's TOML tables as [table] and placeholders as
 // <name>: neither an intra-doc link nor HTML.

@@ -44,13 +44,13 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tracing::warn;
 
-use crate::capture::{self, Received, Receiver, StreamRecorder};
 use crate::daemons::{
     Daemon, TERMINATE_GRACE, daemon_path, describe_status, install_signal_handlers, interrupted,
     wait_until_controller_listens,
 };
 use crate::run_schedule::{ScheduleReport, Scheduler};
 use crate::view_child::ViewChild;
+use hcc_record::capture::{self, Received, Receiver, StreamRecorder};
 
 /// Default scenario of `hcc run`: the paper's simulation #1.
 pub const DEFAULT_CONFIG: &str = "config/paper-sim1.toml";

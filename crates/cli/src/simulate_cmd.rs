@@ -53,7 +53,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     }
     // What the law refuses at q0, named by field and line.
     hcc_cycle::controller_for(&scenario)?;
-    let recording = args.out.join(crate::capture::RECORDING_FILE);
+    let recording = args.out.join(hcc_record::capture::RECORDING_FILE);
     let mut log = SimLog::create(&recording, &scenario)?;
     let result = hcc_in_process::simulate_observed(&scenario, &mut |cycle| {
         log.cycle(cycle)
@@ -115,14 +115,14 @@ impl SimLog {
         let s = &scenario.simulation;
         let (unix, _) = hcc_record::mcap_log::clock_pair();
         let mut run =
-            crate::capture::run_metadata("hcc simulate", &scenario.ipc.namespace, (unix, 0));
+            hcc_record::capture::run_metadata("hcc simulate", &scenario.ipc.namespace, (unix, 0));
         run.insert("mode".into(), "in-process".into());
         run.insert("duration_s".into(), format!("{:?}", s.duration_s));
         run.insert("control_rate_hz".into(), scenario.rate_hz.to_string());
         let info = RunInfo {
             run,
             scenario: RunInfo::describe_scenario(scenario),
-            machine: crate::capture::machine_metadata(),
+            machine: hcc_record::capture::machine_metadata(),
         };
         // Stamps are simulated time (t_k = k T from 0), shown from the start's Unix time.
         let writer = McapWriter::create(path, &info, (unix, 0))?;

@@ -40,6 +40,10 @@
 //!   ([`CycleOutput::desired`]; NaN where the output has none); with
 //!   `e<i>_<k>` = x_i − x_{i,d} the tracking error.
 //!
+//! A live namespace is captured into a recording by [`capture`] (a tap of
+//! its streams on a thread of its own, written as they come); a recording is
+//! read back by [`mcap_log`], and replayed by `hcc-replay`.
+//!
 //! The recorder is streaming: [`Recorder::record`] takes one cycle and pushes
 //! one row into a [`RowSink`]; the in-memory [`hcc_report::Trajectory`] is one
 //! such sink, the streaming [`hcc_report::RunWriter`] (the results of a run
@@ -58,6 +62,7 @@
 //! ```
 
 mod adapters;
+pub mod capture;
 mod layout;
 pub mod mcap_log;
 mod recorder;

@@ -21,13 +21,13 @@
 //! ([`Receiver::dropped`]) and show as gaps in the file — the recorder's
 //! memory stays bounded whatever the load.
 
+use crate::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use anyhow::{Context, bail};
 use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
 use hcc_msgs::{
     JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint,
     Telemetry, TorqueCommand,
 };
-use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use iceoryx2::prelude::SignalHandlingMode;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -483,7 +483,7 @@ pub const ICEORYX2_VERSION: &str = "0.10.0";
 /// The machine facts `hcc jitter` reports, as metadata.
 pub fn machine_metadata() -> BTreeMap<String, String> {
     let info = hcc_timing::machine::MachineInfo::read();
-    hcc_record::mcap_log::json_entries(&serde_json::to_value(info).unwrap_or_default())
+    crate::mcap_log::json_entries(&serde_json::to_value(info).unwrap_or_default())
 }
 
 /// `YYYY-MM-DDTHH:MM:SS.mmmZ` of Unix ns (UTC).
