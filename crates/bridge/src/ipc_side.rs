@@ -12,9 +12,8 @@ use std::sync::{Arc, mpsc};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
+use hcc_msgs::ipc::{TAP_BURST, TapNode, TapStreams, Tapped};
 use hcc_msgs::{JointState, ServiceNames, Telemetry, TorqueCommand};
-use iceoryx2::prelude::SignalHandlingMode;
 
 use crate::counters::{Counters, add, bump};
 use crate::rate::Decimator;
@@ -40,7 +39,7 @@ pub enum Sample {
 /// The reading thread's state: the tap, one decimator per stream, the
 /// channel to the Zenoh side.
 struct Drain {
-    tap: Tap,
+    tap: TapNode,
     /// The joint states', torque commands' and telemetry's decimators.
     decimators: [Decimator; 3],
     tx: mpsc::SyncSender<Sample>,
@@ -57,6 +56,7 @@ impl Drain {
         let (decimators, tx, counters) = (&mut self.decimators, &self.tx, &*self.counters);
         let most = self
             .tap
+            .tap()
             .drain(&mut |m| {
                 bump(&counters.received);
                 let (k, seq, sample) = match m {
@@ -75,7 +75,7 @@ impl Drain {
             .map_err(|e| e.to_string())?;
         // The queues' losses, counted by the tap (a restarted source starts
         // its stream again).
-        let lost = self.tap.counts().missed();
+        let lost = self.tap.tap().counts().missed();
         add(&self.counters.ipc_lost, lost - self.lost);
         self.lost = lost;
         Ok(most)
@@ -108,20 +108,15 @@ impl IpcReader {
         let handle = std::thread::Builder::new()
             .name("hcc-bridge-ipc".into())
             .spawn(move || {
-                let setup = || -> anyhow::Result<_> {
-                    let node = ipc::create_node(
-                        &node_name,
-                        SignalHandlingMode::Disabled,
-                        file_prefix.as_deref(),
-                    )?;
-                    let services = Services::open(&node, &names)?;
-                    let tap = Tap::open(&services, TapStreams::Loop)?;
-                    Ok((node, services, tap))
-                };
-                let (node, services, tap) = match setup() {
-                    Ok(x) => x,
+                let tap = match TapNode::open(
+                    &node_name,
+                    file_prefix.as_deref(),
+                    &names,
+                    TapStreams::Loop,
+                ) {
+                    Ok(t) => t,
                     Err(e) => {
-                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        let _ = ready_tx.send(Err(e.to_string()));
                         return;
                     }
                 };
@@ -144,8 +139,6 @@ impl IpcReader {
                     }
                 }
                 drop(drain);
-                drop(services);
-                drop(node);
             })
             .context("cannot start the iceoryx2 reader thread")?;
         match ready_rx.recv() {

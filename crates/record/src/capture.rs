@@ -23,12 +23,11 @@
 
 use crate::mcap_log::{McapWriter, RecorderMsg, RunInfo, StreamStats};
 use anyhow::{Context, bail};
-use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
+use hcc_msgs::ipc::{TAP_BURST, TapNode, TapStreams, Tapped};
 use hcc_msgs::{
     JointState, LoadSetpoint, PathKnots, SeqEvent, SequenceChecker, ServiceNames, Setpoint,
     Telemetry, TorqueCommand,
 };
-use iceoryx2::prelude::SignalHandlingMode;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -140,23 +139,18 @@ impl Receiver {
                         )
                     })
                 });
-                let setup = || -> anyhow::Result<_> {
-                    let node = ipc::create_node(
-                        &node_name,
-                        SignalHandlingMode::Disabled,
-                        file_prefix.as_deref(),
-                    )?;
-                    let services = Services::open(&node, &names)?;
-                    let tap = Tap::open(&services, TapStreams::All)?;
-                    Ok((node, services, tap))
-                };
-                let (node, services, mut tap) = match setup() {
-                    Ok(x) => {
+                let mut tap = match TapNode::open(
+                    &node_name,
+                    file_prefix.as_deref(),
+                    &names,
+                    TapStreams::All,
+                ) {
+                    Ok(t) => {
                         let _ = ready_tx.send(Ok(warning));
-                        x
+                        t
                     }
                     Err(e) => {
-                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        let _ = ready_tx.send(Err(e.to_string()));
                         return;
                     }
                 };
@@ -166,7 +160,7 @@ impl Receiver {
                     // then the thread ends, whether or not the publishers
                     // are still running.
                     let last = stop_flag.load(Ordering::SeqCst);
-                    match tap.drain(&mut |m| tx.send(received(m))) {
+                    match tap.tap().drain(&mut |m| tx.send(received(m))) {
                         Ok(_) if last => break,
                         Ok(k) if k >= TAP_BURST => {}
                         Ok(_) => std::thread::sleep(poll),
@@ -178,8 +172,6 @@ impl Receiver {
                     }
                 }
                 drop(tap);
-                drop(services);
-                drop(node);
             })
             .context("cannot start the receiver thread")?;
         match ready_rx.recv() {

@@ -10,11 +10,10 @@
 use anyhow::Context as _;
 use hcc_config::ToolScenarioError;
 use hcc_msgs::ServiceNames;
-use hcc_msgs::ipc::{self, Services, TAP_BURST, Tap, TapStreams, Tapped};
+use hcc_msgs::ipc::{self, TAP_BURST, TapNode, TapStreams, Tapped};
 use hcc_record::mcap_log::{
     self, JointStateMsg, LoadMsg, PathMsg, SetpointMsg, TelemetryMsg, TorqueCommandMsg,
 };
-use iceoryx2::prelude::SignalHandlingMode;
 use std::time::{Duration, Instant};
 
 use crate::viewer::stats_line;
@@ -101,19 +100,18 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
             None
         }
     };
-    let node = ipc::create_node(
+    let mut tap = TapNode::open(
         &format!("hcc-view-{}", std::process::id()),
-        SignalHandlingMode::Disabled,
         file_prefix.as_deref(),
+        &names,
+        TapStreams::All,
     )?;
-    let services = Services::open(&node, &names)?;
-    let mut tap = Tap::open(&services, TapStreams::All)?;
     let mut server = crate::start(args, scenario.as_ref(), &format!("namespace {namespace}"))?;
     let clock = Clock::new();
     let mut next_progress = Instant::now() + PROGRESS;
     let mut receive_errors = 0u64;
     while !hcc_rt::stop_requested() {
-        let most = match tap.drain(&mut |m| show(&mut server, &clock, m)) {
+        let most = match tap.tap().drain(&mut |m| show(&mut server, &clock, m)) {
             Ok(k) => k,
             Err(e) => {
                 // The server outlives a broken peer: counted and said, once a power of two.
@@ -140,7 +138,5 @@ pub fn run(args: &Args, namespace: &str) -> anyhow::Result<()> {
     println!("hcc view: stopped; {}", stats_line(server.viewer.counts()));
     server.handle.stop().wait_blocking();
     drop(tap);
-    drop(services);
-    drop(node);
     Ok(())
 }

@@ -102,7 +102,7 @@ pub use settings::{
     MAX_SETPOINT_SUBSCRIBERS, MAX_STATE_SUBSCRIBERS, MAX_SUBSCRIBER_BUFFER,
     MAX_TELEMETRY_SUBSCRIBERS, SETPOINT_BUFFER,
 };
-pub use tap::{StreamCounts, TAP_BURST, Tap, TapCounts, TapStreams, Tapped};
+pub use tap::{StreamCounts, TAP_BURST, Tap, TapCounts, TapNode, TapStreams, Tapped};
 
 /// `update_connections` of iceoryx2's ports (see `hcc_rt::ConnectionUpkeep`).
 pub use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};

@@ -19,7 +19,7 @@
 //! few samples at once), so it allocates: it is not for a real-time loop.
 
 use super::{
-    CommandSubscriber, IpcError, LoadSubscriber, MAX_SUBSCRIBER_BUFFER, PathSubscriber,
+    CommandSubscriber, IpcError, IpcNode, LoadSubscriber, MAX_SUBSCRIBER_BUFFER, PathSubscriber,
     SETPOINT_BUFFER, Services, SetpointSubscriber, StateSubscriber, TelemetrySubscriber,
 };
 use crate::{
@@ -223,5 +223,45 @@ impl Tap {
     /// What the tap has read and lost so far.
     pub fn counts(&self) -> TapCounts {
         self.counts
+    }
+}
+
+/// A tap with the node and the services it reads through: what a tool's
+/// listening thread opens (the node is the thread's own; iceoryx2 ports stay
+/// on the thread that made them). Dropped in order: the tap, the services,
+/// the node.
+pub struct TapNode {
+    tap: Tap,
+    _services: Services,
+    _node: IpcNode,
+}
+
+impl TapNode {
+    /// Creates node `node_name` (file prefix `file_prefix`, no signal
+    /// handling: the tool handles its signals), opens the services of
+    /// `names` and taps `streams`.
+    pub fn open(
+        node_name: &str,
+        file_prefix: Option<&str>,
+        names: &crate::ServiceNames,
+        streams: TapStreams,
+    ) -> Result<TapNode, IpcError> {
+        let node = super::create_node(
+            node_name,
+            iceoryx2::prelude::SignalHandlingMode::Disabled,
+            file_prefix,
+        )?;
+        let services = Services::open(&node, names)?;
+        let tap = Tap::open(&services, streams)?;
+        Ok(TapNode {
+            tap,
+            _services: services,
+            _node: node,
+        })
+    }
+
+    /// The tap.
+    pub fn tap(&mut self) -> &mut Tap {
+        &mut self.tap
     }
 }
