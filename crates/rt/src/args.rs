@@ -1,6 +1,7 @@
 //! The command-line pieces every real-time process of hcc shares: where it
-//! meets its peers ([`IpcArgs`], flattened into each process's own clap
-//! arguments) and how a usage error ends the process ([`parse_args`]).
+//! meets its peers ([`IpcArgs`]) and how its loop thread is set up
+//! ([`RtArgs`]), both flattened into each process's own clap arguments, and
+//! how a usage error ends the process ([`parse_args`]).
 
 use std::ffi::OsString;
 use std::process::ExitCode;
@@ -33,6 +34,47 @@ impl IpcArgs {
         self.file_prefix
             .clone()
             .or_else(hcc_msgs::ipc::file_prefix_from_env)
+    }
+}
+
+/// How a process's loop thread is set up for real time ([`prepare_rt_thread`](crate::prepare_rt_thread)):
+/// the same three options in the controller daemon, the simulator daemon and
+/// every robot driver; each overrides the scenario's value where the process
+/// has one.
+// The help texts name the scenario's TOML tables as [table]: not an intra-doc link.
+#[allow(rustdoc::broken_intra_doc_links)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
+pub struct RtArgs {
+    /// CPU core of the loop's thread (overrides the process's [..._daemon].cpu_core).
+    #[arg(long)]
+    pub cpu_core: Option<usize>,
+    /// SCHED_FIFO priority 1..=99 of the loop's thread (overrides the
+    /// process's [..._daemon].sched_priority); default: normal scheduling.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub sched_priority: Option<i32>,
+    /// Lock memory (mlockall), as the process's [..._daemon].mlock = true.
+    #[arg(long)]
+    pub mlock: bool,
+}
+
+impl RtArgs {
+    /// The loop thread's settings: these options over the scenario's
+    /// `cpu_core`, `sched_priority` and `mlock` of the process (`None`,
+    /// `None`, `false` where it has none), with `prefault_stack_bytes` of
+    /// the stack pre-faulted.
+    pub fn settings(
+        &self,
+        cpu_core: Option<usize>,
+        sched_priority: Option<i32>,
+        mlock: bool,
+        prefault_stack_bytes: usize,
+    ) -> crate::RtSettings {
+        crate::RtSettings {
+            cpu_core: self.cpu_core.or(cpu_core),
+            sched_priority: self.sched_priority.or(sched_priority),
+            lock_memory: self.mlock || mlock,
+            prefault_stack_bytes,
+        }
     }
 }
 

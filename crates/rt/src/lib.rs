@@ -38,7 +38,7 @@ pub mod thread;
 pub mod upkeep;
 mod wait;
 
-pub use args::{IpcArgs, parse_args, run_main};
+pub use args::{IpcArgs, RtArgs, parse_args, run_main};
 pub use sleep::{
     HYBRID_LEAD_NS, sleep_until_hybrid_ns, sleep_until_hybrid_with, sleep_until_ns,
     wait_for_event_until,

@@ -31,7 +31,7 @@ use tracing::{error, info, warn};
 use crate::control_loop::{ControlLoop, LoopSettings, Outcome, Ports};
 use crate::status::LoopStatus;
 use hcc_cycle::CycleCounters;
-use hcc_rt::{self as rt, RtReport, RtSettings, WaitStrategy};
+use hcc_rt::{self as rt, RtReport, WaitStrategy};
 
 /// Cycles after which the allocator counters are taken as the baseline.
 const WARM_UP_CYCLES: u64 = 1_000;
@@ -62,16 +62,9 @@ pub struct Args {
     /// Wait strategy (overrides [controller_daemon].wait_strategy).
     #[arg(long, value_enum)]
     pub wait: Option<WaitStrategy>,
-    /// CPU core of the control thread (overrides [controller_daemon].cpu_core).
-    #[arg(long)]
-    pub cpu_core: Option<usize>,
-    /// SCHED_FIFO priority 1..=99 of the control thread (overrides
-    /// [controller_daemon].sched_priority).
-    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
-    pub sched_priority: Option<i32>,
-    /// Lock memory (mlockall), as [controller_daemon].mlock = true.
-    #[arg(long)]
-    pub mlock: bool,
+    /// The control thread's real-time set-up (over [controller_daemon]).
+    #[command(flatten)]
+    pub rt: hcc_rt::RtArgs,
     /// When stopping, write the loop's timing report (wake-up latency and
     /// compute time histograms, counters, real-time set-up obtained) as JSON here.
     #[arg(long)]
@@ -186,12 +179,9 @@ pub fn run(args: Args) -> Result<()> {
     };
 
     let d = &scenario.controller_daemon;
-    let rt_settings = RtSettings {
-        cpu_core: args.cpu_core.or(d.cpu_core),
-        sched_priority: args.sched_priority.or(d.sched_priority),
-        lock_memory: args.mlock || d.mlock,
-        prefault_stack_bytes: PREFAULT_STACK_BYTES,
-    };
+    let rt_settings = args
+        .rt
+        .settings(d.cpu_core, d.sched_priority, d.mlock, PREFAULT_STACK_BYTES);
     let report = rt::prepare_rt_thread(&rt_settings);
     log_start(&setup, &report);
 

@@ -45,7 +45,7 @@ use hcc_msgs::ipc::{self, PreLoan, Services};
 use hcc_msgs::{
     JointState, STATE_FLAG_DRIVER_POLLS_COMMANDS, ServiceNames, TorqueCommand, monotonic_now_ns,
 };
-use hcc_rt::{self as rt, RtSettings, WaitStrategy};
+use hcc_rt::{self as rt, WaitStrategy};
 use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or};
 
 use hcc_plant::{Applied, SimDriver};
@@ -98,15 +98,9 @@ pub struct Args {
     /// to drain them, however the host stalls them.
     #[arg(long)]
     pub lockstep_max_speed: Option<f64>,
-    /// SCHED_FIFO priority of the simulator thread (1..=99); default: normal scheduling.
-    #[arg(long)]
-    pub sched_priority: Option<i32>,
-    /// Lock memory (mlockall).
-    #[arg(long)]
-    pub mlock: bool,
-    /// CPU core of the simulator thread (overrides [sim_daemon].cpu_core).
-    #[arg(long)]
-    pub cpu_core: Option<usize>,
+    /// The simulator thread's real-time set-up (over [sim_daemon]).
+    #[command(flatten)]
+    pub rt: hcc_rt::RtArgs,
     /// Real time: how the loop waits — `event`: sleep until each tick
     /// (clock_nanosleep) and block on `command_ready` for the answer;
     /// `hybrid`: sleep until shortly before the tick and spin to it, poll for
@@ -541,11 +535,6 @@ fn check_args(args: &Args) -> Result<()> {
             args.lockstep_timeout_ms
         );
     }
-    if let Some(p) = args.sched_priority
-        && !(1..=99).contains(&p)
-    {
-        anyhow::bail!("--sched-priority {p} must be in 1..=99");
-    }
     if let Some(x) = args.lockstep_max_speed
         && !(x.is_finite() && x > 0.0)
     {
@@ -582,12 +571,9 @@ pub fn run(args: Args) -> Result<()> {
     let services = Services::open(&node, &names)?;
     let ports = Ports::open(&services)?;
 
-    let rt_settings = RtSettings {
-        cpu_core: args.cpu_core.or(scenario.sim_daemon.cpu_core),
-        sched_priority: args.sched_priority,
-        lock_memory: args.mlock,
-        prefault_stack_bytes: 512 * 1024,
-    };
+    let rt_settings = args
+        .rt
+        .settings(scenario.sim_daemon.cpu_core, None, false, 512 * 1024);
     let report = rt::prepare_rt_thread(&rt_settings);
     for w in &report.warnings {
         tracing::warn!("{w}");

@@ -56,6 +56,9 @@ struct Args {
     /// IPC namespace and file prefix.
     #[command(flatten)]
     ipc: hcc_rt::IpcArgs,
+    /// The loop thread's real-time set-up (memory is always locked).
+    #[command(flatten)]
+    rt: hcc_rt::RtArgs,
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
@@ -294,11 +297,10 @@ fn run(args: Args) -> anyhow::Result<StopReason> {
         fault: None,
     };
     hcc_rt::install_stop_handler().context("installing the SIGINT/SIGTERM handlers")?;
-    if let Err(e) = hcc_rtalloc::lock_memory() {
-        tracing::warn!("{e} (running without locked memory)");
+    let report = hcc_rt::prepare_rt_thread(&args.rt.settings(None, None, true, 256 * 1024));
+    for w in &report.warnings {
+        tracing::warn!("{w}");
     }
-    hcc_rtalloc::prefault();
-    hcc_rtalloc::prefault_stack(256 * 1024)?;
     tracing::info!(
         "{n} joints at {rate} Hz in namespace {namespace}, robot gravity compensation {}",
         d.hw.compensates_gravity()

@@ -49,6 +49,11 @@ struct Args {
     /// IPC namespace and file prefix.
     #[command(flatten)]
     ipc: hcc_rt::IpcArgs,
+    /// The loop thread's real-time set-up (memory is always locked;
+    /// franka-rs raises the thread to its highest SCHED_FIFO priority
+    /// itself, `--sched-priority` sets another).
+    #[command(flatten)]
+    rt: hcc_rt::RtArgs,
     /// Write the URDF the robot serves (FCI protocol 10) to this file and exit.
     #[arg(long, conflicts_with = "config")]
     save_urdf: Option<PathBuf>,
@@ -197,15 +202,12 @@ fn run(args: &Args) -> Result<Outcome> {
 
     let robot = connect(args)?;
     set_collision_behavior(&robot, &scenario.franka)?;
-    let memory_locked = match hcc_rtalloc::lock_memory() {
-        Ok(()) => true,
-        Err(e) => {
-            tracing::warn!("{e} (running without locked memory)");
-            false
-        }
-    };
-    hcc_rtalloc::prefault();
-    hcc_rtalloc::prefault_stack(512 * 1024)?;
+    // On the thread that runs the loop (the one franka-rs connected from).
+    let report = hcc_rt::prepare_rt_thread(&args.rt.settings(None, None, true, 512 * 1024));
+    for w in &report.warnings {
+        tracing::warn!("{w}");
+    }
+    let memory_locked = report.memory_locked;
     tracing::info!("{}: publishing on {:?}", scenario.name, names.joint_state());
     let mut cycle = FrankaCycle::new(FrankaSettings::from_config(&scenario.franka), &ports);
     let started = std::time::Instant::now();
