@@ -8,10 +8,18 @@
 //!   contract (`hcc_msgs::driver`: command freshness, hold, fallback,
 //!   status), allocation-free per period — the driver `hcc simulate` runs
 //!   in process as well.
-//! * [`daemon`]: the process — real-time (absolute 1 kHz clock) or lockstep
-//!   pacing on the runtime of `hcc-rt`, start-up, logging (`tracing`, from a
-//!   logging thread that reads the loop's atomics) and shutdown.
+//! * [`sim_loop`]: the allocation-free loop around the driver — real-time
+//!   (absolute 1 kHz clock) or lockstep pacing on the runtime of `hcc-rt`,
+//!   publish the state, wait for its answer, integrate ([`SimLoop`]).
+//! * [`status`]: the counters and flags the loop shares with the logging
+//!   thread ([`LoopStatus`]).
+//! * [`daemon`]: the `hcc-sim` command line, start-up, the logging thread
+//!   and shutdown.
 
 pub mod daemon;
+pub mod sim_loop;
+pub mod status;
 
 pub use hcc_plant::{Applied, DriverCounters, SimDriver};
+pub use sim_loop::{Ports, SimLoop};
+pub use status::LoopStatus;

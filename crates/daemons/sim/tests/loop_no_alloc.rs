@@ -24,7 +24,7 @@ use hcc_msgs::{
 use hcc_rt::WaitStrategy;
 use hcc_rtalloc::{LoopAudit, RtAllocator};
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{LoopStatus, Ports, SimLoop};
+use hcc_sim::{LoopStatus, Ports, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[global_allocator]

@@ -19,7 +19,7 @@ use hcc_msgs::{
 };
 use hcc_rt::WaitStrategy;
 use hcc_sim::SimDriver;
-use hcc_sim::daemon::{LoopStatus, Ports, SimLoop};
+use hcc_sim::{LoopStatus, Ports, SimLoop};
 use iceoryx2::prelude::SignalHandlingMode;
 
 #[test]
