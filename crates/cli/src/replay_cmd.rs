@@ -2,7 +2,7 @@
 //! and setpoints through the control cycle again — the code the controller
 //! daemon runs each cycle ([`hcc_cycle::ControlCycle`]: stream checks, the
 //! law of eq. 19, the torque filter, saturation), in process, see
-//! [`hcc_replay::replay`] — and compares its torque commands with the recorded
+//! [`hcc_replay::replay`] — and compares (`hcc_replay::compare`) its torque commands with the recorded
 //! ones, bit for bit.
 //!
 //! For a recording of the same build and scenario every torque is
@@ -11,10 +11,8 @@
 //! the torques?) and the proof that the loop is deterministic.
 
 use anyhow::bail;
-use hcc_cycle::Answer;
-use hcc_record::mcap_log;
+use hcc_replay::compare::compare_file;
 use hcc_replay::derive;
-use hcc_replay::replay::{Replayed, replay_file};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -26,103 +24,11 @@ pub struct ReplayArgs {
     pub config: Option<PathBuf>,
 }
 
-/// Where the replay differs from the recording.
-struct Difference {
-    cycle: u64,
-    state_seq: u64,
-    what: String,
-}
-
-/// The comparison of replayed and recorded commands.
-#[derive(Default)]
-struct Comparison {
-    compared: u64,
-    /// Cycles at the end whose inputs the recording does not hold.
-    incomplete: u64,
-    /// The cycle the comparison started at (the first whose inputs the
-    /// recording holds).
-    first_cycle: Option<u64>,
-    first_difference: Option<Difference>,
-}
-
-impl Comparison {
-    /// Compares one cycle; whether to go on.
-    fn cycle(&mut self, r: &Replayed<'_>, n: usize) -> anyhow::Result<bool> {
-        let tel = r.telemetry;
-        if r.before_recording {
-            // The recording started mid-run (module `replay`): counted there.
-            return Ok(true);
-        }
-        self.first_cycle.get_or_insert(tel.header.seq);
-        let inputs = (r.state, r.recorded, r.answer);
-        let (Some(state), Some(recorded), Some(answer), 0) =
-            (inputs.0, inputs.1, inputs.2, r.setpoints_missing)
-        else {
-            if r.at_end {
-                self.incomplete += 1;
-                return Ok(true);
-            }
-            let what = match inputs {
-                (None, ..) => "joint state",
-                (_, None, _) => "command",
-                _ => "setpoint",
-            };
-            bail!(
-                "cycle {}: its {what} is not in the recording (a gap): cannot replay further ({} cycles compared)",
-                tel.header.seq,
-                self.compared
-            );
-        };
-        let mut differ = |what: String| {
-            self.first_difference = Some(Difference {
-                cycle: tel.header.seq,
-                state_seq: state.header.seq,
-                what,
-            });
-            Ok(false)
-        };
-        let Answer::Command(mode) = answer else {
-            return differ(
-                "the replay took the state for a duplicate and did not answer it".into(),
-            );
-        };
-        let replayed = r.cycle.command();
-        if recorded.mode != mode.code() {
-            return differ(format!(
-                "mode: recorded {}, replayed {}",
-                mcap_log::mode_name(recorded.mode),
-                mcap_log::mode_name(mode.code())
-            ));
-        }
-        let (a, b) = (recorded.tau(), replayed.tau());
-        if a.len() != n || b.len() != n {
-            bail!(
-                "cycle {}: commands of {} and {} joints",
-                tel.header.seq,
-                a.len(),
-                b.len()
-            );
-        }
-        if let Some(j) = (0..n).find(|&j| a[j].to_bits() != b[j].to_bits()) {
-            return differ(format!(
-                "joint {}: recorded τ = {:e} N·m, replayed {:e} N·m (difference {:e})",
-                j + 1,
-                a[j],
-                b[j],
-                b[j] - a[j]
-            ));
-        }
-        self.compared += 1;
-        Ok(true)
-    }
-}
-
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let scenario = derive::scenario_of(&args.recording, args.config.as_deref())?;
-    let n = scenario.model.nq();
     let period = scenario.period_s();
-    let mut cmp = Comparison::default();
-    let read = replay_file(&args.recording, &scenario, &mut |r| cmp.cycle(r, n))?;
+    let cmp = compare_file(&args.recording, &scenario)?;
+    let read = &cmp.replay;
     let counts = read.counts;
     if let Some(reason) = &read.truncated {
         println!(

@@ -3,7 +3,8 @@
 //! the code the controller daemon runs) and hands each one on with the
 //! recorded and the replayed torque; [`derive`](mod@derive) builds a recorded run's
 //! results from it — the rows of `trajectory.csv` in the layout of `hcc
-//! simulate`, the metrics and the IPC figures. `hcc replay`, `hcc plot` and
+//! simulate`, the metrics and the IPC figures; [`compare`] checks a
+//! recording's commands against their replay bit for bit. `hcc replay`, `hcc plot` and
 //! `hcc run` parse their arguments and print; the work is here.
 //!
 //! Replaying a recording and comparing every command, as `hcc replay` does:
@@ -34,5 +35,6 @@
 //! # }
 //! ```
 
+pub mod compare;
 pub mod derive;
 pub mod replay;

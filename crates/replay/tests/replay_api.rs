@@ -5,6 +5,7 @@
 
 use hcc_config::Scenario;
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
+use hcc_replay::compare::compare_file;
 use hcc_replay::derive::scenario_of;
 use hcc_replay::replay::replay_file;
 use std::collections::BTreeMap;
@@ -99,4 +100,9 @@ fn a_recording_opened_replayed_and_compared_bit_for_bit() {
     })
     .expect("replay");
     assert_eq!(seen, 10);
+    // What `hcc replay` prints, as a value.
+    let cmp = compare_file(&file, &from_file).expect("comparison");
+    assert_eq!((cmp.compared, cmp.incomplete), (cycles, 0));
+    assert!(cmp.first_difference.is_none());
+    assert!(cmp.first_cycle.is_some());
 }
