@@ -7,10 +7,12 @@
 //! recording's commands against their replay bit for bit. `hcc replay`, `hcc plot` and
 //! `hcc run` parse their arguments and print; the work is here.
 //!
-//! Replaying a recording and comparing every command, as `hcc replay` does:
+//! Opening a recording, replaying its cycles and comparing every command, as
+//! `hcc replay` does, then deriving the run's results and metrics, as `hcc
+//! plot` does:
 //!
 //! ```no_run
-//! use hcc_replay::derive::scenario_of;
+//! use hcc_replay::derive::{derive, results_writer, scenario_of};
 //! use hcc_replay::replay::replay_file;
 //!
 //! # fn main() -> anyhow::Result<()> {
@@ -31,6 +33,11 @@
 //!     "{compared} cycles compared ({} setpoints taken): largest difference {largest:e} N·m",
 //!     done.counts.setpoints_taken
 //! );
+//! // The run's results (trajectory.csv and metrics.json, no plots) and its metrics.
+//! let mut writer = results_writer(&scenario, std::path::Path::new("out/derived"), true)?;
+//! let derived = derive(file, &scenario, &mut writer)?;
+//! let metrics = writer.finish(&derived.description)?.metrics;
+//! print!("{} rows: {}", derived.rows.rows, metrics.summary());
 //! # Ok(())
 //! # }
 //! ```

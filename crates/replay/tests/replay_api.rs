@@ -1,12 +1,12 @@
 //! The library's API as its doc example uses it: a recording made in
 //! process (the paper's simulation #1: the messages the driver and the
-//! control cycle exchanged), opened, replayed and compared: every torque
-//! bit-identical, every cycle answered.
+//! control cycle exchanged), opened, replayed and compared — every torque
+//! bit-identical, every cycle answered — and its results derived.
 
 use hcc_config::Scenario;
 use hcc_record::mcap_log::{McapWriter, RecorderMsg, RunInfo};
 use hcc_replay::compare::compare_file;
-use hcc_replay::derive::scenario_of;
+use hcc_replay::derive::{derive, results_writer, scenario_of};
 use hcc_replay::replay::replay_file;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -105,4 +105,15 @@ fn a_recording_opened_replayed_and_compared_bit_for_bit() {
     assert_eq!((cmp.compared, cmp.incomplete), (cycles, 0));
     assert!(cmp.first_difference.is_none());
     assert!(cmp.first_cycle.is_some());
+    // The results, as `hcc plot` writes them: one row per cycle, the metrics.
+    let out = dir.0.join("derived");
+    let mut writer = results_writer(&from_file, &out, true).expect("writer");
+    let derived = derive(&file, &from_file, &mut writer).expect("derivation");
+    assert_eq!(derived.rows.rows as u64, cycles);
+    let metrics = writer
+        .finish(&derived.description)
+        .expect("results")
+        .metrics;
+    assert!(!metrics.summary().is_empty());
+    assert!(out.join("trajectory.csv").exists() && out.join("metrics.json").exists());
 }
