@@ -4,6 +4,7 @@
 //! the filter's rate.
 
 mod common;
+use common::state_of;
 
 use std::path::PathBuf;
 
@@ -41,7 +42,6 @@ fn with_load(file: &str, start_s: f64, mass: f64) -> (Scenario, ControlCycle) {
 fn run(announce: Option<f64>) -> Run {
     let (sc, mut d) = with_load("panda-pose-posture.toml", 1.0, 1.0);
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
-    let n = sc.model.nq();
     let attach = 1000;
     let timing = LoopTiming {
         control_period_s: sc.period_s(),
@@ -60,10 +60,7 @@ fn run(announce: Option<f64>) -> Run {
             d.set_load(&hcc_model::Load::point(1.0, [0.0, 0.0, 0.1]), ramp)
                 .unwrap();
         }
-        let mut s = JointState::zeroed();
-        s.set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
-            .unwrap();
-        s.header.seq = k as u64 + 1;
+        let s = state_of(q.as_slice(), qd.as_slice(), k as u64 + 1);
         d.decide(&s, (k as u64 + 1) * sc.period_ns());
         if k >= attach {
             let t = d.telemetry();
@@ -240,7 +237,6 @@ fn a_load_the_driver_does_not_know_is_compensated_by_the_controller() {
 fn a_load_announced_in_motion_is_booked_and_ramps_in() {
     let (sc, mut d) = with_load("panda-pose-posture.toml", 0.7, 2.0);
     let mut plant = hcc_plant::plant_for(&sc).unwrap();
-    let n = sc.model.nq();
     let timing = LoopTiming {
         control_period_s: sc.period_s(),
         substeps: 10,
@@ -261,10 +257,7 @@ fn a_load_announced_in_motion_is_booked_and_ramps_in() {
             d.set_load(&hcc_model::Load::point(2.0, [0.0, 0.0, 0.1]), 0.2)
                 .unwrap();
         }
-        let mut s = JointState::zeroed();
-        s.set_joints(q.as_slice(), qd.as_slice(), &vec![0.0; n])
-            .unwrap();
-        s.header.seq = k as u64 + 1;
+        let s = state_of(q.as_slice(), qd.as_slice(), k as u64 + 1);
         d.decide(&s, (k as u64 + 1) * sc.period_ns());
         if (700..900).contains(&k) {
             speed = speed.max(qd.amax());

@@ -4,6 +4,14 @@
 use hcc_config::Scenario;
 use hcc_msgs::JointState;
 
+/// The joint state number `seq` at `q`, `qd` (no measured torque).
+pub fn state_of(q: &[f64], qd: &[f64], seq: u64) -> JointState {
+    let mut s = JointState::zeroed();
+    s.set_joints(q, qd, &vec![0.0; q.len()]).unwrap();
+    s.header.seq = seq;
+    s
+}
+
 /// The arm held at `scenario`'s start: its joint state number `seq`, at rest.
 pub fn state_at_start(scenario: &Scenario, seq: u64) -> JointState {
     let n = scenario.model.nq();

@@ -124,6 +124,26 @@ fn receive_error(service: &str, e: impl std::fmt::Debug) -> IpcError {
     }
 }
 
+/// Empties one loop stream's queue (`service`): checks each sample's
+/// sequence number into `counts` and hands it to `each` (`tapped`: its
+/// number and the sample as tapped). Returns how many it read.
+fn drain_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
+    port: &iceoryx2::port::subscriber::Subscriber<super::Ipc, T, ()>,
+    service: &str,
+    (checker, counts): (&mut SequenceChecker, &mut StreamCounts),
+    each: &mut dyn FnMut(Tapped<'_>),
+    tapped: impl for<'a> Fn(&'a T) -> (u64, Tapped<'a>),
+) -> Result<usize, IpcError> {
+    let mut k = 0;
+    while let Some(sample) = port.receive().map_err(|e| receive_error(service, e))? {
+        let (seq, m) = tapped(&sample);
+        check(checker, counts, seq);
+        each(m);
+        k += 1;
+    }
+    Ok(k)
+}
+
 /// Counts one loop sample's sequence number into `counts`.
 fn check(checker: &mut SequenceChecker, counts: &mut StreamCounts, seq: u64) {
     counts.received += 1;
@@ -185,39 +205,29 @@ impl Tap {
             most = held.len();
         }
         let [states, commands, telemetry] = &mut self.checkers;
-        let mut k = 0;
-        while let Some(s) = self
-            .states
-            .receive()
-            .map_err(|e| receive_error("joint_state", e))?
-        {
-            check(states, &mut self.counts.joint_state, s.header.seq);
-            each(Tapped::State(&s));
-            k += 1;
-        }
-        most = most.max(k);
-        k = 0;
-        while let Some(c) = self
-            .commands
-            .receive()
-            .map_err(|e| receive_error("torque_command", e))?
-        {
-            check(commands, &mut self.counts.torque_command, c.header.seq);
-            each(Tapped::Command(&c));
-            k += 1;
-        }
-        most = most.max(k);
-        k = 0;
-        while let Some(t) = self
-            .telemetry
-            .receive()
-            .map_err(|e| receive_error("telemetry", e))?
-        {
-            check(telemetry, &mut self.counts.telemetry, t.header.seq);
-            each(Tapped::Telemetry(&t));
-            k += 1;
-        }
-        Ok(most.max(k))
+        let c = &mut self.counts;
+        let s = drain_loop(
+            &self.states,
+            "joint_state",
+            (states, &mut c.joint_state),
+            each,
+            |s| (s.header.seq, Tapped::State(s)),
+        )?;
+        let k = drain_loop(
+            &self.commands,
+            "torque_command",
+            (commands, &mut c.torque_command),
+            each,
+            |c| (c.header.seq, Tapped::Command(c)),
+        )?;
+        let t = drain_loop(
+            &self.telemetry,
+            "telemetry",
+            (telemetry, &mut c.telemetry),
+            each,
+            |t| (t.header.seq, Tapped::Telemetry(t)),
+        )?;
+        Ok(most.max(s).max(k).max(t))
     }
 
     /// What the tap has read and lost so far.

@@ -39,6 +39,22 @@ pub fn object(title: &str, description: &str, properties: Value) -> Value {
     })
 }
 
+/// A client message's properties: its header and client id (every client
+/// message has them, in this order), then `fields`.
+fn client_message(fields: Value) -> Value {
+    let mut m = json!({
+        "seq": integer("the client's sequence number"),
+        "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
+        "schema_version": integer("hcc-msgs schema"),
+        "n_joints": integer("header n_joints"),
+        "client_id": integer("the client"),
+    });
+    if let (Some(m), Value::Object(f)) = (m.as_object_mut(), fields) {
+        m.extend(f);
+    }
+    m
+}
+
 fn stream_stats() -> Value {
     json!({
         "type": "object",
@@ -174,12 +190,7 @@ fn setpoint() -> Value {
     object(
         "hcc.Setpoint",
         "A client's setpoint to the controller (hcc-msgs Setpoint)",
-        json!({
-            "seq": integer("the client's sequence number"),
-            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
-            "schema_version": integer("hcc-msgs schema"),
-            "n_joints": integer("header n_joints"),
-            "client_id": integer("the client"),
+        client_message(json!({
             "level": integer("target level, 0-based"),
             "fields": integer("SETPOINT_* bits: 1 goal, 2 velocity, 4 stiffness, 8 damping"),
             "dim": integer("task dimension of the values"),
@@ -190,7 +201,7 @@ fn setpoint() -> Value {
             "velocity": numbers("velocity feed-forward"),
             "stiffness": numbers("K_i: diagonal, or full row-major"),
             "damping": numbers("D_i: diagonal, or full row-major"),
-        }),
+        })),
     )
 }
 
@@ -198,12 +209,7 @@ fn path() -> Value {
     object(
         "hcc.PathKnots",
         "A client's path knots to the controller (hcc-msgs PathKnots)",
-        json!({
-            "seq": integer("the client's sequence number"),
-            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
-            "schema_version": integer("hcc-msgs schema"),
-            "n_joints": integer("header n_joints"),
-            "client_id": integer("the client"),
+        client_message(json!({
             "level": integer("target level, 0-based"),
             "flags": integer("PATH_* bits: 1 new, 2 extend, 4 derivatives"),
             "columns": integer("columns per knot"),
@@ -213,7 +219,7 @@ fn path() -> Value {
             "values": {"type": "array", "items": numbers("a knot's columns"), "description": "the knots' values"},
             "velocity": {"type": "array", "items": numbers("a sample's velocity"), "description": "with PATH_DERIVATIVES: the knots' velocities"},
             "acceleration": {"type": "array", "items": numbers("a sample's acceleration"), "description": "with PATH_DERIVATIVES: the knots' accelerations"},
-        }),
+        })),
     )
 }
 
@@ -221,17 +227,12 @@ fn load() -> Value {
     object(
         "hcc.LoadSetpoint",
         "A client's load in the hand to the controller (hcc-msgs LoadSetpoint)",
-        json!({
-            "seq": integer("the client's sequence number"),
-            "stamp_ns": integer("send time, CLOCK_MONOTONIC ns"),
-            "schema_version": integer("hcc-msgs schema"),
-            "n_joints": integer("header n_joints"),
-            "client_id": integer("the client"),
+        client_message(json!({
             "mass": number("kg"),
             "com": numbers("centre of mass in the tip frame, m"),
             "inertia": numbers("about the centre of mass, tip axes, kg·m²: ixx ixy ixz iyy iyz izz"),
             "ramp_s": number("the ramp as sent, s (0: the controller's default)"),
-        }),
+        })),
     )
 }
 
