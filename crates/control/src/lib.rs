@@ -90,7 +90,7 @@ pub mod velocity_limit;
 
 pub use brake_certificate::{BrakeModel, BrakeWork, limit_velocity_rate_limited};
 pub use contact::{ContactChange, ContactDetector, MomentumObserver, ObserverInput, observe};
-pub use controller::{Controller, Diagnostics, LevelTarget, StepOutput};
+pub use controller::{CommandInput, Controller, Diagnostics, LevelTarget, StepOutput};
 pub use fade::FADE_RANGE;
 pub use rate::GainRate;
 pub use safety::{SafetyOutput, SafetySpec};

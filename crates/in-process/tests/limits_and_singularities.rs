@@ -66,6 +66,11 @@ struct Sample {
     passivity: bool,
     /// A level's goal moves (a transition under way).
     goal_moving: bool,
+    /// What the commands put into H: over the period this cycle starts (the
+    /// goals' and the feed-forward's power times T, J), and the tanks' refill
+    /// at its sample (J).
+    input_power: f64,
+    refill: f64,
 }
 
 /// `SWEEP_TRACE=t0,t1`: print every cycle in [t0, t1) (energy terms, the levels' tanks
@@ -171,6 +176,9 @@ impl Logged {
                     .level_target(i)
                     .is_some_and(|l| l.goal_velocity.iter().any(|&x| x != 0.0))
             }),
+            input_power: self.period_s
+                * (out.command_input.goal_power + out.command_input.feed_forward_power),
+            refill: out.command_input.refill,
         });
     }
 }
@@ -620,6 +628,12 @@ struct GoalRun {
     /// Once the goal is final (after `move_end`: no input), the largest rise
     /// of the storage H from one cycle to the next (J, and when).
     rise_final: (f64, f64),
+    /// While the goal moves: the largest rise of H from one cycle to the next
+    /// beyond what the commands put in (J, and when).
+    rise_moving: (f64, f64),
+    /// What the commands put in over the run: the goals' and the
+    /// feed-forward's work, the tanks' refills (J).
+    work_in: (f64, f64),
     /// When it moved again (above 0.05 rad/s) after resting (max |q̇| <
     /// 0.01 rad/s over 0.1 s) with its goal final.
     moved_again: Option<f64>,
@@ -656,7 +670,9 @@ struct GoalRun {
 /// |r| per joint (free motion: no goal may be flagged as a contact with the
 /// `[contact]` defaults). The goals' transitions (at the levels' shipped
 /// speed limits) last up to 14 s, so the settling is also counted from the
-/// end of each goal's transitions. Asserted on every goal once its goal is
+/// end of each goal's transitions. Asserted on every goal: while its goals
+/// move, H never rises from one cycle to the next by more than 1e-4 J beyond
+/// what the commands put in (`StepOutput::command_input`); once its goal is
 /// final: H never rises by more than 1e-4 J from one cycle to the next, and
 /// it never moves again (above 0.05 rad/s) after resting (max |q̇| < 0.01
 /// rad/s over 0.1 s) — but the reach-boundary creep of goals 36 and 39.
@@ -761,6 +777,11 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             tau_step: log.iter().skip(1).map(|s| s.tau_step).fold(0.0, f64::max),
             beyond,
             rise_final: rise_once_final(&log, move_end),
+            rise_moving: rise_beyond_input(&log, move_end),
+            work_in: (
+                log.iter().map(|s| s.input_power).sum(),
+                log.iter().map(|s| s.refill).sum(),
+            ),
             moved_again: moved_again_once_final(&log, move_end),
             class: settle.is_infinite().then(|| classify(&log, seconds, eps)),
             contact_cycles: log.iter().filter(|s| s.contact).count(),
@@ -793,7 +814,7 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         }
         if shard.is_some() {
             println!(
-                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {} after12 {} rise_final {} rise_at {} again {}",
+                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {} after12 {} rise_final {} rise_at {} rise_moving {} rise_moving_at {} work_in {} refill_in {} again {}",
                 run.settle,
                 run.speed_at_12,
                 run.speed_ratio,
@@ -804,6 +825,10 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
                 run.speed_12_after,
                 run.rise_final.0,
                 run.rise_final.1,
+                run.rise_moving.0,
+                run.rise_moving.1,
+                run.work_in.0,
+                run.work_in.1,
                 run.moved_again.unwrap_or(-1.0),
             );
         }
@@ -841,6 +866,14 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             "goal {g}: once final, H rose by {} J from one cycle to the next at {} s",
             r.rise_final.0,
             r.rise_final.1
+        );
+        // While the goals move, H rises by what the commands put in (their
+        // goals' work, the feed-forward's, the tanks' refills) and no more.
+        assert!(
+            r.rise_moving.0 <= 1e-4 || overridden,
+            "goal {g}: while its goals moved, H rose by {} J beyond what they put in, at {} s",
+            r.rise_moving.0,
+            r.rise_moving.1
         );
         assert!(
             r.moved_again.is_none() || overridden || REACH_BOUNDARY_CREEP.contains(&g),
@@ -945,6 +978,15 @@ fn rise_once_final(log: &[Sample], from: f64) -> (f64, f64) {
         .fold((0.0, 0.0), |m, x| if x.0 > m.0 { x } else { m })
 }
 
+/// While the goals move (up to `until`): the largest rise of H from one
+/// cycle to the next beyond what the commands put in (J, and when).
+fn rise_beyond_input(log: &[Sample], until: f64) -> (f64, f64) {
+    log.windows(2)
+        .filter(|w| w[0].t <= until)
+        .map(|w| (w[1].h - w[0].h - w[0].input_power - w[1].refill, w[1].t))
+        .fold((0.0, 0.0), |m, x| if x.0 > m.0 { x } else { m })
+}
+
 /// When the arm moved again (max |q̇| above 0.05 rad/s) after it had rested
 /// (below 0.01 rad/s for 0.1 s) after `from`.
 fn moved_again_once_final(log: &[Sample], from: f64) -> Option<f64> {
@@ -1010,6 +1052,23 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         rise.1,
         rise.0.1,
         runs.iter().filter(|r| r.rise_final.0 > 1e-3).count(),
+    );
+    let moving = runs
+        .iter()
+        .map(|r| (r.rise_moving, r.g))
+        .fold(((0.0, 0.0), 0), |m, x| if x.0.0 > m.0.0 { x } else { m });
+    println!(
+        "sweep: while the goals move, H rises from one cycle to the next beyond what the commands put in by at most {:.3e} J (goal {}, t {:.3} s), by more than 1e-4 J in {} goals",
+        moving.0.0,
+        moving.1,
+        moving.0.1,
+        runs.iter().filter(|r| r.rise_moving.0 > 1e-4).count(),
+    );
+    let sum = |f: fn(&GoalRun) -> f64| runs.iter().map(f).sum::<f64>() / n;
+    println!(
+        "sweep: the commands put in per goal (mean) {:.1} J of the goals' and the feed-forward's work and {:.1} J of the tanks' refills",
+        sum(|r| r.work_in.0),
+        sum(|r| r.work_in.1),
     );
     println!(
         "sweep: settled (at rest or converged for good) after median {:.2} s, p95 {:.2} s, max {:.2} s; by 3 s {:.1} %, 6 s {:.1} %, 12 s {:.1} %, 20 s {:.1} %, {seconds} s {:.1} %",

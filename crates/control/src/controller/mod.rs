@@ -15,6 +15,7 @@
 //! `setters.rs` take goals and gains between cycles, `initial_check.rs` checks
 //! the hierarchy at construction, `diagnostics.rs` forms the stacked matrices.
 
+mod command_input;
 mod coriolis;
 mod diagnostics;
 mod initial_check;
@@ -30,7 +31,7 @@ mod task_force;
 mod tracking;
 
 pub use diagnostics::Diagnostics;
-pub use output::{LevelTarget, StepOutput};
+pub use output::{CommandInput, LevelTarget, StepOutput};
 
 use crate::ControlError;
 use crate::fade::fade_factor;
@@ -325,6 +326,7 @@ impl Controller {
 
         self.out.safety.spring_saturated_cycles += u64::from(self.out.safety.spring_saturated);
         self.level_torques();
+        self.command_power(qd);
         self.coriolis_cancellation(qd)?;
         // Safety layer: null-space damping of faded levels, the passivity
         // damping, joint position and velocity limits (crate::safety); zero and

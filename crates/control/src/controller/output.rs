@@ -56,6 +56,13 @@ pub struct StepOutput {
     /// Per level: its tank's valve β_i ∈ [0, 1] of this cycle (1: the paper's
     /// law; 0: the spring point follows what the levels above do to it).
     pub tank_valve: Vec<f64>,
+    /// What the commands put into the storage H this cycle: the moving
+    /// goals' power −Σ_i β_i ẋ_{i,d}ᵀ F_i (W; their work on the springs and
+    /// dampers, β_i the level's fade times the law's share) plus the tracking
+    /// feed-forward's q̇ᵀ τ_ff, both over the coming period, and what a
+    /// refill put into the energy tanks at this cycle's sample
+    /// ([`CommandInput`]).
+    pub command_input: CommandInput,
     /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`](crate::Form::KinematicProjector) only (zero otherwise).
     pub coriolis: DVector<f64>,
     /// Safety layer (crate::safety): its torque (added to τ only when it acts), what
@@ -86,10 +93,23 @@ impl StepOutput {
             fade_mu: 1.0,
             tank: vec![0.0; r],
             tank_valve: vec![1.0; r],
+            command_input: CommandInput::default(),
             coriolis: DVector::zeros(n),
             safety: crate::safety::SafetyOutput::new(n, r),
         }
     }
+}
+
+/// What a command put into the storage H in one cycle
+/// ([`StepOutput::command_input`]): with no command, all zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CommandInput {
+    /// −Σ_i β_i ẋ_{i,d}ᵀ F_i, the moving goals' power over the coming period (W).
+    pub goal_power: f64,
+    /// q̇ᵀ τ_ff, the tracking feed-forward's power over the coming period (W).
+    pub feed_forward_power: f64,
+    /// What the energy tanks' refill added at this cycle's sample (J).
+    pub refill: f64,
 }
 
 /// A level's current spring–damper target ([`Controller::level_target`](super::Controller::level_target)).

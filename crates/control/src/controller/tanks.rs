@@ -26,6 +26,7 @@ impl Controller {
         }
         let s = &self.spec.safety;
         let (period, return_rate, max) = (s.control_period_s, s.tank_return_rate, s.tank_max);
+        self.out.command_input.refill = 0.0;
         if self.tank_refill {
             // Start, goal or gains change: `tank_initial` plus a share of the
             // storage ½ q̇ᵀ M q̇ + Σ V_i (crate::energy_tank).
@@ -33,9 +34,12 @@ impl Controller {
             let storage =
                 0.5 * qd.dot(&self.tmp_n) + self.levels.iter().map(|l| l.potential).sum::<f64>();
             let e = s.tank_initial + TANK_TRANSIENT_SHARE * storage.max(0.0);
+            let mut added = 0.0;
             for l in self.levels.iter_mut().skip(1) {
+                added += (e - l.tank.energy).max(0.0);
                 l.tank.refill(e);
             }
+            self.out.command_input.refill = added;
             self.tank_refill = false;
         }
         for i in 1..self.levels.len() {

@@ -1,0 +1,34 @@
+//! What the commands put into the storage H in a cycle
+//! ([`StepOutput::command_input`](super::StepOutput::command_input)): a moving
+//! goal works on its level's spring and damper, the tracking feed-forward on
+//! the arm, and a refill puts energy into the tanks. With a fixed goal and no
+//! feed-forward, nothing.
+//!
+//! Level i's storage β_i V_i(x_i − x_{i,d}) and its damper D_i (ẋ_i − ẋ_{i,d})
+//! change with x_{i,d}: along the motion the storage H changes by
+//! −ẋ_{i,d}ᵀ F_i on top of what the law dissipates (level 1: dH/dt = −ẋ_{1,d}ᵀ
+//! F_1 − ẽᵀ D_1 ẽ, ẽ = ẋ_1 − ẋ_{1,d}); the goal's power is positive while the
+//! goal leads the arm.
+
+use super::Controller;
+use nalgebra::DVector;
+
+impl Controller {
+    /// The moving goals' and the feed-forward's power into H over the coming
+    /// period (F_i as applied, after the tanks). Allocation-free.
+    pub(super) fn command_power(&mut self, qd: &DVector<f64>) {
+        let mut goal = 0.0;
+        for (i, l) in self.levels.iter().enumerate() {
+            if l.goal_moving {
+                goal -= self.out.fade[i] * self.law_share * l.goal_velocity.dot(&l.f);
+            }
+        }
+        let input = &mut self.out.command_input;
+        input.goal_power = goal;
+        input.feed_forward_power = if self.track.active {
+            qd.dot(&self.out.tau_feed_forward)
+        } else {
+            0.0
+        };
+    }
+}
