@@ -46,6 +46,14 @@ fn ten_thousand_panda_steps_allocate_nothing() {
             k_step.copy_from(&k_new);
             k_step *= 1.0 + 1e-3 * (k / 1000) as f64;
             c.ramp_gains(1, Some(&k_step), None).expect("gains");
+            // A goal transition's grant and step, paid from the command tank.
+            c.grant_goal_step(0, &[0.45, 0.1, 0.5]).expect("grant");
+            c.set_commands_active(true);
+            c.ramp_goal(0, &[0.41, 0.1, 0.5], &[0.01, 0.0, 0.0])
+                .expect("goal");
+        }
+        if k % 1000 == 700 {
+            c.set_commands_active(false);
         }
         if k == 5000 {
             // The tracking form (docs/tracking.md) from here on: every

@@ -647,6 +647,9 @@ impl ControlCycle {
         self.counters.core.paths_stopped = self.paths.stopped;
         self.counters.core.streams_stopped = self.setpoints.streams_stopped;
         self.counters.core.gain_ramp_held = self.setpoints.gains_held;
+        self.counters.core.goal_ramp_held = self.setpoints.goals_held;
+        self.counters.core.command_unpaid_mj =
+            (1e3 * self.controller.command_tank().1).round() as u64;
         // A load being announced moves the model on (module `load_ramp`).
         let announcing = self.load_ramp.active();
         if !self

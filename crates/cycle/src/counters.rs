@@ -44,6 +44,13 @@ hcc_msgs::define_counters! {
         /// Level-cycles in which a gains transition held: the energy tanks
         /// could not pay the stiffening (module `setpoints`).
         gain_ramp_held: "level-cycles a gains transition held (the tanks could not pay it)",
+        /// Level-cycles in which a goal transition's step held: neither the
+        /// command tank nor the tanks' spare could pay its work (module
+        /// `setpoints`).
+        goal_ramp_held: "level-cycles a goal transition held (its command tank could not pay it)",
+        /// The goals' work neither the command tank nor the tanks' spare
+        /// paid (mJ, total; H rose by it).
+        command_unpaid_mj: "goals' work beyond the command tank (mJ)",
         /// Cycles in which a `soften` contact reaction's restore held: the
         /// energy tanks could not pay the springs' return (module `reaction`).
         reaction_restore_held: "cycles a soften reaction's restore held (the tanks could not pay it)",

@@ -57,9 +57,12 @@ fn stiffen(d: &mut ControlCycle, k: f64) {
 #[test]
 fn a_stiffening_the_tanks_pay_runs_its_course() {
     let (sc, mut d, mut seq) = stretched();
-    let spare = d.controller().tank_spare();
     stiffen(&mut d, 450.0);
-    for _ in 0..600 {
+    // The command refilled the tanks; the stiffening is paid from them.
+    d.decide(&state(&sc, seq), seq * PERIOD);
+    seq += 1;
+    let spare = d.controller().tank_spare();
+    for _ in 1..600 {
         d.decide(&state(&sc, seq), seq * PERIOD);
         seq += 1;
     }

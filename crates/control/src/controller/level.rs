@@ -25,6 +25,16 @@ pub(super) struct Level {
     /// [`Controller::set_goal_velocity`]); the damping acts on ẋ_i − ẋ_{i,d}.
     pub(super) goal_velocity: DVector<f64>,
     pub(super) goal_moving: bool,
+    /// The rate of x_{i,d} a transition moves it at ([`Controller::ramp_goal`];
+    /// its work on V_i is booked with it, also where the damper is not told
+    /// ẋ_{i,d}); zero otherwise.
+    pub(super) goal_rate: DVector<f64>,
+    /// The potential's buffers at a goal not (yet) in force: the energy a
+    /// step to a transition's target would store (`command_tank.rs`).
+    pub(super) pot_target: PotentialWork,
+    pub(super) goal_target: DVector<f64>,
+    pub(super) err_target: DVector<f64>,
+    pub(super) grad_target: DVector<f64>,
     /// The tracking form's buffers and desired local velocities (`tracking.rs`).
     pub(super) track: TrackLevel,
     // task
@@ -163,6 +173,11 @@ impl Level {
             pot: PotentialWork::new(&spec.tasks, &spec.goal, n),
             goal_velocity: DVector::zeros(m),
             goal_moving: false,
+            goal_rate: DVector::zeros(m),
+            pot_target: PotentialWork::new(&spec.tasks, &spec.goal, n),
+            goal_target: DVector::zeros(m),
+            err_target: DVector::zeros(m),
+            grad_target: DVector::zeros(m),
             track: TrackLevel::new(m, d),
             j: DMatrix::zeros(m, n),
             jdot: DMatrix::zeros(m, n),

@@ -16,6 +16,7 @@
 //! the hierarchy at construction, `diagnostics.rs` forms the stacked matrices.
 
 mod command_input;
+mod command_tank;
 mod coriolis;
 mod diagnostics;
 mod initial_check;
@@ -112,6 +113,8 @@ pub struct Controller {
     /// The energy tanks are to be refilled in the next cycle (start, reset, a
     /// goal or gains change; crate::energy_tank).
     tank_refill: bool,
+    /// The command tank (`command_tank.rs`).
+    command: command_tank::CommandTank,
     /// The tracking form's joint-space parts (`tracking.rs`).
     track: TrackWork,
     out: StepOutput,
@@ -177,6 +180,7 @@ impl Controller {
             stiffness_scale: 1.0,
             law_share: 1.0,
             tank_refill: true,
+            command: command_tank::CommandTank::default(),
             track: TrackWork::new(n, dims[0]),
             out,
         };
@@ -327,6 +331,7 @@ impl Controller {
         self.out.safety.spring_saturated_cycles += u64::from(self.out.safety.spring_saturated);
         self.level_torques();
         self.command_power(qd);
+        self.book_command_work();
         self.coriolis_cancellation(qd)?;
         // Safety layer: null-space damping of faded levels, the passivity
         // damping, joint position and velocity limits (crate::safety); zero and

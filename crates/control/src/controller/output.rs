@@ -59,9 +59,9 @@ pub struct StepOutput {
     /// What the commands put into the storage H this cycle: the moving
     /// goals' power −Σ_i β_i ẋ_{i,d}ᵀ F_i (W; their work on the springs and
     /// dampers, β_i the level's fade times the law's share) plus the tracking
-    /// feed-forward's q̇ᵀ τ_ff, both over the coming period, and what a
-    /// refill put into the energy tanks at this cycle's sample
-    /// ([`CommandInput`]).
+    /// feed-forward's q̇ᵀ τ_ff, both over the coming period (unless the
+    /// command tank pays them), what a refill put into the energy tanks and
+    /// a grant into the command tank at this cycle's sample ([`CommandInput`]).
     pub command_input: CommandInput,
     /// C(q, q̇) q̇, added to τ by [`Form::KinematicProjector`](crate::Form::KinematicProjector) only (zero otherwise).
     pub coriolis: DVector<f64>,
@@ -104,12 +104,22 @@ impl StepOutput {
 /// ([`StepOutput::command_input`]): with no command, all zero.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CommandInput {
-    /// −Σ_i β_i ẋ_{i,d}ᵀ F_i, the moving goals' power over the coming period (W).
+    /// −Σ_i β_i ẋ_{i,d}ᵀ F_i, the moving goals' power over the coming period
+    /// (W; the spring's share with V_i's whole gradient where the velocity
+    /// governor scales it in F_i).
     pub goal_power: f64,
     /// q̇ᵀ τ_ff, the tracking feed-forward's power over the coming period (W).
     pub feed_forward_power: f64,
     /// What the energy tanks' refill added at this cycle's sample (J).
     pub refill: f64,
+    /// What the command tank was granted at this cycle's sample (J; a goal
+    /// setpoint taken: `Controller::grant_goal_step`).
+    pub granted: f64,
+    /// The command tank E_c at this cycle's sample (J; counted in H).
+    pub tank: f64,
+    /// The command tank pays the goals' and the feed-forward's work of the
+    /// coming period (a transition runs): it is then no input of H.
+    pub paid: bool,
 }
 
 /// A level's current spring–damper target ([`Controller::level_target`](super::Controller::level_target)).

@@ -42,6 +42,14 @@ impl Controller {
             self.out.command_input.refill = added;
             self.tank_refill = false;
         }
+        // A goal setpoint's grant; a transition's top-ups (`command_tank.rs`).
+        self.command_tank_sample(qd);
+        // What a transition's tanks hold above `tank_max` was granted for it.
+        let max = if self.commands_hold_tanks() {
+            f64::INFINITY
+        } else {
+            max
+        };
         for i in 1..self.levels.len() {
             let l = &mut self.levels[i];
             l.tank_at_sample = l.tank.energy;
@@ -81,14 +89,19 @@ impl Controller {
         }
     }
 
-    /// Σ E_i of the levels' tanks at this cycle's sample (J; 0 when they are
-    /// off): the content the state's storage is counted with, before this
+    /// Σ E_i of the levels' tanks and the command tank E_c at this cycle's
+    /// sample (J; 0 when they are off): the content the state's storage is counted with, before this
     /// cycle books the coming period.
     pub(super) fn tank_energy(&self) -> f64 {
         if !self.tanks_on() {
             return 0.0;
         }
-        self.levels.iter().skip(1).map(|l| l.tank_at_sample).sum()
+        self.levels
+            .iter()
+            .skip(1)
+            .map(|l| l.tank_at_sample)
+            .sum::<f64>()
+            + self.command.at_sample
     }
 
     /// What the fade's tank holds and the levels' tanks hold above the band
@@ -212,6 +225,7 @@ impl Controller {
         for l in self.levels.iter_mut() {
             l.tank.reset(0.0);
         }
+        self.reset_command_tank();
         self.tank_refill = true;
     }
 }

@@ -252,6 +252,22 @@ impl Transition {
         }
     }
 
+    /// Time elapsed on the goal's clock (s).
+    pub fn goal_elapsed(&self) -> f64 {
+        self.elapsed
+    }
+
+    /// Sets the goal's clock back to `elapsed` (s, clamped to the goal's
+    /// transition) and updates the equilibrium: a step the law could not
+    /// take (its command tank and the tanks' spare could not pay the goal's
+    /// work) is taken again later. Allocation-free.
+    pub fn rewind_goal(&mut self, elapsed: f64) {
+        if elapsed.is_finite() {
+            self.elapsed = elapsed.clamp(0.0, self.duration);
+            self.update();
+        }
+    }
+
     /// Progress σ = t / T in [0, 1] of the goal's transition (1 when none runs).
     pub fn goal_progress(&self) -> f64 {
         sigma(self.elapsed, self.duration)

@@ -357,3 +357,39 @@ fn gains_stay_symmetric_positive_definite() {
     assert_eq!(t.stiffness(), &k1);
     assert_eq!(t.damping(), &d);
 }
+
+#[test]
+fn a_rewound_clock_takes_its_step_again() {
+    // The goal's clock and the gains' rewind on their own: the law could
+    // not take a step (its tanks could not pay it), so the same step comes
+    // again in the next cycle.
+    let k = DMatrix::from_diagonal_element(2, 2, 100.0);
+    let d = DMatrix::from_diagonal_element(2, 2, 10.0);
+    let mut t = Transition::new(GoalKind::Vector, &[0.0, 0.0], &k, &d).unwrap();
+    let k1 = DMatrix::from_diagonal_element(2, 2, 200.0);
+    t.start(
+        Target {
+            goal: Some(&[1.0, 0.0]),
+            stiffness: Some(&k1),
+            damping: None,
+        },
+        1.0,
+    );
+    t.advance(0.1);
+    let (goal, clock, gains) = (t.goal().to_vec(), t.goal_elapsed(), t.gain_elapsed());
+    let stiffness = t.stiffness().clone();
+    t.advance(0.1);
+    t.rewind_goal(clock);
+    assert_eq!(t.goal(), goal.as_slice());
+    assert_eq!(t.goal_elapsed(), clock);
+    // The gains' clock ran on.
+    assert!((t.gain_elapsed() - 0.2).abs() < 1e-12);
+    t.rewind_gains(gains);
+    assert_eq!(t.stiffness(), &stiffness);
+    // Clamped to the transition; a NaN is ignored.
+    t.rewind_goal(-5.0);
+    assert_eq!(t.goal_elapsed(), 0.0);
+    assert_eq!(t.goal(), &[0.0, 0.0]);
+    t.rewind_goal(f64::NAN);
+    assert_eq!(t.goal_elapsed(), 0.0);
+}

@@ -26,10 +26,15 @@
 //!
 //! [`SetpointHandler::advance`] moves every transition by one period and hands
 //! x_{i,d}(t), K_i(t), D_i(t) and — with `relative_damping` — ẋ_{i,d}(t) to
-//! the law (`set_goal`, `ramp_gains`, `set_goal_velocity`). A taken setpoint
-//! is a command: the law refills its energy tanks (`command_taken`); each step
-//! of the gains is then booked against them, and a stiffening they cannot pay
-//! holds the gains' clock until they can (counted, `gain_ramp_held`). Nothing
+//! the law (`ramp_goal`, `ramp_gains`, `set_goal_velocity`). A taken setpoint
+//! is a command: the law refills its energy tanks (`command_taken`), and a
+//! goal setpoint grants its command tank the energy the step to its target
+//! would store (`grant_goal_step`). The goal's steps are paid from the command
+//! tank (its work on the level's spring and damper); a step neither it nor
+//! the tanks' spare can pay holds the goal's clock (counted,
+//! `goal_ramp_held`). Each step of the gains is booked against the tanks, and
+//! a stiffening they cannot pay holds the gains' clock until they can
+//! (counted, `gain_ramp_held`). Nothing
 //! changes for a level that never received a setpoint, so a run without
 //! setpoints is bit-identical to one without this module.
 
@@ -101,6 +106,9 @@ pub struct SetpointHandler {
     /// Cycles in which a level's gains transition held: the energy tanks
     /// could not pay its stiffening (`Controller::ramp_gains`).
     pub(crate) gains_held: u64,
+    /// Level-cycles in which a goal's step was held: neither the command
+    /// tank nor the tanks' spare could pay its work (`Controller::ramp_goal`).
+    pub(crate) goals_held: u64,
 }
 
 impl SetpointHandler {
@@ -170,6 +178,7 @@ impl SetpointHandler {
             accepted: 0,
             streams_stopped: 0,
             gains_held: 0,
+            goals_held: 0,
         })
     }
 
@@ -328,6 +337,10 @@ impl SetpointHandler {
         };
         level.transition.start(target, duration);
         controller.command_taken();
+        if sp.sets(SETPOINT_GOAL) {
+            // Checked above: the grant cannot fail.
+            let _ = controller.grant_goal_step(sp.level as usize, sp.goal());
+        }
         if sp.sets(SETPOINT_VELOCITY) {
             level.transition.set_feed_forward(sp.velocity());
             let m = sp.velocity().len();
@@ -378,11 +391,14 @@ impl SetpointHandler {
     /// the law; a gains step the law's tanks cannot pay is held (module
     /// docs). Levels without a setpoint are not touched. Allocation-free.
     pub fn advance(&mut self, dt: f64, controller: &mut Controller) {
+        let mut any = false;
         for (i, level) in self.levels.iter_mut().enumerate() {
             if !level.active {
                 continue;
             }
+            any = true;
             let gain_clock = level.transition.gain_elapsed();
+            let goal_clock = level.transition.goal_elapsed();
             level.transition.advance(dt);
             if level.transition.has_feed_forward() {
                 // A stream that stopped: its feed-forward fades to zero.
@@ -401,9 +417,18 @@ impl SetpointHandler {
                     }
                 }
             }
-            let t = &level.transition;
             // The values come from checked setpoints: these calls cannot fail.
-            let _ = controller.set_goal(i, t.goal());
+            // The goal's step is paid from the command tank: one it and the
+            // tanks' spare cannot pay holds the goal's clock (counted).
+            let t = &level.transition;
+            let goal_held = !controller
+                .ramp_goal(i, t.goal(), t.goal_velocity())
+                .unwrap_or(true);
+            if goal_held {
+                level.transition.rewind_goal(goal_clock);
+                self.goals_held += 1;
+            }
+            let t = &level.transition;
             // The gains' step is booked through the energy tanks: a
             // stiffening they cannot pay holds the gains' clock (counted)
             // and is taken again in the next cycle.
@@ -415,14 +440,16 @@ impl SetpointHandler {
                 self.gains_held += 1;
             }
             let t = &level.transition;
-            let velocity = if self.relative_damping {
+            // A held goal stands still.
+            let velocity = if self.relative_damping && !goal_held {
                 t.goal_velocity()
             } else {
                 &self.zeros[..t.dim()]
             };
             let _ = controller.set_goal_velocity(i, velocity);
-            level.active = t.is_moving() || t.has_feed_forward() || held;
+            level.active = t.is_moving() || t.has_feed_forward() || held || goal_held;
         }
+        controller.set_commands_active(any);
     }
 
     /// How many goal setpoints have been taken for level `i` (a path that
