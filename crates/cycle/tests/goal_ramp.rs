@@ -67,3 +67,44 @@ fn a_goal_transition_is_paid_from_its_grant() {
     d.decide(&state(&sc, seq), seq * PERIOD);
     assert_eq!(d.controller().command_tank().0, 0.0);
 }
+
+#[test]
+fn a_stream_of_setpoints_refills_the_tanks_once() {
+    // A client streaming its goal with its velocity, a setpoint every cycle
+    // (as `hcc teleop` does): the first one refills the tanks, the others
+    // arrive while its transition runs and add their grants to the command
+    // tank — no refill per message.
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
+    let sc = Scenario::load(&path).unwrap();
+    let settings = CycleSettings::from_scenario(&sc);
+    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let mut d = ControlCycle::new(c, &settings).unwrap();
+    d.decide(&state(&sc, 1), PERIOD);
+    let goal = d.controller().level_target(0).unwrap().goal.to_vec();
+    let (mut refills, mut grants) = (Vec::new(), 0.0);
+    for k in 0..300u64 {
+        // 0.05 m/s along y.
+        let y = goal[1] + 0.05 * 1e-3 * (k + 1) as f64;
+        let sp = Setpoint::for_level(7, k + 1, 0, 3)
+            .with_goal(&[goal[0], y, goal[2]])
+            .unwrap()
+            .with_velocity(&[0.0, 0.05, 0.0])
+            .unwrap();
+        assert_eq!(d.take_setpoint_now(&sp), ANSWER_ACCEPTED);
+        let seq = k + 2;
+        d.decide(&state(&sc, seq), seq * PERIOD);
+        let input = d.controller().output().command_input;
+        refills.push(input.refill);
+        grants += input.granted;
+    }
+    println!(
+        "refills {:.4} J at the first message, {:.2e} J after; grants {grants:.4} J",
+        refills[0],
+        refills[1..].iter().sum::<f64>()
+    );
+    assert!(refills[1..].iter().all(|&r| r == 0.0), "{refills:?}");
+    assert!(grants > 0.0);
+    assert_eq!(d.counters().core.goal_ramp_held, 0);
+    assert_eq!(d.counters().core.command_unpaid_mj, 0);
+}

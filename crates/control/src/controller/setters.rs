@@ -170,10 +170,17 @@ impl Controller {
     /// A client's command was taken (a setpoint: hcc-cycle's setpoints): in
     /// the next cycle the energy tanks and the passivity budget are refilled,
     /// the energy a command may put in; its transition's steps are then
-    /// booked against them ([`Controller::ramp_gains`]).
+    /// booked against them ([`Controller::ramp_gains`]). While a transition
+    /// runs ([`Controller::set_commands_active`]) the tanks are not refilled:
+    /// they live on its command tank, to which the new command's grant is
+    /// added ([`Controller::grant_goal_step`]) — so a stream of setpoints puts
+    /// in the first one's refill and each one's grant, not a refill per
+    /// message.
     pub fn command_taken(&mut self) {
         self.safety.refill_passivity_budget();
-        self.refill_tanks();
+        if !self.commands_hold_tanks() {
+            self.refill_tanks();
+        }
     }
 
     /// One step of a gains transition (hcc-cycle's setpoints): the gains as
