@@ -164,3 +164,34 @@ fn the_stiffness_scale_is_booked_both_ways() {
     assert!(c.ramp_stiffness_scale(1.5) && c.ramp_stiffness_scale(f64::NAN));
     assert_eq!(c.stiffness_scale(), 0.5);
 }
+
+#[test]
+fn the_law_share_of_a_hold_is_booked_both_ways() {
+    // A contact hold blends the law's torque away (share s from 1 to 0): the
+    // springs act with s, H counts s Σ β_i V_i, and the change goes through
+    // the tanks — into the fade's tank on the way in, from the spare on the
+    // way out.
+    let mut c = panda_stretched_5cm();
+    let before = h(&mut c);
+    let spare = c.tank_spare();
+    assert!(c.ramp_law_share(0.25));
+    // V_1 = 1 J: three quarters of it leave the springs' storage.
+    assert!((c.tank_spare() - (spare + 0.75)).abs() < 1e-9);
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!((out.safety.level_potential[0] - 0.25).abs() < 1e-9);
+    assert!(
+        (out.safety.h - before).abs() < 1e-9,
+        "H {before} → {}",
+        out.safety.h
+    );
+    assert!(c.ramp_law_share(1.0));
+    assert!((c.tank_spare() - spare).abs() < 1e-9);
+    let after = h(&mut c);
+    assert!((after - before).abs() < 1e-9, "H {before} → {after}");
+    // Held again, the spare spent: the release waits.
+    assert!(c.ramp_law_share(0.0));
+    h(&mut c);
+    c.draw_tank_spare(1e6);
+    assert!(!c.ramp_law_share(1.0));
+    assert!(c.ramp_law_share(f64::NAN), "ignored");
+}

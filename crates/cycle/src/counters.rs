@@ -51,9 +51,10 @@ hcc_msgs::define_counters! {
         /// The goals' work neither the command tank nor the tanks' spare
         /// paid (mJ, total; H rose by it).
         command_unpaid_mj: "goals' work beyond the command tank (mJ)",
-        /// Cycles in which a `soften` contact reaction's restore held: the
-        /// energy tanks could not pay the springs' return (module `reaction`).
-        reaction_restore_held: "cycles a soften reaction's restore held (the tanks could not pay it)",
+        /// Cycles in which a contact reaction's return held: the energy
+        /// tanks could not pay the springs' return (`soften`'s restore) or
+        /// the law's share coming back (`hold`'s release; module `reaction`).
+        reaction_restore_held: "cycles a contact reaction's restore or release held (the tanks could not pay it)",
     }
 }
 

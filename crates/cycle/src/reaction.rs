@@ -41,7 +41,11 @@
 //! −(1 − h) (the law's dissipation) − h q̇ᵀ D_h q̇ − ḣ Σ V_i + τ_extᵀ q̇: the
 //! ramp into the hold (ḣ ≥ 0) only removes energy; the ramp out adds at most
 //! Σ V_i, the springs' energy at the configuration where the hold left the
-//! arm (a client's new goal there makes it small).
+//! arm (a client's new goal there makes it small). With the energy tanks on,
+//! each step of the share 1 − h is booked through them
+//! (`Controller::ramp_law_share`): the ramp in fills the fade's tank, the
+//! release is paid from the tanks' spare, and a release they cannot pay
+//! waits (counted, `reaction_restore_held`).
 //!
 //! **report.** h stays 0 and nothing is touched: the torques are bit for bit
 //! the law's.
@@ -104,7 +108,8 @@ pub(crate) struct ContactReaction {
     /// The setpoint handler's count of accepted setpoints, as last seen.
     accepted_seen: u64,
     /// Cycles in which `soften`'s restore held: the energy tanks could not
-    /// pay the springs' return (`Controller::ramp_stiffness_scale`).
+    /// pay the springs' return (`Controller::ramp_stiffness_scale`), or a
+    /// `hold`'s release the law's share (`Controller::ramp_law_share`).
     pub(crate) restore_held: u64,
 }
 
@@ -183,10 +188,14 @@ impl ContactReaction {
             }
             self.h = self.ramp.value();
         } else {
+            // The law's share of the blended torque (`blend`): the storage it
+            // makes changes with it, booked through the law's energy tanks; a
+            // release they cannot pay waits (counted).
+            if !controller.ramp_law_share(1.0 - self.ramp.value()) {
+                self.ramp.elapsed = elapsed;
+                self.restore_held += 1;
+            }
             self.h = self.ramp.value();
-            // The law's share of the blended torque (`blend`), for the energy
-            // tanks' booking.
-            controller.set_law_share(1.0 - self.h);
         }
     }
 

@@ -39,8 +39,10 @@ impl Controller {
         }
         let (fade, pot) = (&mut self.out.fade, &self.out.potential);
         let cond = &self.out.conditioning;
+        // The dampers act with the law's share of the torque.
+        let share = self.law_share;
         self.safety
-            .passive_fade(fade, pot, p1, cond, &mut self.out.safety);
+            .passive_fade(fade, pot, share * p1, cond, share, &mut self.out.safety);
     }
 
     /// The acceleration the applied torque ([`Controller::set_applied_torque`])
@@ -142,6 +144,7 @@ impl Controller {
             potential: &self.out.potential,
             singular_ratio: self.spec.singular_ratio,
             level_tanks: self.tank_energy(),
+            law_share: self.law_share,
         };
         self.safety.torque(&terms, &mut self.out.safety);
     }

@@ -110,12 +110,42 @@ impl Controller {
     /// next cycle on: 1 − h while a contact reaction `hold` blends the
     /// torque towards its own (hcc-cycle). The energy tanks (crate::energy_tank)
     /// book their levels' power scaled by it, as they do a fade: a level's
-    /// tank neither fills from nor pays for a torque that is not applied. A
+    /// tank neither fills from nor pays for a torque that is not applied, and
+    /// H counts the springs' storage with it. Set so, the change of that
+    /// storage is not booked; [`Controller::ramp_law_share`] books it. A
     /// value outside [0, 1] or not finite is ignored. Allocation-free.
     pub fn set_law_share(&mut self, share: f64) {
         if (0.0..=1.0).contains(&share) {
             self.law_share = share;
         }
+    }
+
+    /// One step of a contact hold's blend (hcc-cycle's `reaction`): the
+    /// law's share s of the torque, as [`Controller::set_law_share`] takes it,
+    /// with the change of the storage it makes booked through the energy
+    /// tanks — the springs and the joint-limit guard act with s, so H counts
+    /// s (Σ β_i V_i + the guard's potential), and a step to s′ changes it by
+    /// (s′ − s) times that at the last cycle's state: a ramp into the hold
+    /// (s falls) fills the fade's tank, the release (s rises) is paid from
+    /// the tanks' spare ([`Controller::book_model_change`]). False, and s
+    /// unchanged, when the spare cannot pay: the release must wait. A value
+    /// outside [0, 1] or not finite is ignored (true). Allocation-free.
+    pub fn ramp_law_share(&mut self, share: f64) -> bool {
+        if !(0.0..=1.0).contains(&share) || share == self.law_share {
+            return true;
+        }
+        let stored: f64 = self
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| if i == 0 { 1.0 } else { self.out.fade[i] } * l.potential)
+            .sum::<f64>()
+            + self.out.safety.guard_potential;
+        if !self.book_model_change((share - self.law_share) * stored) {
+            return false;
+        }
+        self.law_share = share;
+        true
     }
 
     /// κ ([`Controller::set_stiffness_scale`]).

@@ -75,6 +75,9 @@ pub(crate) struct CycleTerms<'a> {
     pub singular_ratio: f64,
     /// Σ E_i of the levels' energy tanks (J; crate::energy_tank).
     pub level_tanks: f64,
+    /// The share s of the law's torque (and τ_safety's) the robot receives
+    /// (`Controller::set_law_share`): the law's storages count with it.
+    pub law_share: f64,
 }
 
 /// Workspace and memory of the safety layer.
@@ -259,8 +262,10 @@ impl Safety {
         gemv(&mut self.mqd, 1.0, c.m, c.qd, 0.0);
         let kinetic = 0.5 * c.qd.dot(&self.mqd);
         let mut potential = 0.0;
+        // The springs act with the law's share s of the torque (a contact
+        // hold blends the rest away): their storage is s β_i V_i.
         for (i, (v, stored)) in c.potential.iter().zip(&mut out.level_potential).enumerate() {
-            *stored = if i == 0 { *v } else { c.fade[i] * v };
+            *stored = c.law_share * if i == 0 { *v } else { c.fade[i] * v };
             potential += *stored;
         }
         out.hierarchy_power = c.hierarchy_power;
@@ -285,7 +290,7 @@ impl Safety {
         };
         out.joint_limit_cycles += u64::from(out.joint_limit_active);
         out.velocity_limit_cycles += u64::from(out.velocity_limit_active);
-        out.energy = kinetic + potential + out.guard_potential;
+        out.energy = kinetic + potential + c.law_share * out.guard_potential;
         out.h = out.energy + self.tank + c.level_tanks;
     }
 

@@ -35,7 +35,8 @@ impl Safety {
             self.project_above(i, c);
             let ci = (1.0 - beta) * rate;
             let p = self.add_null_space_damping(ci, c, out);
-            self.fill_power += p;
+            // Applied with the law's share (a contact hold blends the rest away).
+            self.fill_power += c.law_share * p;
             out.null_space_damping_active = true;
         }
     }

@@ -17,13 +17,15 @@ impl Safety {
     /// The passive fade (module docs): `fade` holds β_i(q) on entry and the effective
     /// β_i on return; `potential` V_i; `damper_dissipation` Σ β_i ẋ_iᵀ D_i ẋ_i (W);
     /// `conditioning` r_i of each level's own inversions, for the conflict fade
-    /// β_i(q) ← min(β_i(q), β_c(r_i)).
+    /// β_i(q) ← min(β_i(q), β_c(r_i)); `share` the law's share s of the torque
+    /// the robot receives (a fade moves s β_i V_i, the storage H counts).
     pub(crate) fn passive_fade(
         &mut self,
         fade: &mut [f64],
         potential: &[f64],
         damper_dissipation: f64,
         conditioning: &[f64],
+        share: f64,
         out: &mut SafetyOutput,
     ) {
         if !self.spec.enabled {
@@ -38,7 +40,7 @@ impl Safety {
         let mut tank = self.tank + fill.max(0.0);
         let mut limited = false;
         for i in 1..fade.len() {
-            let (prev, v) = (self.beta_prev[i], potential[i].max(0.0));
+            let (prev, v) = (self.beta_prev[i], share * potential[i].max(0.0));
             // Hysteresis: a faded level comes back only once it has left the fade
             // region (β(q) = 1), and then in at least 1 / FADE_IN_RATE s — no
             // relaxation cycles at the edge of the fade region.
