@@ -17,21 +17,8 @@ const REST: [f64; 7] = [0.0; 7];
 /// x, the orientation and the posture at theirs (V = ½ · 800 · 0.05² = 1 J;
 /// every tank filled with `tank_initial` plus half of it, below `tank_max`).
 fn panda_stretched_5cm() -> Controller {
-    let model = panda();
-    let mut spec = panda_spec(&model);
-    let q0 = DVector::from_vec(Q0.to_vec());
-    let mut data = hcc_model::Data::new(&model);
-    hcc_model::forward_kinematics(&model, &mut data, &q0);
-    let tcp = model.frame_id("panda_hand_tcp").expect("tcp");
-    let placement = hcc_model::frame_placement(&model, &data, tcp);
-    let p = placement.translation.vector;
-    let (roll, pitch, yaw) = placement.rotation.euler_angles();
-    spec.levels[0].goal = DVector::from_vec(vec![p[0] + 0.05, p[1], p[2]]);
-    spec.levels[1].goal = DVector::from_vec(vec![roll, pitch, yaw]);
-    spec.levels[2].goal = q0.clone();
-    let mut c = Controller::new(&model, spec, &q0).expect("ctl");
-    c.step(&Q0, &REST).expect("step");
-    c
+    let tank_initial = panda_spec(&panda()).safety.tank_initial;
+    panda_tcp_offset(&Q0, [0.05, 0.0, 0.0], tank_initial).0
 }
 
 fn h(c: &mut Controller) -> f64 {

@@ -15,22 +15,36 @@ const REST: [f64; 7] = [0.0; 7];
 /// The Panda's controller at rest at `Q0`, every level at its goal (H = the
 /// tanks' content), with `tank_initial` J in its tanks; the TCP's position.
 fn panda_at_goal(tank_initial: f64) -> (Controller, [f64; 3]) {
-    let model = panda();
-    let mut spec = panda_spec(&model);
-    spec.safety.tank_initial = tank_initial;
-    let q0 = DVector::from_vec(Q0.to_vec());
-    let mut data = hcc_model::Data::new(&model);
-    hcc_model::forward_kinematics(&model, &mut data, &q0);
-    let tcp = model.frame_id("panda_hand_tcp").expect("tcp");
-    let placement = hcc_model::frame_placement(&model, &data, tcp);
-    let p = placement.translation.vector;
-    let (roll, pitch, yaw) = placement.rotation.euler_angles();
-    spec.levels[0].goal = DVector::from_vec(vec![p[0], p[1], p[2]]);
-    spec.levels[1].goal = DVector::from_vec(vec![roll, pitch, yaw]);
-    spec.levels[2].goal = q0.clone();
-    let mut c = Controller::new(&model, spec, &q0).expect("ctl");
-    c.step(&Q0, &REST).expect("step");
-    (c, [p[0], p[1], p[2]])
+    panda_tcp_offset(&Q0, [0.0; 3], tank_initial)
+}
+
+/// Grants a 5 cm step of the TCP goal along x and moves the goal there on
+/// the minimum-jerk profile in 0.4 s (as a transition moves it: peak
+/// 0.23 m/s), the arm held still; `relative`: the damper is told the goal's
+/// velocity. Returns the largest rise of H from one cycle to the next.
+fn move_5cm(c: &mut Controller, p: [f64; 3], relative: bool) -> f64 {
+    c.grant_goal_step(0, &[p[0] + 0.05, p[1], p[2]])
+        .expect("grant");
+    c.set_commands_active(true);
+    let mut h = c.step(&Q0, &REST).expect("step").safety.h;
+    let (period, duration) = (1e-3, 0.4);
+    let cycles = (duration / period) as usize;
+    let mut rise: f64 = 0.0;
+    for k in 1..=cycles {
+        let (s, ds, _) = hcc_control::transition::quintic(k as f64 / cycles as f64);
+        let goal = [p[0] + 0.05 * s, p[1], p[2]];
+        let rate = [0.05 * ds / duration, 0.0, 0.0];
+        assert!(c.ramp_goal(0, &goal, &rate).expect("goal"));
+        if relative {
+            c.set_goal_velocity(0, &rate).expect("velocity");
+        }
+        let out = c.step(&Q0, &REST).expect("step");
+        assert!(out.command_input.paid);
+        assert!(out.command_input.goal_power >= 0.0, "the goal leads");
+        rise = rise.max(out.safety.h - h);
+        h = out.safety.h;
+    }
+    rise
 }
 
 #[test]
@@ -61,26 +75,7 @@ fn a_goal_setpoint_grants_what_its_step_would_store() {
 #[test]
 fn the_goals_steps_are_paid_from_the_grant_and_h_never_rises() {
     let (mut c, p) = panda_at_goal(2.0);
-    let target = [p[0] + 0.05, p[1], p[2]];
-    c.grant_goal_step(0, &target).expect("grant");
-    c.set_commands_active(true);
-    let mut h = c.step(&Q0, &REST).expect("step").safety.h;
-    // 5 cm on the minimum-jerk profile in 0.4 s (as a transition moves it:
-    // peak 0.23 m/s), the arm held still.
-    let (period, duration) = (1e-3, 0.4);
-    let cycles = (duration / period) as usize;
-    let mut rise: f64 = 0.0;
-    for k in 1..=cycles {
-        let (s, ds, _) = hcc_control::transition::quintic(k as f64 / cycles as f64);
-        let goal = [p[0] + 0.05 * s, p[1], p[2]];
-        let rate = [0.05 * ds / duration, 0.0, 0.0];
-        assert!(c.ramp_goal(0, &goal, &rate).expect("goal"));
-        c.set_goal_velocity(0, &rate).expect("velocity");
-        let out = c.step(&Q0, &REST).expect("step");
-        assert!(out.command_input.paid);
-        rise = rise.max(out.safety.h - h);
-        h = out.safety.h;
-    }
+    let rise = move_5cm(&mut c, p, true);
     // Booked from one cycle's F for the coming period, the work differs from
     // the spring's rise by second-order terms; the fade's tank books level
     // 1's damper ahead (at the sample that starts the period), the command
@@ -143,23 +138,7 @@ fn a_goal_the_damper_is_not_told_is_booked_at_its_rate() {
     // `relative_damping = false`: the damper acts on ẋ_i, the goal still
     // moves; its work on the spring is booked at the transition's rate.
     let (mut c, p) = panda_at_goal(2.0);
-    c.grant_goal_step(0, &[p[0] + 0.05, p[1], p[2]])
-        .expect("grant");
-    c.set_commands_active(true);
-    let mut h = c.step(&Q0, &REST).expect("step").safety.h;
-    let (period, duration) = (1e-3, 0.4);
-    let cycles = (duration / period) as usize;
-    let mut rise: f64 = 0.0;
-    for k in 1..=cycles {
-        let (s, ds, _) = hcc_control::transition::quintic(k as f64 / cycles as f64);
-        let goal = [p[0] + 0.05 * s, p[1], p[2]];
-        let rate = [0.05 * ds / duration, 0.0, 0.0];
-        assert!(c.ramp_goal(0, &goal, &rate).expect("goal"));
-        let out = c.step(&Q0, &REST).expect("step");
-        assert!(out.command_input.goal_power >= 0.0, "the goal leads");
-        rise = rise.max(out.safety.h - h);
-        h = out.safety.h;
-    }
+    let rise = move_5cm(&mut c, p, false);
     // The arm held still: no damper acts, the spring's work is the whole of
     // it, booked at the rate at the period's start — below its mean while
     // the goal speeds up (K |x̃| ẍ_d T² / 2 ≈ 2e-5 J here). The sweep's

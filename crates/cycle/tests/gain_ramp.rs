@@ -5,20 +5,11 @@
 
 mod common;
 
-use std::path::PathBuf;
-
 use hcc_config::Scenario;
-use hcc_control::Controller;
-use hcc_cycle::{ControlCycle, CycleSettings};
+use hcc_cycle::ControlCycle;
 use hcc_msgs::{ANSWER_ACCEPTED, Setpoint};
 
 const PERIOD: u64 = 1_000_000;
-
-fn scenario() -> Scenario {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    Scenario::load(&path).unwrap()
-}
 
 use common::state_at_start as state;
 
@@ -26,11 +17,7 @@ use common::state_at_start as state;
 /// reached (the spring stretched, V_1 = ½ · 350 · 0.2² = 7 J), and the
 /// next state's number.
 fn stretched() -> (Scenario, ControlCycle, u64) {
-    let sc = scenario();
-    let settings = CycleSettings::from_scenario(&sc);
-    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
-    let mut d = ControlCycle::new(c, &settings).unwrap();
-    d.decide(&state(&sc, 1), PERIOD);
+    let (sc, mut d) = common::panda_cycle();
     let goal = d.controller().level_target(0).unwrap().goal.to_vec();
     let sp = Setpoint::for_level(7, 1, 0, 3)
         .with_goal(&[goal[0], goal[1] + 0.2, goal[2]])

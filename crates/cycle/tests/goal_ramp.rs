@@ -6,11 +6,6 @@
 
 mod common;
 
-use std::path::PathBuf;
-
-use hcc_config::Scenario;
-use hcc_control::Controller;
-use hcc_cycle::{ControlCycle, CycleSettings};
 use hcc_msgs::{ANSWER_ACCEPTED, Setpoint};
 
 const PERIOD: u64 = 1_000_000;
@@ -19,13 +14,7 @@ use common::state_at_start as state;
 
 #[test]
 fn a_goal_transition_is_paid_from_its_grant() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let sc = Scenario::load(&path).unwrap();
-    let settings = CycleSettings::from_scenario(&sc);
-    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
-    let mut d = ControlCycle::new(c, &settings).unwrap();
-    d.decide(&state(&sc, 1), PERIOD);
+    let (sc, mut d) = common::panda_cycle();
     let goal = d.controller().level_target(0).unwrap().goal.to_vec();
     // 5 cm along y; the arm held where it is (the state never changes).
     let sp = Setpoint::for_level(7, 1, 0, 3)
@@ -74,13 +63,7 @@ fn a_stream_of_setpoints_refills_the_tanks_once() {
     // (as `hcc teleop` does): the first one refills the tanks, the others
     // arrive while its transition runs and add their grants to the command
     // tank — no refill per message.
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let sc = Scenario::load(&path).unwrap();
-    let settings = CycleSettings::from_scenario(&sc);
-    let c = Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
-    let mut d = ControlCycle::new(c, &settings).unwrap();
-    d.decide(&state(&sc, 1), PERIOD);
+    let (sc, mut d) = common::panda_cycle();
     let goal = d.controller().level_target(0).unwrap().goal.to_vec();
     let (mut refills, mut grants) = (Vec::new(), 0.0);
     for k in 0..300u64 {

@@ -93,12 +93,7 @@ impl Controller {
         if !(kappa > 0.0 && kappa <= 1.0) || kappa == self.stiffness_scale {
             return true;
         }
-        let stored: f64 = self
-            .levels
-            .iter()
-            .enumerate()
-            .map(|(i, l)| if i == 0 { 1.0 } else { self.out.fade[i] } * l.potential)
-            .sum();
+        let stored = self.faded_potential();
         if !self.book_model_change((kappa / self.stiffness_scale - 1.0) * stored) {
             return false;
         }
@@ -134,18 +129,21 @@ impl Controller {
         if !(0.0..=1.0).contains(&share) || share == self.law_share {
             return true;
         }
-        let stored: f64 = self
-            .levels
-            .iter()
-            .enumerate()
-            .map(|(i, l)| if i == 0 { 1.0 } else { self.out.fade[i] } * l.potential)
-            .sum::<f64>()
-            + self.out.safety.guard_potential;
+        let stored = self.faded_potential() + self.out.safety.guard_potential;
         if !self.book_model_change((share - self.law_share) * stored) {
             return false;
         }
         self.law_share = share;
         true
+    }
+
+    /// Σ β_i V_i at the last cycle's state (β_1 = 1; V_i with κ).
+    fn faded_potential(&self) -> f64 {
+        self.levels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| if i == 0 { 1.0 } else { self.out.fade[i] } * l.potential)
+            .sum()
     }
 
     /// κ ([`Controller::set_stiffness_scale`]).

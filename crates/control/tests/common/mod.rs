@@ -78,6 +78,34 @@ pub fn planar_spec(model: &Model, sim: &str) -> ControllerSpec {
 }
 
 /// Panda: TCP position / TCP orientation / posture.
+/// The Panda's controller at rest at `q0` (7 values) with its TCP goal
+/// `offset` (m) from the TCP, the orientation and the posture at theirs,
+/// `tank_initial` J in the energy tanks, after one cycle; and the TCP's
+/// position.
+pub fn panda_tcp_offset(
+    q0: &[f64],
+    offset: [f64; 3],
+    tank_initial: f64,
+) -> (hcc_control::Controller, [f64; 3]) {
+    let model = panda();
+    let mut spec = panda_spec(&model);
+    spec.safety.tank_initial = tank_initial;
+    let q = nalgebra::DVector::from_column_slice(q0);
+    let mut data = hcc_model::Data::new(&model);
+    hcc_model::forward_kinematics(&model, &mut data, &q);
+    let tcp = model.frame_id("panda_hand_tcp").expect("tcp");
+    let placement = hcc_model::frame_placement(&model, &data, tcp);
+    let p = placement.translation.vector;
+    let (roll, pitch, yaw) = placement.rotation.euler_angles();
+    spec.levels[0].goal =
+        nalgebra::DVector::from_vec(vec![p[0] + offset[0], p[1] + offset[1], p[2] + offset[2]]);
+    spec.levels[1].goal = nalgebra::DVector::from_vec(vec![roll, pitch, yaw]);
+    spec.levels[2].goal = q.clone();
+    let mut c = hcc_control::Controller::new(&model, spec, &q).expect("ctl");
+    c.step(q0, &vec![0.0; q0.len()]).expect("step");
+    (c, [p[0], p[1], p[2]])
+}
+
 pub fn panda_spec(model: &Model) -> ControllerSpec {
     let tcp = model.frame_id("panda_hand_tcp").expect("tcp frame");
     ControllerSpec::new(vec![

@@ -1,5 +1,6 @@
-//! `soften`'s κ through the law's energy tanks: a restore the tanks cannot
-//! pay waits (counted) and goes on once a command refills them.
+//! `soften`'s κ and `hold`'s share through the law's energy tanks: a restore
+//! or a release the tanks cannot pay waits (counted) and goes on once a
+//! command refills them.
 
 use super::ContactReaction;
 use hcc_config::Scenario;
@@ -7,18 +8,24 @@ use hcc_control::Controller;
 use hcc_spec::contact::{Contact, Reaction};
 use std::path::PathBuf;
 
-#[test]
-fn a_restore_the_tanks_cannot_pay_waits_for_them() {
+/// The shipped Panda's controller at rest at its start, its TCP goal 10 cm
+/// off (a stretched spring), after one cycle; the state (q, q̇ = 0).
+fn stretched() -> (Controller, Vec<f64>, Vec<f64>) {
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
     let sc = Scenario::load(&path).unwrap();
-    let n = sc.model.nq();
     let mut spec = sc.spec.clone();
-    // The TCP goal 10 cm off the start: a stretched spring.
     spec.levels[0].goal[1] += 0.1;
     let mut c = Controller::new(&sc.model, spec, &sc.q0).unwrap();
-    let (q, rest) = (sc.q0.as_slice().to_vec(), vec![0.0; n]);
+    let (q, rest) = (sc.q0.as_slice().to_vec(), vec![0.0; sc.model.nq()]);
     c.step(&q, &rest).unwrap();
+    (c, q, rest)
+}
+
+#[test]
+fn a_restore_the_tanks_cannot_pay_waits_for_them() {
+    let (mut c, q, rest) = stretched();
+    let n = q.len();
     let mut contact = Contact::defaults(n);
     contact.reaction = Reaction::Soften;
     contact.soften_fraction = 0.5;
@@ -52,15 +59,8 @@ fn a_restore_the_tanks_cannot_pay_waits_for_them() {
 fn a_release_the_tanks_cannot_pay_waits_for_them() {
     // `hold`: the law's share 1 − h of the torque is booked as soften's κ
     // is; a release (a setpoint taken) the tanks cannot pay waits.
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/panda-pose-posture.toml");
-    let sc = Scenario::load(&path).unwrap();
-    let n = sc.model.nq();
-    let mut spec = sc.spec.clone();
-    spec.levels[0].goal[1] += 0.1;
-    let mut c = Controller::new(&sc.model, spec, &sc.q0).unwrap();
-    let (q, rest) = (sc.q0.as_slice().to_vec(), vec![0.0; n]);
-    c.step(&q, &rest).unwrap();
+    let (mut c, q, rest) = stretched();
+    let n = q.len();
     let h0 = c.output().safety.h;
     let mut contact = Contact::defaults(n);
     contact.reaction = Reaction::Hold;

@@ -22,6 +22,19 @@ pub fn state_at_start(scenario: &Scenario, seq: u64) -> JointState {
     s
 }
 
+/// The shipped Panda scenario (`config/panda-pose-posture.toml`) and its
+/// control cycle after one state at the start (number 1, at rest).
+pub fn panda_cycle() -> (Scenario, hcc_cycle::ControlCycle) {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config/panda-pose-posture.toml");
+    let sc = Scenario::load(&path).unwrap();
+    let settings = hcc_cycle::CycleSettings::from_scenario(&sc);
+    let c = hcc_control::Controller::new(&sc.model, sc.spec.clone(), &sc.q0).unwrap();
+    let mut d = hcc_cycle::ControlCycle::new(c, &settings).unwrap();
+    d.decide(&state_at_start(&sc, 1), 1_000_000);
+    (sc, d)
+}
+
 /// The largest change of a joint torque from one cycle to the next in
 /// `tau` (one command per cycle), N·m.
 pub fn largest_torque_step(tau: &[Vec<f64>]) -> f64 {
