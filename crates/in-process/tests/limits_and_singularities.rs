@@ -691,8 +691,9 @@ struct GoalRun {
 /// `[contact]` defaults). The goals' transitions (at the levels' shipped
 /// speed limits) last up to 14 s, so the settling is also counted from the
 /// end of each goal's transitions. Asserted on every goal: while its goals
-/// move, H never rises from one cycle to the next by more than 1e-3 J beyond
-/// what the commands put in (`StepOutput::command_input`); once its goal is
+/// move, H never rises from one cycle to the next by more than 1e-4 J beyond
+/// what the commands put in (`StepOutput::command_input`; 1e-3 J for goal
+/// 443, `UNEXPLAINED_TRANSITION_RISE`); once its goal is
 /// final: H never rises by more than 1e-4 J from one cycle to the next, and
 /// it never moves again (above 0.05 rad/s) after resting (max |q̇| < 0.01
 /// rad/s over 0.1 s) — but the reach-boundary creep of goals 36 and 39.
@@ -893,12 +894,17 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         );
         // While the goals move, H rises by what the commands put in (their
         // goals' work, the feed-forward's, the tanks' refills, the command
-        // tanks' grants) and no more — to 1e-3 J per cycle: booked from the
-        // F of each period's first sample, the work leaves second-order terms
-        // up to 1e-4 J, and goal 443 rises by 4.85e-4 J for a few cycles
-        // (docs/limits-and-singularities.md, Open).
+        // tanks' grants) and no more — to 1e-4 J per cycle (booked from the F
+        // of each period's first sample, the work leaves second-order terms
+        // up to 9.5e-5 J on the 500 goals), 1e-3 J for goal 443, which rises
+        // by 4.85e-4 J for a few cycles (docs/limits-and-singularities.md, Open).
+        let tolerance = if UNEXPLAINED_TRANSITION_RISE.contains(&g) {
+            1e-3
+        } else {
+            1e-4
+        };
         assert!(
-            r.rise_moving.0 <= 1e-3 || overridden,
+            r.rise_moving.0 <= tolerance || overridden,
             "goal {g}: while its goals moved, H rose by {} J beyond what they put in, at {} s",
             r.rise_moving.0,
             r.rise_moving.1
@@ -954,6 +960,11 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         );
     }
 }
+
+/// A goal whose H rises beyond what its commands put in while its goals
+/// move, by more than the booking's second-order terms (4.85e-4 J per cycle;
+/// docs/limits-and-singularities.md, Open).
+const UNEXPLAINED_TRANSITION_RISE: [usize; 1] = [443];
 
 /// Goals beyond reach by a few mm that creep along the reach boundary and
 /// rest in between (docs/limits-and-singularities.md, Open): they move again.
@@ -1086,7 +1097,7 @@ fn report_sweep(runs: &[GoalRun], seconds: f64) {
         .map(|r| (r.rise_moving, r.g))
         .fold(((0.0, 0.0), 0), |m, x| if x.0.0 > m.0.0 { x } else { m });
     println!(
-        "sweep: while the goals move, H rises from one cycle to the next beyond what the commands put in by at most {:.3e} J (goal {}, t {:.3} s), by more than 1e-4 J in {} goals (asserted: 1e-3 J)",
+        "sweep: while the goals move, H rises from one cycle to the next beyond what the commands put in by at most {:.3e} J (goal {}, t {:.3} s), by more than 1e-4 J in {} goals (asserted: 1e-4 J, 1e-3 J for goal 443)",
         moving.0.0,
         moving.1,
         moving.0.1,

@@ -103,8 +103,9 @@ impl Controller {
     /// [`Controller::set_goal`] checks it and `rate`, the transition's ẋ_{i,d}
     /// (m_i values) its work is booked with, but nothing is refilled — its
     /// work is paid from the command tank (module docs). `Ok(false)`, and
-    /// nothing changed, while neither the command tank nor the tanks' spare
-    /// holds energy: the transition must wait. With the energy tanks off,
+    /// nothing changed, while the command tank (its pending grant included)
+    /// and the tanks' spare together hold less than the last period's work:
+    /// the transition must wait. With the energy tanks off,
     /// [`Controller::set_goal`]. Allocation-free.
     pub fn ramp_goal(
         &mut self,
