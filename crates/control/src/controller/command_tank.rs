@@ -29,7 +29,6 @@
 use super::Controller;
 use crate::ControlError;
 use crate::energy_tank::TANK_TRANSIENT_SHARE;
-use hcc_linalg::products::gemv;
 use nalgebra::DVector;
 
 /// E_c and what it books (module docs).
@@ -181,12 +180,8 @@ impl Controller {
                 self.command.energy = 0.0;
             }
         }
-        let c = &self.command;
-        if c.active && c.energy > 0.0 {
-            gemv(&mut self.tmp_n, 1.0, &self.data.m, qd, 0.0);
-            let storage =
-                0.5 * qd.dot(&self.tmp_n) + self.levels.iter().map(|l| l.potential).sum::<f64>();
-            let target = self.spec.safety.tank_initial + TANK_TRANSIENT_SHARE * storage.max(0.0);
+        if self.command.active && self.command.energy > 0.0 {
+            let target = self.refill_level(qd);
             for l in self.levels.iter_mut().skip(1) {
                 let take = (target - l.tank.energy).max(0.0).min(self.command.energy);
                 l.tank.energy += take;

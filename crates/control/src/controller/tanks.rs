@@ -28,12 +28,8 @@ impl Controller {
         let (period, return_rate, max) = (s.control_period_s, s.tank_return_rate, s.tank_max);
         self.out.command_input.refill = 0.0;
         if self.tank_refill {
-            // Start, goal or gains change: `tank_initial` plus a share of the
-            // storage ½ q̇ᵀ M q̇ + Σ V_i (crate::energy_tank).
-            gemv(&mut self.tmp_n, 1.0, &self.data.m, qd, 0.0);
-            let storage =
-                0.5 * qd.dot(&self.tmp_n) + self.levels.iter().map(|l| l.potential).sum::<f64>();
-            let e = s.tank_initial + TANK_TRANSIENT_SHARE * storage.max(0.0);
+            // Start, goal or gains change.
+            let e = self.refill_level(qd);
             let mut added = 0.0;
             for l in self.levels.iter_mut().skip(1) {
                 added += (e - l.tank.energy).max(0.0);
@@ -212,6 +208,15 @@ impl Controller {
     /// ([`Controller::book_model_change`] does something).
     pub fn books_model_changes(&self) -> bool {
         self.tanks_on()
+    }
+
+    /// What a refill fills each level's tank to: `tank_initial` plus a share
+    /// of the storage ½ q̇ᵀ M q̇ + Σ V_i (crate::energy_tank; J).
+    pub(super) fn refill_level(&mut self, qd: &DVector<f64>) -> f64 {
+        gemv(&mut self.tmp_n, 1.0, &self.data.m, qd, 0.0);
+        let storage =
+            0.5 * qd.dot(&self.tmp_n) + self.levels.iter().map(|l| l.potential).sum::<f64>();
+        self.spec.safety.tank_initial + TANK_TRANSIENT_SHARE * storage.max(0.0)
     }
 
     /// A goal or gains changed (a command, an input): in the next cycle every
