@@ -6,7 +6,8 @@
 //! setpoint service, each entry applied at its cycle; `hcc simulate` hands
 //! it to the cycle with the state of its cycle), with the torque filter on,
 //! and for a robot that adds gravity itself. `hcc replay` of the in-process
-//! run's recording is bit-identical too.
+//! run's recording is bit-identical too. A recorder stopped again and again
+//! for longer than its queues last loses nothing: the simulator waits for it.
 
 use hcc_system_tests::*;
 use std::path::Path;
@@ -22,15 +23,42 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 /// figures.
 fn compare(test: &str, config: &Path, duration: Option<f64>) -> (usize, serde_json::Value) {
     let dir = TempDir::new(test);
-    compare_in(&dir, test, config, duration)
+    compare_in(&dir, test, config, duration, false)
 }
 
-/// [`compare`], writing into `dir`.
+/// Stops the `hcc run` of `namespace` (and so its recorder) for 150 ms of
+/// every 200 ms until `done`, then lets it run; returns how many times it
+/// stopped it. A stop is six times what the recorder's queues hold at the
+/// lockstep's pace (128 samples at 5 kHz).
+fn stutter(namespace: &str, done: &std::sync::atomic::AtomicBool) -> u32 {
+    use std::sync::atomic::Ordering;
+    let mut stops = 0;
+    while !done.load(Ordering::SeqCst) {
+        let launcher = processes_with(namespace)
+            .into_iter()
+            .find(|(_, cmdline)| cmdline.contains(" run ") && cmdline.contains("--lockstep"));
+        let Some((pid, _)) = launcher else {
+            std::thread::sleep(Duration::from_millis(5));
+            continue;
+        };
+        // SAFETY: signals to the test's own child, by its id.
+        unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+        std::thread::sleep(Duration::from_millis(150));
+        unsafe { libc::kill(pid as i32, libc::SIGCONT) };
+        stops += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stops
+}
+
+/// [`compare`], writing into `dir`; with `stalls`, `hcc run` is stopped
+/// again and again meanwhile ([`stutter`]).
 fn compare_in(
     dir: &TempDir,
     test: &str,
     config: &Path,
     duration: Option<f64>,
+    stalls: bool,
 ) -> (usize, serde_json::Value) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let namespace = unique_namespace(test);
@@ -54,27 +82,48 @@ fn compare_in(
     );
     assert!(sim.status.success(), "hcc simulate failed\n{}", sim.log());
 
-    let run = run_with_timeout(
-        Command::new(bin("hcc"))
-            .current_dir(repo_root())
-            .env(FILE_PREFIX_ENV, &prefix)
-            .arg("run")
-            .arg(config)
-            .args(&duration_args)
-            .arg("--lockstep")
-            .args(["--namespace", &namespace])
-            .arg("--out")
-            .arg(dir.path().join("run"))
-            .arg("--no-plots"),
-        dir.path(),
-        "run",
-        Duration::from_secs(300),
-    );
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let (run, stops) = std::thread::scope(|scope| {
+        let stops = stalls.then(|| scope.spawn(|| stutter(&namespace, &done)));
+        let run = run_with_timeout(
+            Command::new(bin("hcc"))
+                .current_dir(repo_root())
+                .env(FILE_PREFIX_ENV, &prefix)
+                .arg("run")
+                .arg(config)
+                .args(&duration_args)
+                .arg("--lockstep")
+                .args(["--namespace", &namespace])
+                .arg("--out")
+                .arg(dir.path().join("run"))
+                .arg("--no-plots"),
+            dir.path(),
+            "run",
+            Duration::from_secs(300),
+        );
+        done.store(true, std::sync::atomic::Ordering::SeqCst);
+        (run, stops.map(|h| h.join().unwrap()))
+    });
     assert!(
         run.status.success(),
         "hcc run --lockstep failed\n{}",
         run.log()
     );
+    if let Some(stops) = stops {
+        println!("hcc run was stopped {stops} times for 150 ms");
+        assert!(stops >= 2, "the run was stopped only {stops} times");
+    }
+
+    // The recorder lost nothing and says so (first: a lost sample is also
+    // a missing row below).
+    let metrics = read_json(&dir.path().join("run/metrics.json"));
+    let ipc = metrics["run"]["settings"]["ipc"].clone();
+    assert_eq!(ipc["mode"], "lockstep", "{ipc}");
+    for stream in ["joint_state", "torque_command", "telemetry"] {
+        assert_eq!(ipc["recorder_gaps"][stream], 0, "{ipc}");
+    }
+    assert_eq!(ipc["rows"], ipc["expected_rows"], "{ipc}");
+    assert!(run.stdout.contains("latency"), "{}", run.log());
 
     let a = read_csv(&dir.path().join("simulate/trajectory.csv"));
     let b = read_csv(&dir.path().join("run/trajectory.csv"));
@@ -89,16 +138,6 @@ fn compare_in(
         worst == 0.0,
         "hcc run --lockstep differs from hcc simulate by {worst:e} in column {column} at row {row}"
     );
-
-    // The recorder lost nothing and says so.
-    let metrics = read_json(&dir.path().join("run/metrics.json"));
-    let ipc = metrics["run"]["settings"]["ipc"].clone();
-    assert_eq!(ipc["mode"], "lockstep", "{ipc}");
-    for stream in ["joint_state", "torque_command", "telemetry"] {
-        assert_eq!(ipc["recorder_gaps"][stream], 0, "{ipc}");
-    }
-    assert_eq!(ipc["rows"], ipc["expected_rows"], "{ipc}");
-    assert!(run.stdout.contains("latency"), "{}", run.log());
 
     assert_clean(&namespace, &prefix);
     (a.1.len(), ipc)
@@ -189,7 +228,7 @@ fn lockstep_run_with_the_torque_filter_is_bit_identical_to_hcc_simulate() {
         dir.path(),
         "\n[torque_filter]\ntorque_rate_limit = 1500.0\nlow_pass_hz = 80.0\n",
     );
-    let (rows, _) = compare_in(&dir, "run_lockstep_filter", &config, Some(1.0));
+    let (rows, _) = compare_in(&dir, "run_lockstep_filter", &config, Some(1.0), false);
     assert_eq!(rows, 1001);
     let metrics = read_json(&dir.path().join("simulate/metrics.json"));
     let limited = &metrics["run"]["settings"]["rate_limited_cycles"];
@@ -232,11 +271,28 @@ fn lockstep_run_of_a_robot_that_adds_gravity_is_bit_identical_to_hcc_simulate() 
         ),
     )
     .unwrap();
-    compare_in(&dir, "run_lockstep_gravity", &config, Some(1.0));
+    compare_in(&dir, "run_lockstep_gravity", &config, Some(1.0), false);
     let metrics = read_json(&dir.path().join("simulate/metrics.json"));
     let final_error = metrics["levels"][0]["final_error_norm"].as_f64().unwrap();
     assert!(
         final_error < 1e-3,
         "the TCP did not reach its goal: {metrics}"
     );
+}
+
+/// The recorder of a lockstep run stopped for 150 ms of every 200 ms — six
+/// times what its queues hold at the run's pace, each time — loses nothing:
+/// the simulator waits for it (`hcc-sim --lockstep-recorder`), and the run
+/// is bit-identical to `hcc simulate` all the same.
+#[test]
+fn a_stalled_recorder_loses_nothing_in_lockstep() {
+    let dir = TempDir::new("run_lockstep_stalls");
+    let (rows, _) = compare_in(
+        &dir,
+        "run_lockstep_stalls",
+        &repo_root().join("config/paper-sim1.toml"),
+        Some(1.0),
+        true,
+    );
+    assert_eq!(rows, 1001);
 }

@@ -132,7 +132,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let info = run_info(&args.namespace, scenario.as_ref(), clock);
     let node = format!("hcc-record-{}", std::process::id());
     let priority = (args.receiver_priority > 0).then_some(args.receiver_priority);
-    let receiver = Receiver::start(&node, file_prefix, names, priority, capture::POLL)?;
+    let receiver = Receiver::start(&node, file_prefix, names, priority, capture::Pace::Realtime)?;
     if let Some(w) = &receiver.priority_warning {
         eprintln!("hcc record: warning: {w}");
     }

@@ -314,6 +314,13 @@ impl Launch {
             // controller waits on the state_ready event instead of sleeping until
             // the next expected period.
             controller_args.extend(["--wait".to_string(), "event".to_string()]);
+            // A simulator that waits for the recorder is not a lost driver:
+            // no stale-peer report per 3 ms of such a wait, which would
+            // fill the recorder's telemetry queue.
+            controller_args.extend([
+                "--stale-timeout-ms".to_string(),
+                format!("{LOCKSTEP_TIMEOUT_MS:?}"),
+            ]);
             // A loaded machine may stall the controller for longer than the
             // simulator's default 100 ms; a lockstep run must stay exact
             // (the launcher itself notices a dead or hung child).
@@ -326,6 +333,10 @@ impl Launch {
                 // CPU exceeded now and then (samples lost).
                 "--lockstep-max-speed".to_string(),
                 format!("{LOCKSTEP_MAX_SPEED:?}"),
+                // And it waits for the recorder, which publishes its
+                // progress (capture::Pace::Lockstep): a stall of the
+                // recorder longer than its queues then loses nothing.
+                "--lockstep-recorder".to_string(),
             ]);
         } else if !args.no_rt {
             let (sim_rt, controller_rt) = realtime_args(scenario, args.quiet);
@@ -596,21 +607,23 @@ fn write_derived(
 /// The recorder's receiver of a run. It drains at a low real-time priority
 /// when permitted (the daemons' warning already says when SCHED_FIFO is not),
 /// also in lockstep, whose daemons run at normal priority as fast as they
-/// can: there it drains every 100 µs (at 1 ms a loaded machine lost samples
-/// of a lockstep run now and then).
+/// can: there it drains every 100 µs and publishes its progress, which the
+/// simulator waits for (`hcc-sim --lockstep-recorder`), so that a stall of
+/// the recorder on a loaded machine delays the run instead of losing
+/// samples.
 fn start_receiver(args: &RunArgs, launch: &Launch) -> anyhow::Result<Receiver> {
     let priority = (!args.no_rt).then_some(capture::RECEIVER_PRIORITY);
-    let poll = if launch.mode == "lockstep" {
-        capture::LOCKSTEP_POLL
+    let pace = if launch.mode == "lockstep" {
+        capture::Pace::Lockstep
     } else {
-        capture::POLL
+        capture::Pace::Realtime
     };
     let receiver = Receiver::start(
         "hcc-run",
         launch.file_prefix.clone(),
         launch.names.clone(),
         priority,
-        poll,
+        pace,
     )?;
     if let Some(w) = &receiver.priority_warning {
         tracing::debug!("{w}");

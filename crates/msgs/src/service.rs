@@ -102,6 +102,7 @@ pub struct ServiceNames {
     state_ready: String,
     command_ready: String,
     scenario: String,
+    recorder_progress: String,
 }
 
 impl ServiceNames {
@@ -123,6 +124,7 @@ impl ServiceNames {
             state_ready: format!("{base}/state_ready"),
             command_ready: format!("{base}/command_ready"),
             scenario: format!("{base}/scenario"),
+            recorder_progress: format!("{base}/recorder_progress"),
             namespace,
         }
     }
@@ -178,8 +180,15 @@ impl ServiceNames {
         &self.scenario
     }
 
+    /// Publish-subscribe service of the recorder's progress in a lockstep
+    /// run (`hcc_msgs::ipc::RecorderProgressPublisher`): the simulator does
+    /// not run further ahead of the recorder than its queues hold.
+    pub fn recorder_progress(&self) -> &str {
+        &self.recorder_progress
+    }
+
     /// All names, for listing/cleanup.
-    pub fn all(&self) -> [&str; 9] {
+    pub fn all(&self) -> [&str; 10] {
         [
             &self.joint_state,
             &self.torque_command,
@@ -190,6 +199,7 @@ impl ServiceNames {
             &self.state_ready,
             &self.command_ready,
             &self.scenario,
+            &self.recorder_progress,
         ]
     }
 }

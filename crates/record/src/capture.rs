@@ -65,6 +65,19 @@ pub const POLL: Duration = Duration::from_millis(1);
 /// whose core the wake-ups would disturb.
 pub const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
 
+/// How the receiver keeps up with the publishers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pace {
+    /// Drains every [`POLL`]; a writer [`BACKLOG`] samples behind loses
+    /// samples, counted (the daemons never wait for the recorder).
+    Realtime,
+    /// Drains every [`LOCKSTEP_POLL`], waits for a writer that is behind, and
+    /// publishes its progress after each drain, for the simulator of a
+    /// lockstep run to wait on (`hcc_msgs::ipc::RecorderProgressPublisher`):
+    /// nothing is lost, however long the recorder stalls.
+    Lockstep,
+}
+
 /// The subscribers, on a thread of their own that does nothing but copy
 /// samples out of the queues into a bounded channel, so that writing the
 /// file never delays the draining (in lockstep the daemons run much faster
@@ -79,15 +92,20 @@ pub struct Receiver {
 }
 
 /// The receiver thread's end of the channel: full means the writer is
-/// [`BACKLOG`] samples behind, and the sample is dropped and counted.
+/// [`BACKLOG`] samples behind, and the sample is dropped and counted — or,
+/// when `wait` (a lockstep run), waited for.
 struct Sink {
     tx: mpsc::SyncSender<Received>,
     dropped: Arc<AtomicU64>,
+    wait: bool,
 }
 
 impl Sink {
     fn send(&self, m: Received) {
-        if let Err(mpsc::TrySendError::Full(_)) = self.tx.try_send(m) {
+        if self.wait {
+            // Fails only once the writer is gone (nothing to record then).
+            let _ = self.tx.send(m);
+        } else if let Err(mpsc::TrySendError::Full(_)) = self.tx.try_send(m) {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
@@ -107,21 +125,23 @@ fn received(m: Tapped<'_>) -> Received {
 
 impl Receiver {
     /// Subscribes (on the new thread, node `node_name`, at SCHED_FIFO
-    /// `priority` when given and permitted, draining every `poll`: [`POLL`],
-    /// or [`LOCKSTEP_POLL`] for a lockstep run) and returns once the
-    /// subscribers exist.
+    /// `priority` when given and permitted, at `pace`) and returns once the
+    /// subscribers (and with [`Pace::Lockstep`] the progress publisher) exist.
     pub fn start(
         node_name: &str,
         file_prefix: Option<String>,
         names: ServiceNames,
         priority: Option<i32>,
-        poll: Duration,
+        pace: Pace,
     ) -> anyhow::Result<Receiver> {
         let (tx, rx) = mpsc::sync_channel(BACKLOG);
         let dropped = Arc::new(AtomicU64::new(0));
+        let lockstep = pace == Pace::Lockstep;
+        let poll = if lockstep { LOCKSTEP_POLL } else { POLL };
         let tx = Sink {
             tx,
             dropped: dropped.clone(),
+            wait: lockstep,
         };
         type Ready = Result<Option<String>, String>;
         let (ready_tx, ready_rx) = mpsc::sync_channel::<Ready>(1);
@@ -139,12 +159,19 @@ impl Receiver {
                         )
                     })
                 });
-                let mut tap = match TapNode::open(
+                let opened = TapNode::open(
                     &node_name,
                     file_prefix.as_deref(),
                     &names,
                     TapStreams::All,
-                ) {
+                )
+                .and_then(|mut t| {
+                    if lockstep {
+                        t.enable_progress()?;
+                    }
+                    Ok(t)
+                });
+                let mut tap = match opened {
                     Ok(t) => {
                         let _ = ready_tx.send(Ok(warning));
                         t
@@ -160,7 +187,11 @@ impl Receiver {
                     // then the thread ends, whether or not the publishers
                     // are still running.
                     let last = stop_flag.load(Ordering::SeqCst);
-                    match tap.tap().drain(&mut |m| tx.send(received(m))) {
+                    let drained = tap
+                        .tap()
+                        .drain(&mut |m| tx.send(received(m)))
+                        .and_then(|k| tap.publish_progress().map(|()| k));
+                    match drained {
                         Ok(_) if last => break,
                         Ok(k) if k >= TAP_BURST => {}
                         Ok(_) => std::thread::sleep(poll),
@@ -223,6 +254,10 @@ impl Receiver {
     ) -> anyhow::Result<()> {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(h) = self.handle.take() {
+            // A lockstep receiver may be waiting for room in the channel.
+            while !h.is_finished() {
+                self.pump(Duration::from_millis(1), &mut f)?;
+            }
             let _ = h.join();
         }
         while self.pump(Duration::ZERO, &mut f)? > 0 {}
@@ -234,6 +269,12 @@ impl Drop for Receiver {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(h) = self.handle.take() {
+            // A lockstep receiver may be waiting for room in the channel:
+            // what it still hands on is discarded.
+            while !h.is_finished() {
+                while self.rx.try_recv().is_ok() {}
+                std::thread::sleep(Duration::from_millis(1));
+            }
             let _ = h.join();
         }
     }

@@ -79,6 +79,12 @@ pub struct Args {
     /// spins before the next one.
     #[arg(long)]
     pub no_warm_up: bool,
+    /// No state for this long (ms) is a lost driver, reported in telemetry
+    /// once per timeout (overrides [controller_daemon].stale_timeout_ms).
+    /// `hcc run --lockstep` sets the simulator's lockstep timeout: there a
+    /// driver waiting for the recorder is not lost.
+    #[arg(long)]
+    pub stale_timeout_ms: Option<f64>,
 }
 
 /// Parses `args` (program name first), runs the daemon, maps the result to
@@ -108,6 +114,12 @@ fn load(args: &Args) -> Result<Setup> {
     }
     settings.telemetry_every = args.telemetry_every;
     settings.warm_up &= !args.no_warm_up;
+    if let Some(ms) = args.stale_timeout_ms {
+        if !(ms.is_finite() && ms > 0.0) {
+            anyhow::bail!("--stale-timeout-ms {ms} must be a positive number of milliseconds");
+        }
+        settings.stale_timeout_ns = (ms * 1e6).round() as u64;
+    }
     Ok(Setup {
         scenario,
         names,

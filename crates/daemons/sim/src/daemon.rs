@@ -20,7 +20,10 @@
 //! that starts later receives it. Once commands flow, a command missing for
 //! `--lockstep-timeout-ms` is a miss (dead controller): the driver holds and
 //! then falls back like in real time, advancing one period per period of wall
-//! time, until commands return.
+//! time, until commands return. With `--lockstep-recorder` (as `hcc run`
+//! starts it) state k also waits for the recorder to have taken state
+//! k − 32 ([`crate::recorder_wait`]): nothing is lost when the recorder
+//! stalls.
 //!
 //! With `--duration S` the state at t = S is published with status `Stopped`
 //! and the process exits 0; SIGINT/SIGTERM do the same at the current state.
@@ -47,6 +50,7 @@ use iceoryx2::prelude::{LogLevel, SignalHandlingMode, set_log_level_from_env_or}
 
 use hcc_plant::SimDriver;
 
+use crate::recorder_wait::RecorderWait;
 use crate::sim_loop::{Ports, SimLoop};
 use crate::status::{LoopStatus, log_loop};
 
@@ -85,6 +89,12 @@ pub struct Args {
     /// to drain them, however the host stalls them.
     #[arg(long)]
     pub lockstep_max_speed: Option<f64>,
+    /// Lockstep: wait for the recorder of `hcc run` (its progress service):
+    /// state k is published once the recorder has taken state k − 32, so
+    /// that a stalled recorder delays the run instead of losing samples. A
+    /// recorder silent for --lockstep-timeout-ms is no longer waited for.
+    #[arg(long)]
+    pub lockstep_recorder: bool,
     /// The simulator thread's real-time set-up (over [sim_daemon]).
     #[command(flatten)]
     pub rt: hcc_rt::RtArgs,
@@ -149,6 +159,9 @@ pub fn run(args: Args) -> Result<()> {
     let names =
         ServiceNames::new(args.ipc.namespace_or(&scenario.ipc.namespace)).context("--namespace")?;
     let mode = mode(&args, &scenario);
+    if args.lockstep_recorder && mode != SimMode::Lockstep {
+        anyhow::bail!("--lockstep-recorder needs lockstep mode (--lockstep)");
+    }
     let file_prefix = args.ipc.file_prefix();
     check_args(&args)?;
     let mut driver = SimDriver::new(&scenario)
@@ -201,7 +214,13 @@ pub fn run(args: Args) -> Result<()> {
             .context("starting the logging thread")?
     };
 
+    let recorder = if args.lockstep_recorder {
+        Some(RecorderWait::open(&node, &names)?)
+    } else {
+        None
+    };
     let mut lp = SimLoop::new(driver, &ports, &status, args.wait)
+        .with_recorder(recorder)
         // Lockstep blocks on `command_ready` (it has no deadline to spin to).
         .with_polling(args.poll_commands && mode == SimMode::Realtime);
     let started = std::time::Instant::now();

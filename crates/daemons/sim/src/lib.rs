@@ -17,6 +17,7 @@
 //!   and shutdown.
 
 pub mod daemon;
+pub mod recorder_wait;
 pub mod sim_loop;
 pub mod status;
 

@@ -13,6 +13,7 @@ use hcc_plant::{Applied, SimDriver};
 use hcc_rt::{self as rt, WaitStrategy};
 use hcc_timing::LatencyHistogram;
 
+use crate::recorder_wait::{RecorderWait, RecorderWaitCounts};
 use crate::status::LoopStatus;
 
 /// Republish period of the current state while waiting for the first command (lockstep).
@@ -82,6 +83,8 @@ pub struct SimLoop<'a> {
     upkeep: hcc_rt::ConnectionUpkeep,
     /// The next state's sample, loaned while waiting for the tick.
     state_loan: PreLoan<JointState>,
+    /// Lockstep: the recorder the states wait for (`--lockstep-recorder`).
+    recorder: Option<RecorderWait>,
 }
 
 impl<'a> SimLoop<'a> {
@@ -113,7 +116,20 @@ impl<'a> SimLoop<'a> {
             overruns: 0,
             upkeep: hcc_rt::ConnectionUpkeep::new(),
             state_loan: PreLoan::new(),
+            recorder: None,
         }
+    }
+
+    /// Lockstep: publishes no state further ahead of `recorder` than its
+    /// queues hold (module docs of [`crate::recorder_wait`]).
+    pub fn with_recorder(mut self, recorder: Option<RecorderWait>) -> Self {
+        self.recorder = recorder;
+        self
+    }
+
+    /// What the waits for the recorder came to (`None`: none was waited for).
+    pub fn recorder_waits(&self) -> Option<RecorderWaitCounts> {
+        self.recorder.as_ref().map(RecorderWait::counts)
     }
 
     /// Waits for answers by polling only and flags the states
@@ -327,6 +343,12 @@ impl<'a> SimLoop<'a> {
                 rt::sleep_until_ns(last_publish.saturating_add(pace_ns));
                 last_publish = monotonic_now_ns();
             }
+            if let Some(r) = &mut self.recorder {
+                r.before_publish(self.driver.k(), timeout_ns);
+                if rt::stop_requested() {
+                    break;
+                }
+            }
             self.publish();
             let mut published = monotonic_now_ns();
             let deadline = if !self.driver.has_command() {
@@ -399,6 +421,18 @@ impl SimLoop<'_> {
             "state → command (controller stamp − state stamp): {}",
             self.answer_stamp.summary().line_us()
         );
+        if let Some(w) = self.recorder_waits() {
+            tracing::info!(
+                "states that waited for the recorder: {} (longest {:.1} ms)",
+                w.waits,
+                w.longest_ns as f64 / 1e6
+            );
+            if w.abandoned {
+                tracing::warn!(
+                    "the recorder made no progress for the lockstep timeout and was no longer waited for: the recording may lack samples (counted as gaps)"
+                );
+            }
+        }
     }
 
     /// The timing report of the run (`--stats`).

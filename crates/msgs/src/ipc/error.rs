@@ -25,6 +25,9 @@ pub enum IpcError {
         port: &'static str,
         reason: String,
     },
+    /// A sample could not be sent.
+    #[error("service {service:?}: send failed: {reason}")]
+    Send { service: String, reason: String },
     /// A subscriber's queue could not be read.
     #[error("service {service:?}: receive failed: {reason}")]
     Receive { service: String, reason: String },

@@ -73,6 +73,7 @@ mod events;
 mod node;
 mod preloan;
 mod pubsub;
+mod recorder_progress;
 mod scenario;
 mod services;
 mod settings;
@@ -91,6 +92,7 @@ pub use pubsub::{
     PathSubscriber, SetpointPublisher, SetpointSubscriber, StatePublisher, StateSample,
     StateSubscriber, TelemetryPublisher, TelemetrySubscriber,
 };
+pub use recorder_progress::{RECORDER_LEAD, RecorderProgressPublisher, RecorderProgressSubscriber};
 pub use scenario::{
     CONTROLLER_NODE, MAX_SCENARIO_SUBSCRIBERS, ScenarioPublisher, ScenarioReadError, read_scenario,
     read_scenario_as,

@@ -114,6 +114,8 @@ pub struct Tap {
     /// The sequence checks of the states, commands and telemetry.
     checkers: [SequenceChecker; 3],
     counts: TapCounts,
+    /// The last joint state's sequence number + 1 (0 before any).
+    states_taken: u64,
 }
 
 /// Why a queue could not be read.
@@ -126,22 +128,24 @@ fn receive_error(service: &str, e: impl std::fmt::Debug) -> IpcError {
 
 /// Empties one loop stream's queue (`service`): checks each sample's
 /// sequence number into `counts` and hands it to `each` (`tapped`: its
-/// number and the sample as tapped). Returns how many it read.
+/// number and the sample as tapped). Returns how many it read and the last
+/// one's number.
 fn drain_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
     port: &iceoryx2::port::subscriber::Subscriber<super::Ipc, T, ()>,
     service: &str,
     (checker, counts): (&mut SequenceChecker, &mut StreamCounts),
     each: &mut dyn FnMut(Tapped<'_>),
     tapped: impl for<'a> Fn(&'a T) -> (u64, Tapped<'a>),
-) -> Result<usize, IpcError> {
-    let mut k = 0;
+) -> Result<(usize, Option<u64>), IpcError> {
+    let (mut k, mut last) = (0, None);
     while let Some(sample) = port.receive().map_err(|e| receive_error(service, e))? {
         let (seq, m) = tapped(&sample);
         check(checker, counts, seq);
         each(m);
         k += 1;
+        last = Some(seq);
     }
-    Ok(k)
+    Ok((k, last))
 }
 
 /// Counts one loop sample's sequence number into `counts`.
@@ -172,6 +176,7 @@ impl Tap {
             client,
             checkers: Default::default(),
             counts: TapCounts::default(),
+            states_taken: 0,
         })
     }
 
@@ -206,28 +211,38 @@ impl Tap {
         }
         let [states, commands, telemetry] = &mut self.checkers;
         let c = &mut self.counts;
-        let s = drain_loop(
+        let (s, last_state) = drain_loop(
             &self.states,
             "joint_state",
             (states, &mut c.joint_state),
             each,
             |s| (s.header.seq, Tapped::State(s)),
         )?;
-        let k = drain_loop(
+        let (k, _) = drain_loop(
             &self.commands,
             "torque_command",
             (commands, &mut c.torque_command),
             each,
             |c| (c.header.seq, Tapped::Command(c)),
         )?;
-        let t = drain_loop(
+        let (t, _) = drain_loop(
             &self.telemetry,
             "telemetry",
             (telemetry, &mut c.telemetry),
             each,
             |t| (t.header.seq, Tapped::Telemetry(t)),
         )?;
+        if let Some(seq) = last_state {
+            self.states_taken = seq + 1;
+        }
         Ok(most.max(s).max(k).max(t))
+    }
+
+    /// The last joint state's sequence number + 1, as of the last drain (0
+    /// before any): with every queue emptied by that drain, what a lockstep
+    /// recorder publishes ([`super::RecorderProgressPublisher`]).
+    pub fn states_taken(&self) -> u64 {
+        self.states_taken
     }
 
     /// What the tap has read and lost so far.
@@ -242,8 +257,11 @@ impl Tap {
 /// the node.
 pub struct TapNode {
     tap: Tap,
+    /// The lockstep recorder's progress, once enabled.
+    progress: Option<super::RecorderProgressPublisher>,
+    names: crate::ServiceNames,
     _services: Services,
-    _node: IpcNode,
+    node: IpcNode,
 }
 
 impl TapNode {
@@ -265,13 +283,37 @@ impl TapNode {
         let tap = Tap::open(&services, streams)?;
         Ok(TapNode {
             tap,
+            progress: None,
+            names: names.clone(),
             _services: services,
-            _node: node,
+            node,
         })
     }
 
     /// The tap.
     pub fn tap(&mut self) -> &mut Tap {
         &mut self.tap
+    }
+
+    /// Publishes the tap's progress from now on ([`Self::publish_progress`]):
+    /// the recorder of a lockstep run, which the simulator waits for
+    /// (module [`super::recorder_progress`]).
+    pub fn enable_progress(&mut self) -> Result<(), IpcError> {
+        if self.progress.is_none() {
+            self.progress = Some(super::RecorderProgressPublisher::open(
+                &self.node,
+                &self.names,
+            )?);
+        }
+        Ok(())
+    }
+
+    /// Publishes [`Tap::states_taken`] when enabled: call it once the
+    /// samples of a drain have been handed on.
+    pub fn publish_progress(&mut self) -> Result<(), IpcError> {
+        match &mut self.progress {
+            Some(p) => p.publish(self.tap.states_taken()),
+            None => Ok(()),
+        }
     }
 }
