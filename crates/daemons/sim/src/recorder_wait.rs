@@ -1,8 +1,7 @@
 //! Lockstep with a recorder (`--lockstep-recorder`): the simulator publishes
 //! state k only once the recorder of `hcc run` has taken state
 //! k − [`RECORDER_LEAD`], so that nothing the recorder has not taken is
-//! more than its queues hold (module docs of `hcc_msgs::ipc`'s
-//! `recorder_progress`). A recorder that says nothing for the lockstep
+//! more than its queues hold (`hcc_msgs::ipc::RecorderProgressPublisher`). A recorder that says nothing for the lockstep
 //! timeout is no longer waited for (the run goes on; counted and logged).
 
 use hcc_msgs::ServiceNames;

@@ -1,23 +1,5 @@
 //! The recorder's progress (`hcc/<ns>/recorder_progress`), the flow control
-//! of a lockstep run that is recorded.
-//!
-//! A tap never makes a publisher wait (module [`super::tap`]): a tool that
-//! falls behind loses samples, counted. In a lockstep run the daemons turn
-//! several times faster than real time, so the recorder's queues
-//! ([`MAX_SUBSCRIBER_BUFFER`] samples) last a few tens of milliseconds, and a
-//! stall of the recorder's thread that long on a loaded machine lost
-//! samples — the oldest first, so the run's first cycle went missing
-//! without a gap to show for it. A lockstep run is not bound to the clock,
-//! so it waits instead: after each drain the recorder publishes how many
-//! states it has taken (the newest state's sequence number + 1), and the
-//! simulator does not publish state k while the recorder has taken fewer
-//! than k − [`RECORDER_LEAD`] (`hcc-sim --lockstep-recorder`). Everything
-//! the recorder has not taken then fits its queues: at most
-//! [`RECORDER_LEAD`] + 1 states, commands and telemetry samples, plus the
-//! controller's stale-peer reports while the simulator waits.
-//!
-//! One value, the last one kept (history 1, a queue of one): the simulator
-//! reads the newest on every wait.
+//! of a lockstep run that is recorded: [`RecorderProgressPublisher`].
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -62,7 +44,25 @@ fn port_error(service: &str, port: &'static str, e: impl std::fmt::Debug) -> Ipc
     }
 }
 
-/// The recorder's side (module docs).
+/// The recorder's side of the flow control of a recorded lockstep run.
+///
+/// A tap never makes a publisher wait ([`super::Tap`]): a tool that
+/// falls behind loses samples, counted. In a lockstep run the daemons turn
+/// several times faster than real time, so the recorder's queues
+/// ([`MAX_SUBSCRIBER_BUFFER`] samples) last a few tens of milliseconds, and a
+/// stall of the recorder's thread that long on a loaded machine lost
+/// samples — the oldest first, so the run's first cycle went missing
+/// without a gap to show for it. A lockstep run is not bound to the clock,
+/// so it waits instead: after each drain the recorder publishes how many
+/// states it has taken (the newest state's sequence number + 1), and the
+/// simulator does not publish state k while the recorder has taken fewer
+/// than k − [`RECORDER_LEAD`] (`hcc-sim --lockstep-recorder`). Everything
+/// the recorder has not taken then fits its queues: at most
+/// [`RECORDER_LEAD`] + 1 states, commands and telemetry samples, plus the
+/// controller's stale-peer reports while the simulator waits.
+///
+/// One value, the last one kept (history 1, a queue of one): the simulator
+/// reads the newest on every wait.
 pub struct RecorderProgressPublisher {
     publisher: Publisher<Ipc, u64, ()>,
     /// The last value published.
@@ -104,7 +104,7 @@ impl RecorderProgressPublisher {
     }
 }
 
-/// The simulator's side (module docs).
+/// The simulator's side ([`RecorderProgressPublisher`]).
 pub struct RecorderProgressSubscriber {
     subscriber: Subscriber<Ipc, u64, ()>,
     /// The newest value read (0 before any).

@@ -297,7 +297,7 @@ impl TapNode {
 
     /// Publishes the tap's progress from now on ([`Self::publish_progress`]):
     /// the recorder of a lockstep run, which the simulator waits for
-    /// (module [`super::recorder_progress`]).
+    /// ([`super::RecorderProgressPublisher`]).
     pub fn enable_progress(&mut self) -> Result<(), IpcError> {
         if self.progress.is_none() {
             self.progress = Some(super::RecorderProgressPublisher::open(
