@@ -175,6 +175,9 @@ impl Paths {
         let (code, knot) = match result {
             Ok(()) => {
                 self.track(controller);
+                // A command, as a setpoint is: the tanks and the passivity
+                // budget are refilled once (the samples are not commands).
+                controller.command_taken();
                 (ANSWER_ACCEPTED, NO_KNOT)
             }
             Err(r) => (r.code(), r.knot_field()),
@@ -321,7 +324,9 @@ impl Paths {
             }
             let s = &p.sample;
             // Checked paths of the level's dimension: these calls cannot fail.
-            let _ = controller.set_goal(i, &s.goal);
+            // The sample's work is booked with its velocity (an input; the
+            // path's message refilled the tanks when it was taken).
+            let _ = controller.follow_goal(i, &s.goal, &s.velocity);
             if p.velocity {
                 let _ = controller.set_goal_velocity(i, &s.velocity);
             }

@@ -23,9 +23,10 @@ impl Controller {
     /// The moving goals' and the feed-forward's power into H over the coming
     /// period (F_i as applied, after the tanks). Allocation-free.
     pub(super) fn command_power(&mut self, qd: &DVector<f64>) {
-        let mut goal = 0.0;
+        let (mut goal, mut followed) = (0.0, 0.0);
         for (i, l) in self.levels.iter().enumerate() {
-            let moving = self.command.active && l.goal_rate.iter().any(|&x| x != 0.0);
+            let moving =
+                (self.command.active || l.followed) && l.goal_rate.iter().any(|&x| x != 0.0);
             if !l.goal_moving && !moving {
                 continue;
             }
@@ -39,8 +40,13 @@ impl Controller {
             };
             let spring = rate.dot(&l.grad);
             let damper = l.goal_velocity.dot(&l.f) - sigma * l.goal_velocity.dot(&l.grad);
-            goal -= self.out.fade[i] * self.law_share * (spring + damper);
+            let power = -self.out.fade[i] * self.law_share * (spring + damper);
+            goal += power;
+            if l.followed {
+                followed += power;
+            }
         }
+        self.command.followed_power = followed;
         let input = &mut self.out.command_input;
         input.goal_power = goal;
         input.feed_forward_power = if self.track.active {

@@ -47,6 +47,8 @@ pub(super) struct CommandTank {
     pub(super) unpaid: f64,
     /// The work booked in the last cycle (J).
     pub(super) last_work: f64,
+    /// The paths' share of this cycle's goal power (W; `Controller::follow_goal`).
+    pub(super) followed_power: f64,
 }
 
 impl Controller {
@@ -143,6 +145,47 @@ impl Controller {
         Ok(true)
     }
 
+    /// A path's sample for level `i` (hcc-cycle's paths, every cycle it
+    /// drives the level): the goal as [`Controller::set_goal`] checks it and
+    /// `rate`, the path's ẋ_{i,d} (m_i values), which its work is booked
+    /// with. Not a command: the tanks are not refilled (the path's message
+    /// was a command when it was taken: [`Controller::command_taken`]); the
+    /// work of the coming period, −β_i (rᵀ ∂V_i/∂x_iᵀ + u_iᵀ (F_i − σ_i ∂V_i/∂x_iᵀ)),
+    /// is an input, reported in `command_input.goal_power` — and while a
+    /// transition runs, granted to the command tank as it is paid, so that a
+    /// path never holds a transition nor is held. The passivity budget is
+    /// refilled as by a goal change (the damping must not brake a commanded
+    /// motion). With the energy tanks off, [`Controller::set_goal`].
+    /// Allocation-free.
+    pub fn follow_goal(
+        &mut self,
+        i: usize,
+        goal: &[f64],
+        rate: &[f64],
+    ) -> Result<(), ControlError> {
+        if !self.tanks_on() {
+            return self.set_goal(i, goal);
+        }
+        let Some(l) = self.levels.get_mut(i) else {
+            return Err(ControlError::BadInput("no such level"));
+        };
+        let bad = |v: &[f64]| v.len() != l.goal.len() || v.iter().any(|x| !x.is_finite());
+        if bad(goal) || bad(rate) {
+            return Err(ControlError::BadInput(
+                "goal or its rate has the wrong length or a non-finite value",
+            ));
+        }
+        l.goal_rate.as_mut_slice().copy_from_slice(rate);
+        l.followed = true;
+        if l.goal.as_slice() != goal {
+            l.goal.as_mut_slice().copy_from_slice(goal);
+            l.pot.set_goal(&self.spec.levels[i].tasks, goal, self.n);
+            self.safety.release_conflict(i);
+            self.safety.refill_passivity_budget();
+        }
+        Ok(())
+    }
+
     /// Whether a transition runs (hcc-cycle's setpoints, every cycle). When
     /// none runs any more, what is left of the command tank is dropped.
     pub fn set_commands_active(&mut self, active: bool) {
@@ -205,6 +248,12 @@ impl Controller {
     /// pays for, whoever pays it.
     pub(super) fn book_command_work(&mut self) {
         let input = self.out.command_input;
+        let followed = self.spec.safety.control_period_s * self.command.followed_power;
+        // A path's rate is its sample's: booked once (`follow_goal`).
+        for l in self.levels.iter_mut().filter(|l| l.followed) {
+            l.followed = false;
+            l.goal_rate.fill(0.0);
+        }
         if !self.tanks_on() || !self.command.active {
             self.out.command_input.paid = false;
             return;
@@ -214,7 +263,11 @@ impl Controller {
             self.spec.safety.control_period_s * (input.goal_power + input.feed_forward_power);
         if work.is_finite() {
             self.command.energy -= work;
-            self.command.last_work = work;
+            self.command.last_work = work - followed;
+            // The paths' share is an input: granted as it is paid.
+            if followed.is_finite() {
+                self.command.pending += followed;
+            }
         }
     }
 

@@ -29,6 +29,10 @@ pub(super) struct Level {
     /// its work on V_i is booked with it, also where the damper is not told
     /// ẋ_{i,d}); zero otherwise.
     pub(super) goal_rate: DVector<f64>,
+    /// A path's sample set the goal for the coming period
+    /// ([`Controller::follow_goal`]): `goal_rate` is the path's, its work an
+    /// input of this cycle.
+    pub(super) followed: bool,
     /// The potential's buffers at a goal not (yet) in force: the energy a
     /// step to a transition's target would store (`command_tank.rs`).
     pub(super) pot_target: PotentialWork,
@@ -174,6 +178,7 @@ impl Level {
             goal_velocity: DVector::zeros(m),
             goal_moving: false,
             goal_rate: DVector::zeros(m),
+            followed: false,
             pot_target: PotentialWork::new(&spec.tasks, &spec.goal, n),
             goal_target: DVector::zeros(m),
             err_target: DVector::zeros(m),
