@@ -15,6 +15,10 @@
 //! The spring's share is V_i's whole gradient (H counts V_i), also where the
 //! velocity governor scales the spring in F_i by σ_i (without it, goal 152 of
 //! the 500-goal sweep rose by 3.9e-3 J per cycle beyond what was booked).
+//! Under the tracking feed-forward the levels above are meant to drag level
+//! i ≥ 2 by w_d = J_i q̇_d^{(i−1)}; its tank pays only the drag beyond it, so
+//! β_i w_dᵀ F_i is an input as well (without it, a path followed with the
+//! feed-forward raised H by 1.1 mJ per cycle through the posture's spring).
 
 use super::Controller;
 use nalgebra::DVector;
@@ -25,6 +29,17 @@ impl Controller {
     pub(super) fn command_power(&mut self, qd: &DVector<f64>) {
         let (mut goal, mut followed) = (0.0, 0.0);
         for (i, l) in self.levels.iter().enumerate() {
+            if i > 0 && self.track.active && l.track.on {
+                // Tracking: the levels above are meant to drag level i by
+                // w_d = J_i q̇_d^{(i−1)}; its tank pays only the drag beyond
+                // that (tanks.rs), so this share of w_iᵀ F_i is the
+                // commands' input.
+                let drag = self.out.fade[i] * self.law_share * l.track.w_d.dot(&l.f);
+                goal += drag;
+                if self.levels[..i].iter().any(|a| a.followed) {
+                    followed += drag;
+                }
+            }
             let moving =
                 (self.command.active || l.followed) && l.goal_rate.iter().any(|&x| x != 0.0);
             if !l.goal_moving && !moving {
