@@ -175,9 +175,12 @@ impl Paths {
         let (code, knot) = match result {
             Ok(()) => {
                 self.track(controller);
-                // A command, as a setpoint is: the tanks and the passivity
-                // budget are refilled once (the samples are not commands).
-                controller.command_taken();
+                // A new path is a command, as a setpoint is: the tanks and
+                // the passivity budget are refilled once (its samples and
+                // its extensions — a device streaming knots — are not).
+                if knots.is_new() {
+                    controller.command_taken();
+                }
                 (ANSWER_ACCEPTED, NO_KNOT)
             }
             Err(r) => (r.code(), r.knot_field()),

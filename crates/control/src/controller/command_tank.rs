@@ -27,6 +27,7 @@
 //! transition runs, what is left of E_c is dropped (dissipated).
 
 use super::Controller;
+use super::level::Level;
 use crate::ControlError;
 use crate::energy_tank::TANK_TRANSIENT_SHARE;
 use nalgebra::DVector;
@@ -117,15 +118,7 @@ impl Controller {
         if !self.tanks_on() {
             return self.set_goal(i, goal).map(|()| true);
         }
-        let Some(l) = self.levels.get_mut(i) else {
-            return Err(ControlError::BadInput("no such level"));
-        };
-        let bad = |v: &[f64]| v.len() != l.goal.len() || v.iter().any(|x| !x.is_finite());
-        if bad(goal) || bad(rate) {
-            return Err(ControlError::BadInput(
-                "goal or its rate has the wrong length or a non-finite value",
-            ));
-        }
+        let l = moving_goal_level(&mut self.levels, i, goal, rate)?;
         l.goal_rate.fill(0.0);
         if l.goal.as_slice() == goal {
             return Ok(true);
@@ -166,15 +159,7 @@ impl Controller {
         if !self.tanks_on() {
             return self.set_goal(i, goal);
         }
-        let Some(l) = self.levels.get_mut(i) else {
-            return Err(ControlError::BadInput("no such level"));
-        };
-        let bad = |v: &[f64]| v.len() != l.goal.len() || v.iter().any(|x| !x.is_finite());
-        if bad(goal) || bad(rate) {
-            return Err(ControlError::BadInput(
-                "goal or its rate has the wrong length or a non-finite value",
-            ));
-        }
+        let l = moving_goal_level(&mut self.levels, i, goal, rate)?;
         l.goal_rate.as_mut_slice().copy_from_slice(rate);
         l.followed = true;
         if l.goal.as_slice() != goal {
@@ -275,4 +260,25 @@ impl Controller {
     pub(super) fn reset_command_tank(&mut self) {
         self.command = CommandTank::default();
     }
+}
+
+/// Level `i` of `levels` for a goal that moves at `rate`
+/// ([`Controller::ramp_goal`], [`Controller::follow_goal`]): both of the
+/// level's dimension and finite.
+fn moving_goal_level<'a>(
+    levels: &'a mut [Level],
+    i: usize,
+    goal: &[f64],
+    rate: &[f64],
+) -> Result<&'a mut Level, ControlError> {
+    let Some(l) = levels.get_mut(i) else {
+        return Err(ControlError::BadInput("no such level"));
+    };
+    let bad = |v: &[f64]| v.len() != l.goal.len() || v.iter().any(|x| !x.is_finite());
+    if bad(goal) || bad(rate) {
+        return Err(ControlError::BadInput(
+            "goal or its rate has the wrong length or a non-finite value",
+        ));
+    }
+    Ok(l)
 }
