@@ -88,6 +88,65 @@ fn a_stiffening_the_spare_cannot_pay_waits_and_the_damping_alone_is_taken() {
     assert!(c.ramp_gains(9, Some(&k), None).is_err());
 }
 
+/// With the spring saturation the storage is the saturated spring's,
+/// V_sat = r_0 r − r_0²/2 beyond its radius r_0 = d_min v / √k_max: a
+/// stiffening there books V_sat's change (not ½ eᵀ ΔK e, which would have
+/// H fall by the difference), and a damping alone — it sets the radius — is
+/// booked as well; H does not change by either.
+#[test]
+fn with_the_spring_saturation_the_saturated_springs_change_is_booked() {
+    let (mut c, _) = panda_tcp_offset_with(&Q0, [0.3, 0.0, 0.0], |s| {
+        s.safety.spring_saturation = true;
+        // Below the tanks' capacity: nothing decays while it stands.
+        s.safety.tank_max = 100.0;
+    });
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!(out.safety.spring_saturated, "beyond the radius");
+    // ½ · 800 · 0.3² = 36 J unsaturated; the saturated spring stores less.
+    let v = out.potential[0];
+    assert!(v > 0.0 && v < 36.0 - 1e-3, "{v}");
+    let before = out.safety.h;
+    let k = k1(&c) * 1.5;
+    let energy = c.stiffness_change_energy(0, &k);
+    // r = √(2V) grows by √1.5, r_0 falls by √1.5: V_sat = r_0 r − r_0²/2
+    // changes by (r_0²/2)(1 − 1/1.5), far from ½ eᵀ ΔK e = 18 J.
+    let unsaturated = 0.5 * 0.5 * 800.0 * 0.3 * 0.3;
+    assert!(
+        energy > 0.0 && energy < 0.5 * unsaturated,
+        "{energy} (½ eᵀ ΔK e = {unsaturated})"
+    );
+    assert!(c.tank_spare() > energy, "{}", c.tank_spare());
+    assert!(c.ramp_gains(0, Some(&k), None).expect("gains"));
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!(
+        (out.potential[0] - (v + energy)).abs() < 1e-9,
+        "{} {v} {energy}",
+        out.potential[0]
+    );
+    assert!(
+        (out.safety.h - before).abs() < 1e-9,
+        "H {before} → {}",
+        out.safety.h
+    );
+    // Twice the damping doubles the radius: the saturated spring stores more.
+    let (v, before) = (out.potential[0], out.safety.h);
+    let d = c.level_target(0).expect("level").damping * 2.0;
+    let energy = c.gains_change_energy(0, None, Some(&d));
+    assert!(energy > 0.0, "{energy}");
+    assert!(c.ramp_gains(0, None, Some(&d)).expect("gains"));
+    let out = c.step(&Q0, &REST).expect("step");
+    assert!(
+        (out.potential[0] - (v + energy)).abs() < 1e-9,
+        "{} {v} {energy}",
+        out.potential[0]
+    );
+    assert!(
+        (out.safety.h - before).abs() < 1e-9,
+        "H {before} → {}",
+        out.safety.h
+    );
+}
+
 #[test]
 fn without_the_tanks_a_ramp_is_taken_as_it_comes() {
     let model = panda();

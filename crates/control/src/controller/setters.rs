@@ -6,6 +6,7 @@
 use super::{Controller, LevelTarget};
 use crate::ControlError;
 use crate::rate::GainRate;
+use crate::safety::spring_saturation::saturated_potential;
 use crate::spec::Form;
 use nalgebra::DMatrix;
 
@@ -219,7 +220,10 @@ impl Controller {
     /// from their spare, a softening fills the fade's tank, so that H plus
     /// the tanks does not change by it. `Ok(false)`, and nothing changed, when
     /// the spare cannot pay it: the transition must wait. A change of the
-    /// damping alone stores nothing and is always taken. Allocation-free.
+    /// damping alone stores nothing and is always taken — but with the
+    /// spring saturation, whose radius the damping sets, where it moves the
+    /// saturated spring's storage ([`Controller::gains_change_energy`]).
+    /// Allocation-free.
     pub fn ramp_gains(
         &mut self,
         i: usize,
@@ -229,7 +233,7 @@ impl Controller {
         if !self.gains_change(i, stiffness, damping)? {
             return Ok(true);
         }
-        let energy = stiffness.map_or(0.0, |k| self.stiffness_change_energy(i, k));
+        let energy = self.gains_change_energy(i, stiffness, damping);
         if !self.book_model_change(energy) {
             return Ok(false);
         }
@@ -240,19 +244,46 @@ impl Controller {
     /// The change of the storage H (J) that the stiffness `k` in place of
     /// level `i`'s makes at the spring coordinates e of the last cycle:
     /// β_i κ ½ eᵀ (k − K_i) e (V_i is linear in K_i; β_i the level's fade, 1
-    /// for level 1, κ the stiffness scale). With `spring_saturation` the
-    /// unsaturated spring's change. 0 for an unknown level or a matrix of
-    /// another size. Allocation-free.
+    /// for level 1, κ the stiffness scale); with `spring_saturation` the
+    /// saturated spring's change ([`Controller::gains_change_energy`]). 0 for
+    /// an unknown level or a matrix of another size. Allocation-free.
     pub fn stiffness_change_energy(&self, i: usize, k: &DMatrix<f64>) -> f64 {
+        self.gains_change_energy(i, Some(k), None)
+    }
+
+    /// The change of the storage H (J) that the gains `stiffness`, `damping`
+    /// (each `None`: level `i`'s own) make at the spring coordinates e of the
+    /// last cycle: β_i κ (V_sat(½ eᵀ K' e, r_0') − V_sat(½ eᵀ K_i e, r_0,i)),
+    /// r_0 the spring saturation's radius of the gains (∞ without it: then
+    /// β_i κ ½ eᵀ (K' − K_i) e, and a damping changes nothing). 0 for an
+    /// unknown level or a matrix of another size. Allocation-free.
+    pub fn gains_change_energy(
+        &self,
+        i: usize,
+        stiffness: Option<&DMatrix<f64>>,
+        damping: Option<&DMatrix<f64>>,
+    ) -> f64 {
         let Some(l) = self.levels.get(i) else {
             return 0.0;
         };
-        if k.shape() != l.stiffness.shape() {
+        let shape = l.stiffness.shape();
+        if stiffness.is_some_and(|k| k.shape() != shape)
+            || damping.is_some_and(|d| d.shape() != shape)
+        {
             return 0.0;
         }
+        let (k, d) = (
+            stiffness.unwrap_or(&l.stiffness),
+            damping.unwrap_or(&l.damping),
+        );
+        let radius = self.safety.spring_radius_for(i, k, d);
+        let new = saturated_potential(l.pot.spring_energy(k), radius);
+        let old = saturated_potential(
+            l.pot.spring_energy(&l.stiffness),
+            self.safety.spring_radius(i),
+        );
         let fade = if i == 0 { 1.0 } else { self.out.fade[i] };
-        let change = l.pot.spring_energy(k) - l.pot.spring_energy(&l.stiffness);
-        fade * self.stiffness_scale * change
+        fade * self.stiffness_scale * (new - old)
     }
 
     /// Whether `stiffness`, `damping` differ from level `i`'s gains, after

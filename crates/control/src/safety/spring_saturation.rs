@@ -43,20 +43,35 @@ impl Safety {
         }
     }
 
-    /// r_0,i = F_max,i / √λ_max(K_i) with F_max,i = d_min(D_i) · v_i, for the gains
-    /// `stiffness`, `damping` of level `i` (λ_max bounded by the largest absolute row
-    /// sum, d_min the smallest diagonal entry). Allocation-free (also for
-    /// `set_gains`).
+    /// Sets level `i`'s r_0,i for the gains `stiffness`, `damping`
+    /// ([`Safety::spring_radius_for`]). Allocation-free (also for `set_gains`).
     pub(crate) fn set_spring_radius(
         &mut self,
         i: usize,
         stiffness: &DMatrix<f64>,
         damping: &DMatrix<f64>,
     ) {
+        self.spring_radius[i] = self.spring_radius_for(i, stiffness, damping);
+    }
+
+    /// Level `i`'s r_0,i now (∞: not saturated).
+    pub(crate) fn spring_radius(&self, i: usize) -> f64 {
+        self.spring_radius[i]
+    }
+
+    /// r_0,i = F_max,i / √λ_max(K_i) with F_max,i = d_min(D_i) · v_i, for the gains
+    /// `stiffness`, `damping` of level `i` (λ_max bounded by the largest absolute row
+    /// sum, d_min the smallest diagonal entry; ∞ without a task speed).
+    /// Allocation-free.
+    pub(crate) fn spring_radius_for(
+        &self,
+        i: usize,
+        stiffness: &DMatrix<f64>,
+        damping: &DMatrix<f64>,
+    ) -> f64 {
         let v = self.task_speed[i];
         if !v.is_finite() {
-            self.spring_radius[i] = f64::INFINITY;
-            return;
+            return f64::INFINITY;
         }
         let m = stiffness.nrows();
         let mut kmax: f64 = 0.0;
@@ -70,11 +85,11 @@ impl Safety {
         let dmin = (0..damping.nrows())
             .map(|a| damping[(a, a)])
             .fold(f64::INFINITY, f64::min);
-        self.spring_radius[i] = if kmax > 0.0 && dmin > 0.0 {
+        if kmax > 0.0 && dmin > 0.0 {
             dmin * v / kmax.sqrt()
         } else {
             f64::INFINITY
-        };
+        }
     }
 
     /// The spring saturation of level `i` (module docs): with r = √(2 V_i) beyond
@@ -96,6 +111,17 @@ impl Safety {
         }
         let scale = r0 / r;
         *grad *= scale;
-        (r0 * r - 0.5 * r0 * r0, scale)
+        (saturated_potential(potential, r0), scale)
+    }
+}
+
+/// V_sat of the potential V and the radius r_0 (module docs): V for
+/// r = √(2V) ≤ r_0 (and for r_0 = ∞), r_0 r − r_0²/2 beyond.
+pub(crate) fn saturated_potential(potential: f64, r0: f64) -> f64 {
+    let r = (2.0 * potential.max(0.0)).sqrt();
+    if !r0.is_finite() || r <= r0 {
+        potential
+    } else {
+        r0 * r - 0.5 * r0 * r0
     }
 }

@@ -87,9 +87,18 @@ pub fn panda_tcp_offset(
     offset: [f64; 3],
     tank_initial: f64,
 ) -> (hcc_control::Controller, [f64; 3]) {
+    panda_tcp_offset_with(q0, offset, |s| s.safety.tank_initial = tank_initial)
+}
+
+/// [`panda_tcp_offset`] with the spec changed by `change` first.
+pub fn panda_tcp_offset_with(
+    q0: &[f64],
+    offset: [f64; 3],
+    change: impl FnOnce(&mut ControllerSpec),
+) -> (hcc_control::Controller, [f64; 3]) {
     let model = panda();
     let mut spec = panda_spec(&model);
-    spec.safety.tank_initial = tank_initial;
+    change(&mut spec);
     let q = nalgebra::DVector::from_column_slice(q0);
     let mut data = hcc_model::Data::new(&model);
     hcc_model::forward_kinematics(&model, &mut data, &q);
