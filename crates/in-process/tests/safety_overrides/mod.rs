@@ -37,6 +37,9 @@ pub fn sweep_safety_overrides(s: &mut Scenario) -> (bool, bool) {
             "joint_limit_margin" => sp.joint_limit_margin = x,
             "joint_limit_damping_ratio" => sp.joint_limit_damping_ratio = x,
             "enabled" => sp.enabled = x != 0.0,
+            // The hierarchy's ε: where the damped inverses and the fade of the
+            // lower levels and τ_μ begin (crate docs, "Singularities").
+            "singular_ratio" => s.spec.singular_ratio = x,
             "velocity_governor" => sp.velocity_governor = x != 0.0,
             "velocity_barrier" => sp.velocity_barrier = x != 0.0,
             "velocity_barrier_rate" => sp.velocity_barrier_rate = x,
