@@ -98,7 +98,7 @@ fn a_load_s_kinetic_energy_is_what_it_adds_to_the_arm_s() {
     let mut c =
         Controller::new(&bare, panda_spec(&bare), &DVector::from_vec(Q0.to_vec())).expect("ctl");
     c.step(&Q0, &QD).expect("step");
-    let t = c.load_kinetic_energy(&load, &QD);
+    let t = c.load_kinetic_energy(&load, &Q0, &QD);
     let q = DVector::from_vec(Q0.to_vec());
     let qd = DVector::from_vec(QD.to_vec());
     let m = |model: &hcc_model::Model| {
@@ -112,5 +112,28 @@ fn a_load_s_kinetic_energy_is_what_it_adds_to_the_arm_s() {
         (t - want).abs() < 1e-12 * want.abs().max(1e-3),
         "{t} vs {want}"
     );
-    assert_eq!(c.load_kinetic_energy(&Load::none(), &QD), 0.0);
+    assert_eq!(c.load_kinetic_energy(&Load::none(), &Q0, &QD), 0.0);
+    // Taken at the state it is asked for, not at the last cycle's: the
+    // next cycle's storage counts the load at its own state.
+    let q1: Vec<f64> = Q0
+        .iter()
+        .enumerate()
+        .map(|(k, x)| x + 0.05 * (k as f64 + 1.0))
+        .collect();
+    let t1 = c.load_kinetic_energy(&load, &q1, &QD);
+    let q1v = DVector::from_vec(q1.clone());
+    let m1 = |model: &hcc_model::Model| {
+        let mut d = Data::new(model);
+        crba(model, &mut d, &q1v);
+        d.m.clone()
+    };
+    let want1 = 0.5 * qd.dot(&((m1(&loaded) - m1(&bare)) * &qd));
+    assert!(
+        (t1 - want1).abs() < 1e-12 * want1.abs().max(1e-3),
+        "{t1} vs {want1} (at the last cycle's state: {t})"
+    );
+    assert!(
+        (want1 - want).abs() > 1e-6,
+        "the states differ in T: {want1} {want}"
+    );
 }

@@ -654,7 +654,7 @@ impl ControlCycle {
         let announcing = self.load_ramp.active();
         if !self
             .load_ramp
-            .advance(self.period_s, &mut self.controller, state.qd())
+            .advance(self.period_s, &mut self.controller, state.q(), state.qd())
         {
             self.counters.core.load_ramp_held += 1;
         }

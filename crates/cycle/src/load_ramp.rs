@@ -74,11 +74,17 @@ impl LoadRamp {
         self.active
     }
 
-    /// One cycle of `dt` s on at joint velocity `qd`: the controller's model
+    /// One cycle of `dt` s on at the state (`q`, `qd`): the controller's model
     /// takes the ramp's load at its new progress, its change of the storage
     /// booked by the tanks (module docs). Returns false when the tanks could
     /// not pay it and the ramp held. Allocation-free.
-    pub(crate) fn advance(&mut self, dt: f64, controller: &mut Controller, qd: &[f64]) -> bool {
+    pub(crate) fn advance(
+        &mut self,
+        dt: f64,
+        controller: &mut Controller,
+        q: &[f64],
+        qd: &[f64],
+    ) -> bool {
         if !self.active {
             return true;
         }
@@ -88,7 +94,7 @@ impl LoadRamp {
         let s = smooth(u);
         if controller.books_model_changes() {
             let ds = s - smooth(self.u_at(self.elapsed_s));
-            let gain = controller.load_kinetic_energy_change(&self.from, &self.to, qd);
+            let gain = controller.load_kinetic_energy_change(&self.from, &self.to, q, qd);
             if !controller.book_model_change(ds * gain) {
                 return false;
             }

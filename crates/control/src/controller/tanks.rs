@@ -162,20 +162,23 @@ impl Controller {
 
     /// The kinetic energy `load`, held at the tip, has at the tip's twist
     /// J_tip q̇ (J): ½ m |v_c|² + ½ ωᵀ R I_c Rᵀ ω with v_c = v + ω × R c, at
-    /// the kinematics of the last cycle (0 with the tip on the root link).
-    /// The mixture of two loads is linear in their parameters, and so is this
-    /// energy: what the model's storage gains as a load ramps in. Allocation-free.
-    pub fn load_kinetic_energy(&mut self, load: &hcc_model::Load, qd: &[f64]) -> f64 {
-        self.load_kinetic_energy_change(&hcc_model::Load::none(), load, qd)
+    /// the state (`q`, `qd`) (0 with the tip on the root link). The mixture
+    /// of two loads is linear in their parameters, and so is this energy:
+    /// what the model's storage gains as a load ramps in. Allocation-free.
+    pub fn load_kinetic_energy(&mut self, load: &hcc_model::Load, q: &[f64], qd: &[f64]) -> f64 {
+        self.load_kinetic_energy_change(&hcc_model::Load::none(), load, q, qd)
     }
 
     /// T(`to`) − T(`from`) of [`Controller::load_kinetic_energy`], from one
-    /// tip twist: the storage a load's ramp adds per unit of its progress.
-    /// 0 while the tanks are off (nothing books it). Allocation-free.
+    /// tip twist: the storage a load's ramp adds per unit of its progress at
+    /// the state (`q`, `qd`) the next cycle's storage counts (the tip's
+    /// kinematics are computed at `q`; the next step recomputes every model
+    /// term). 0 while the tanks are off (nothing books it). Allocation-free.
     pub fn load_kinetic_energy_change(
         &mut self,
         from: &hcc_model::Load,
         to: &hcc_model::Load,
+        q: &[f64],
         qd: &[f64],
     ) -> f64 {
         let is_none =
@@ -183,9 +186,12 @@ impl Controller {
         if (is_none(from) && is_none(to))
             || hcc_model::load::tip_body(&self.model).is_none()
             || qd.len() != self.n
+            || q.len() != self.n
         {
             return 0.0;
         }
+        self.tmp_n2.copy_from_slice(q);
+        hcc_model::forward_kinematics(&self.model, &mut self.data, &self.tmp_n2);
         let tip = self.model.tip_frame();
         hcc_model::frame_jacobian(&self.model, &self.data, tip, &mut self.load_jacobian);
         let twist: [f64; 6] = std::array::from_fn(|k| {
