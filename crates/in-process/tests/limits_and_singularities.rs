@@ -604,7 +604,10 @@ fn sweep_scenario(tcp: [f64; 3], posture: &[f64]) -> Scenario {
 /// The sweep's first `n` goals (seeded): a TCP goal 0.3–1.4 m from the
 /// shoulder in any direction, a posture goal up to 0.5 rad beyond the limits
 /// of every joint.
-fn sweep_goals(joints: &[hcc_model::Joint], n: usize) -> Vec<([f64; 3], Vec<f64>)> {
+/// A sweep goal: the TCP's and the posture's.
+type SweepGoal = ([f64; 3], Vec<f64>);
+
+fn sweep_goals(joints: &[hcc_model::Joint], n: usize) -> Vec<SweepGoal> {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
     (0..n)
         .map(|_| {
@@ -670,8 +673,8 @@ struct GoalRun {
 /// goals from 0.3 m to 1.4 m from the shoulder (within and beyond reach),
 /// posture goals up to 0.5 rad beyond the limits of every joint.
 /// `SWEEP_GOALS` goals (default 40) of `SWEEP_SECONDS` each (default 30 s);
-/// `SWEEP_GOALS=500 cargo test --release -p hcc-in-process --test
-/// limits_and_singularities sweep -- --nocapture` runs the full sweep of
+/// `SWEEP_GOALS=500 SWEEP_THREADS=2 cargo test --release -p hcc-in-process
+/// --test limits_and_singularities sweep -- --nocapture` runs the full sweep of
 /// docs/limits-and-singularities.md. `SWEEP_DETAIL` prints every goal not
 /// settled by 12 s and every one above 0.9 of a velocity limit; `SWEEP_ONLY=g`
 /// runs goal g alone and prints its course every 0.5 s (`SWEEP_TRACE=t0,t1`:
@@ -701,8 +704,10 @@ struct GoalRun {
 /// goal): every goal settled, ≥ 87.5 % by 12 s (the 500-goal run: 95.0 %),
 /// none faster than 0.05 rad/s at 12 s; from the end of the transitions:
 /// ≥ 95 % within 12 s, every goal within 30 s, none faster than 0.05 rad/s
-/// 12 s after it. `SWEEP_SHARD=i/n` runs every
-/// n-th goal from i (one process per core) and prints each as a line to merge.
+/// 12 s after it. `SWEEP_THREADS=k` runs the goals on k threads (one per
+/// core; the 500 goals on 2 cores in about 7 min) and reports them together,
+/// each goal also as a `sweep-goal` line; `SWEEP_SHARD=i/n` runs every n-th
+/// goal from i (one process per core) and prints each as such a line.
 #[test]
 fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
     let env = |k: &str| std::env::var(k).ok();
@@ -729,136 +734,52 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
     );
     let joints = base.model.joints.clone();
     let eps = base.spec.singular_ratio;
-    let mut runs = Vec::new();
-    let mut overridden = false;
+    // `SWEEP_THREADS=k`: the goals on k threads (one per core), merged here.
+    let threads: usize = env("SWEEP_THREADS")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1)
+        .max(1);
+    let options = SweepOptions {
+        seconds,
+        only: only.is_some(),
+        detail,
+        lines: shard.is_some() || threads > 1,
+    };
+    let todo: Vec<(usize, SweepGoal)> = sweep_goals(&joints, goals)
+        .into_iter()
+        .enumerate()
+        .filter(|(g, _)| only.is_none_or(|o| o == *g) && shard.is_none_or(|(i, n)| g % n == i))
+        .collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some((g, (tcp, posture))) = todo.get(k) else {
+                break;
+            };
+            done.push(sweep_goal(*g, *tcp, posture, &joints, eps, options));
+        }
+        done
+    };
+    let mut results: Vec<(GoalRun, bool, bool, bool)> = if threads > 1 {
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().expect("a sweep thread panicked"))
+                .collect()
+        })
+    } else {
+        work()
+    };
+    results.sort_by_key(|r| r.0.g);
     // Overrides of more than the torque filter (the velocity limits must hold
     // with or without a filter), and whether every run had the filter.
-    let mut law_overridden = false;
-    let mut filtered = true;
-    for (g, (tcp, posture)) in sweep_goals(&joints, goals).into_iter().enumerate() {
-        if only.is_some_and(|o| o != g) || shard.is_some_and(|(i, n)| g % n != i) {
-            continue;
-        }
-        let mut scenario = sweep_scenario(tcp, &posture);
-        let (any, law) = sweep_safety_overrides(&mut scenario);
-        overridden |= any;
-        law_overridden |= law;
-        // The Franka's 1 N·m per cycle holds where the shipped filter (or a
-        // slower one) does.
-        filtered &= scenario
-            .torque_filter
-            .torque_rate_limit
-            .is_some_and(|r| r <= 1000.0);
-        let log = run(scenario.clone(), seconds);
-        assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
-        if only.is_some() {
-            for smp in log.iter().step_by(500) {
-                println!(
-                    "goal {g} t {:5.1}: E {:.6} J |q̇| {:.3?} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
-                    smp.t,
-                    smp.energy,
-                    smp.qd.iter().map(|x| x.abs()).collect::<Vec<_>>(),
-                    smp.errors,
-                    smp.conditioning
-                        .iter()
-                        .map(|c| format!("{c:.1e}"))
-                        .collect::<Vec<_>>(),
-                    smp.faded,
-                    smp.guard,
-                    smp.governor,
-                    smp.q
-                );
-            }
-        }
-        let (beyond, speed_ratio) = limit_figures(&scenario, &log);
-        if only.is_some() {
-            trace_peak_speed(&joints, &log);
-        }
-        let settle = settle_time(&log);
-        let move_end = log
-            .iter()
-            .rev()
-            .find(|s| s.goal_moving)
-            .map_or(0.0, |s| s.t);
-        let run = GoalRun {
-            g,
-            settle,
-            move_end,
-            speed_12_after: if seconds >= move_end + 12.0 {
-                max_speed_between(&log, move_end + 11.9, move_end + 12.0)
-            } else {
-                f64::NAN
-            },
-            speed_at_12: if seconds >= 12.0 {
-                max_speed_between(&log, 11.9, 12.0)
-            } else {
-                f64::NAN
-            },
-            speed_ratio,
-            tau_step: log.iter().skip(1).map(|s| s.tau_step).fold(0.0, f64::max),
-            beyond,
-            rise_final: rise_once_final(&log, move_end),
-            rise_moving: rise_beyond_input(&log, move_end),
-            work_in: (
-                log.iter().map(|s| s.input_power).sum(),
-                log.iter().map(|s| s.refill).sum(),
-            ),
-            goal_held: log.last().map_or(0, |s| s.goal_held),
-            unpaid_mj: log.last().map_or(0, |s| s.unpaid_mj),
-            moved_again: moved_again_once_final(&log, move_end),
-            class: settle.is_infinite().then(|| classify(&log, seconds, eps)),
-            contact_cycles: log.iter().filter(|s| s.contact).count(),
-            r_peak: log.iter().fold(vec![0.0; joints.len()], |mut m, s| {
-                for (m, r) in m.iter_mut().zip(&s.r) {
-                    *m = m.max(r.abs());
-                }
-                m
-            }),
-        };
-        if detail && (run.settle > 12.0 || run.speed_ratio > 0.9) {
-            let last = log.last().unwrap();
-            println!(
-                "goal {g}: safe holds {}, first at {:?} s; tcp {tcp:.3?} posture {posture:.2?}; settled at {:.2} s; |q̇|/limit {:.3}; |q̇| at 12 s {:.3}; errors {:.4?}; conditioning {:?}; faded {} guard {} governor {:.2}; q {:.3?}",
-                log.iter().filter(|s| s.safe_hold).count(),
-                log.iter().find(|s| s.safe_hold).map(|s| s.t),
-                run.settle,
-                run.speed_ratio,
-                run.speed_at_12,
-                last.errors,
-                last.conditioning
-                    .iter()
-                    .map(|c| format!("{c:.2e}"))
-                    .collect::<Vec<_>>(),
-                last.faded,
-                last.guard,
-                last.governor,
-                last.q,
-            );
-        }
-        if shard.is_some() {
-            println!(
-                "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {} after12 {} rise_final {} rise_at {} rise_moving {} rise_moving_at {} work_in {} refill_in {} goal_held {} unpaid_mj {} again {}",
-                run.settle,
-                run.speed_at_12,
-                run.speed_ratio,
-                run.tau_step,
-                run.beyond,
-                run.class,
-                run.move_end,
-                run.speed_12_after,
-                run.rise_final.0,
-                run.rise_final.1,
-                run.rise_moving.0,
-                run.rise_moving.1,
-                run.work_in.0,
-                run.work_in.1,
-                run.goal_held,
-                run.unpaid_mj,
-                run.moved_again.unwrap_or(-1.0),
-            );
-        }
-        runs.push(run);
-    }
+    let overridden = results.iter().any(|r| r.1);
+    let law_overridden = results.iter().any(|r| r.2);
+    let filtered = results.iter().all(|r| r.3);
+    let runs: Vec<GoalRun> = results.into_iter().map(|r| r.0).collect();
     report_sweep(&runs, seconds);
     for r in &runs {
         let g = r.g;
@@ -959,6 +880,153 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             "goals faster than 0.05 rad/s 12 s after their transitions' end: {fast:?}"
         );
     }
+}
+
+/// What the sweep's options ask of every goal's run.
+#[derive(Clone, Copy)]
+struct SweepOptions {
+    seconds: f64,
+    /// One goal alone: its course is printed.
+    only: bool,
+    detail: bool,
+    /// Print each goal as a `sweep-goal` line (to merge or compare).
+    lines: bool,
+}
+
+/// A goal's run and what its scenario's overrides changed: (the run, any
+/// override, an override beyond the torque filter, the shipped filter or a
+/// slower one).
+fn sweep_goal(
+    g: usize,
+    tcp: [f64; 3],
+    posture: &[f64],
+    joints: &[hcc_model::Joint],
+    eps: f64,
+    o: SweepOptions,
+) -> (GoalRun, bool, bool, bool) {
+    let SweepOptions {
+        seconds,
+        only,
+        detail,
+        lines,
+    } = o;
+    let mut scenario = sweep_scenario(tcp, posture);
+    let (any, law) = sweep_safety_overrides(&mut scenario);
+    // The Franka's 1 N·m per cycle holds where the shipped filter (or a
+    // slower one) does.
+    let filtered = scenario
+        .torque_filter
+        .torque_rate_limit
+        .is_some_and(|r| r <= 1000.0);
+    let log = run(scenario.clone(), seconds);
+    assert!(log.iter().all(|s| s.finite), "goal {g}: a NaN");
+    if only {
+        for smp in log.iter().step_by(500) {
+            println!(
+                "goal {g} t {:5.1}: E {:.6} J |q̇| {:.3?} errors {:.4?} conditioning {:?} faded {} guard {} governor {:.2} q {:.2?}",
+                smp.t,
+                smp.energy,
+                smp.qd.iter().map(|x| x.abs()).collect::<Vec<_>>(),
+                smp.errors,
+                smp.conditioning
+                    .iter()
+                    .map(|c| format!("{c:.1e}"))
+                    .collect::<Vec<_>>(),
+                smp.faded,
+                smp.guard,
+                smp.governor,
+                smp.q
+            );
+        }
+    }
+    let (beyond, speed_ratio) = limit_figures(&scenario, &log);
+    if only {
+        trace_peak_speed(joints, &log);
+    }
+    let settle = settle_time(&log);
+    let move_end = log
+        .iter()
+        .rev()
+        .find(|s| s.goal_moving)
+        .map_or(0.0, |s| s.t);
+    let run = GoalRun {
+        g,
+        settle,
+        move_end,
+        speed_12_after: if seconds >= move_end + 12.0 {
+            max_speed_between(&log, move_end + 11.9, move_end + 12.0)
+        } else {
+            f64::NAN
+        },
+        speed_at_12: if seconds >= 12.0 {
+            max_speed_between(&log, 11.9, 12.0)
+        } else {
+            f64::NAN
+        },
+        speed_ratio,
+        tau_step: log.iter().skip(1).map(|s| s.tau_step).fold(0.0, f64::max),
+        beyond,
+        rise_final: rise_once_final(&log, move_end),
+        rise_moving: rise_beyond_input(&log, move_end),
+        work_in: (
+            log.iter().map(|s| s.input_power).sum(),
+            log.iter().map(|s| s.refill).sum(),
+        ),
+        goal_held: log.last().map_or(0, |s| s.goal_held),
+        unpaid_mj: log.last().map_or(0, |s| s.unpaid_mj),
+        moved_again: moved_again_once_final(&log, move_end),
+        class: settle.is_infinite().then(|| classify(&log, seconds, eps)),
+        contact_cycles: log.iter().filter(|s| s.contact).count(),
+        r_peak: log.iter().fold(vec![0.0; joints.len()], |mut m, s| {
+            for (m, r) in m.iter_mut().zip(&s.r) {
+                *m = m.max(r.abs());
+            }
+            m
+        }),
+    };
+    if detail && (run.settle > 12.0 || run.speed_ratio > 0.9) {
+        let last = log.last().unwrap();
+        println!(
+            "goal {g}: safe holds {}, first at {:?} s; tcp {tcp:.3?} posture {posture:.2?}; settled at {:.2} s; |q̇|/limit {:.3}; |q̇| at 12 s {:.3}; errors {:.4?}; conditioning {:?}; faded {} guard {} governor {:.2}; q {:.3?}",
+            log.iter().filter(|s| s.safe_hold).count(),
+            log.iter().find(|s| s.safe_hold).map(|s| s.t),
+            run.settle,
+            run.speed_ratio,
+            run.speed_at_12,
+            last.errors,
+            last.conditioning
+                .iter()
+                .map(|c| format!("{c:.2e}"))
+                .collect::<Vec<_>>(),
+            last.faded,
+            last.guard,
+            last.governor,
+            last.q,
+        );
+    }
+    if lines {
+        println!(
+            "sweep-goal {g} settle {} at12 {} ratio {} step {} beyond {} class {:?} move_end {} after12 {} rise_final {} rise_at {} rise_moving {} rise_moving_at {} work_in {} refill_in {} goal_held {} unpaid_mj {} again {}",
+            run.settle,
+            run.speed_at_12,
+            run.speed_ratio,
+            run.tau_step,
+            run.beyond,
+            run.class,
+            run.move_end,
+            run.speed_12_after,
+            run.rise_final.0,
+            run.rise_final.1,
+            run.rise_moving.0,
+            run.rise_moving.1,
+            run.work_in.0,
+            run.work_in.1,
+            run.goal_held,
+            run.unpaid_mj,
+            run.moved_again.unwrap_or(-1.0),
+        );
+    }
+    (run, any, law, filtered)
 }
 
 /// A goal whose H rises beyond what its commands put in while its goals
