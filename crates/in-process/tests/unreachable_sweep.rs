@@ -26,9 +26,10 @@
 //! position limit. `UNREACHABLE_GOALS` goals (default 24) of
 //! `UNREACHABLE_SECONDS` each (default 30 s); `UNREACHABLE_GOALS=200 cargo
 //! test --release -p hcc-in-process --test unreachable_sweep -- --nocapture`
-//! is the full sweep of docs/limits-and-singularities.md.
-//! `UNREACHABLE_SHARD=i/n` runs the goals g with g mod n = i (one process per
-//! core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
+//! is the full sweep of docs/limits-and-singularities.md
+//! (`UNREACHABLE_THREADS=2`: on two threads, one per core, reported
+//! together, with a line per goal). `UNREACHABLE_SHARD=i/n` runs the goals g
+//! with g mod n = i (one process per core) and prints a line per goal; `UNREACHABLE_ONLY=g` runs goal g alone
 //! and prints its course every 0.25 s (`UNREACHABLE_EVERY=k`: every k
 //! cycles; with q, q̇, the torque sent and which safety parts act)
 //! (`UNREACHABLE_PLOT=<dir>`: and draws
@@ -463,6 +464,42 @@ fn report(runs: &[GoalRun], seconds: f64) {
     );
 }
 
+/// One goal's run, printed as an `unreachable-goal` line when `line`.
+fn run_goal(
+    base: &Scenario,
+    g: usize,
+    goal: &Goal,
+    seconds: f64,
+    only: bool,
+    line: bool,
+) -> GoalRun {
+    let r = run(base, g, goal, seconds, only);
+    if line {
+        println!(
+            "unreachable-goal {g} {:?} tcp {:.3?} rpy {:.3?} posture {:.2?}: H {:.4} → {:.4} J; rise per cycle {:.3e} J at {:.3} s; rise 10 ms {:.3e} J at {:.3} s; rise {:.3e} J at {:.3} s; first rest {:.2} s; rest {:.2} s; moved again {:?} (up to {:.3} rad/s); |q̇|/limit {:.3}; beyond {:.2e} rad",
+            r.region,
+            goal.tcp,
+            goal.rpy,
+            goal.posture,
+            r.h_start,
+            r.h_end,
+            r.rise_cycle.0,
+            r.rise_cycle.1,
+            r.rise_10ms.0,
+            r.rise_10ms.1,
+            r.rise.0,
+            r.rise.1,
+            r.first_rest,
+            r.rest,
+            r.moved_again,
+            r.speed_after_rest,
+            r.speed_ratio,
+            r.beyond,
+        );
+    }
+    r
+}
+
 #[test]
 fn unreachable_goals_energy_and_rest() {
     let env = |k: &str| std::env::var(k).ok();
@@ -477,40 +514,45 @@ fn unreachable_goals_energy_and_rest() {
         let (i, n) = s.split_once('/')?;
         Some((i.parse().ok()?, n.parse().ok()?))
     });
+    // `UNREACHABLE_THREADS=k`: the goals on k threads (one per core), merged here.
+    let threads: usize = env("UNREACHABLE_THREADS")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1)
+        .max(1);
     let base = load("panda-pose-posture.toml");
     let goals = goals(&base.model.joints, n.max(only.map_or(0, |g| g + 1)));
-    let mut runs = Vec::new();
-    for (g, goal) in goals.iter().enumerate() {
-        if only.is_some_and(|o| o != g) || shard.is_some_and(|(i, n)| g % n != i) {
-            continue;
+    let todo: Vec<(usize, &Goal)> = goals
+        .iter()
+        .enumerate()
+        .filter(|(g, _)| only.is_none_or(|o| o == *g) && shard.is_none_or(|(i, n)| g % n == i))
+        .collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let lines = shard.is_some() || only.is_some() || threads > 1;
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(&(g, goal)) = todo.get(k) else {
+                break;
+            };
+            done.push(run_goal(&base, g, goal, seconds, only.is_some(), lines));
         }
-        let r = run(&base, g, goal, seconds, only.is_some());
-        if shard.is_some() || only.is_some() {
-            println!(
-                "unreachable-goal {g} {:?} tcp {:.3?} rpy {:.3?} posture {:.2?}: H {:.4} → {:.4} J; rise per cycle {:.3e} J at {:.3} s; rise 10 ms {:.3e} J at {:.3} s; rise {:.3e} J at {:.3} s; first rest {:.2} s; rest {:.2} s; moved again {:?} (up to {:.3} rad/s); |q̇|/limit {:.3}; beyond {:.2e} rad",
-                r.region,
-                goal.tcp,
-                goal.rpy,
-                goal.posture,
-                r.h_start,
-                r.h_end,
-                r.rise_cycle.0,
-                r.rise_cycle.1,
-                r.rise_10ms.0,
-                r.rise_10ms.1,
-                r.rise.0,
-                r.rise.1,
-                r.first_rest,
-                r.rest,
-                r.moved_again,
-                r.speed_after_rest,
-                r.speed_ratio,
-                r.beyond,
-            );
-        }
-        runs.push(r);
-    }
+        done
+    };
+    let mut runs: Vec<GoalRun> = if threads > 1 {
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().expect("a sweep thread panicked"))
+                .collect()
+        })
+    } else {
+        work()
+    };
+    runs.sort_by_key(|r| r.g);
     report(&runs, seconds);
+
     let filtered = !std::env::var("UNREACHABLE_FILTER").is_ok_and(|v| v == "0");
     let known = if filtered {
         &WITH_FILTER
