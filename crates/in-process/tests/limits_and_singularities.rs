@@ -702,7 +702,7 @@ struct GoalRun {
 /// rad/s over 0.1 s) — but the reach-boundary creep of goals 36 and 39.
 /// Asserted with the defaults (30 s per
 /// goal): every goal settled, ≥ 87.5 % by 12 s (the 500-goal run: 95.0 %),
-/// none faster than 0.05 rad/s at 12 s; from the end of the transitions:
+/// of the 40 none faster than 0.05 rad/s at 12 s; from the end of the transitions:
 /// ≥ 95 % within 12 s, every goal within 30 s, none faster than 0.05 rad/s
 /// 12 s after it. `SWEEP_THREADS=k` runs the goals on k threads (one per
 /// core; the 500 goals on 2 cores in about 7 min) and reports them together,
@@ -850,13 +850,17 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
             "{:.1} % settled by 12 s",
             100.0 * by(12.0)
         );
+        // Of the default 40 none is faster than 0.05 rad/s at 12 s from t = 0;
+        // of the 500, 30 goals' transitions end after 12 s (up to 14 s) and 7
+        // are still moving then: for them the clock starts at the end of
+        // their transitions (below; the settling rule).
         let fast: Vec<_> = runs
             .iter()
             .filter(|r| r.speed_at_12 >= 0.05)
             .map(|r| r.g)
             .collect();
         assert!(
-            fast.is_empty(),
+            fast.is_empty() || goals > 40,
             "goals still faster than 0.05 rad/s at 12 s: {fast:?}"
         );
         // The same targets with the clock started when each goal's
