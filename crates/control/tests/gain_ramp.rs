@@ -105,46 +105,36 @@ fn with_the_spring_saturation_the_saturated_springs_change_is_booked() {
     // ½ · 800 · 0.3² = 36 J unsaturated; the saturated spring stores less.
     let v = out.potential[0];
     assert!(v > 0.0 && v < 36.0 - 1e-3, "{v}");
-    let before = out.safety.h;
-    let k = k1(&c) * 1.5;
-    let energy = c.stiffness_change_energy(0, &k);
+    // Takes the gains (each None: as they are): the spring stores what was
+    // booked, and H plus the tanks is the same.
+    let take = |c: &mut Controller, k: Option<&DMatrix<f64>>, d: Option<&DMatrix<f64>>| {
+        let before = c.step(&Q0, &REST).expect("step");
+        let (v, h) = (before.potential[0], before.safety.h);
+        let energy = c.gains_change_energy(0, k, d);
+        assert!(c.tank_spare() > energy, "{}", c.tank_spare());
+        assert!(c.ramp_gains(0, k, d).expect("gains"));
+        let out = c.step(&Q0, &REST).expect("step");
+        let stored = out.potential[0] - v;
+        assert!(
+            (stored - energy).abs() < 1e-9,
+            "stored {stored}, booked {energy}"
+        );
+        assert!((out.safety.h - h).abs() < 1e-9, "H {h} → {}", out.safety.h);
+        energy
+    };
     // r = √(2V) grows by √1.5, r_0 falls by √1.5: V_sat = r_0 r − r_0²/2
     // changes by (r_0²/2)(1 − 1/1.5), far from ½ eᵀ ΔK e = 18 J.
+    let k = k1(&c) * 1.5;
+    let energy = take(&mut c, Some(&k), None);
     let unsaturated = 0.5 * 0.5 * 800.0 * 0.3 * 0.3;
     assert!(
         energy > 0.0 && energy < 0.5 * unsaturated,
         "{energy} (½ eᵀ ΔK e = {unsaturated})"
     );
-    assert!(c.tank_spare() > energy, "{}", c.tank_spare());
-    assert!(c.ramp_gains(0, Some(&k), None).expect("gains"));
-    let out = c.step(&Q0, &REST).expect("step");
-    assert!(
-        (out.potential[0] - (v + energy)).abs() < 1e-9,
-        "{} {v} {energy}",
-        out.potential[0]
-    );
-    assert!(
-        (out.safety.h - before).abs() < 1e-9,
-        "H {before} → {}",
-        out.safety.h
-    );
     // Twice the damping doubles the radius: the saturated spring stores more.
-    let (v, before) = (out.potential[0], out.safety.h);
     let d = c.level_target(0).expect("level").damping * 2.0;
-    let energy = c.gains_change_energy(0, None, Some(&d));
+    let energy = take(&mut c, None, Some(&d));
     assert!(energy > 0.0, "{energy}");
-    assert!(c.ramp_gains(0, None, Some(&d)).expect("gains"));
-    let out = c.step(&Q0, &REST).expect("step");
-    assert!(
-        (out.potential[0] - (v + energy)).abs() < 1e-9,
-        "{} {v} {energy}",
-        out.potential[0]
-    );
-    assert!(
-        (out.safety.h - before).abs() < 1e-9,
-        "H {before} → {}",
-        out.safety.h
-    );
 }
 
 #[test]

@@ -7,7 +7,7 @@
 mod safety_overrides;
 mod seeded;
 use safety_overrides::sweep_safety_overrides;
-use seeded::{Rng, quantile};
+use seeded::{Rng, on_threads, quantile};
 use std::path::PathBuf;
 
 use hcc_config::Scenario;
@@ -750,30 +750,9 @@ fn sweep_of_random_panda_goals_stays_inside_every_limit_and_settles() {
         .enumerate()
         .filter(|(g, _)| only.is_none_or(|o| o == *g) && shard.is_none_or(|(i, n)| g % n == i))
         .collect();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let work = || {
-        let mut done = Vec::new();
-        loop {
-            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some((g, (tcp, posture))) = todo.get(k) else {
-                break;
-            };
-            done.push(sweep_goal(*g, *tcp, posture, &joints, eps, options));
-        }
-        done
-    };
-    let mut results: Vec<(GoalRun, bool, bool, bool)> = if threads > 1 {
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().expect("a sweep thread panicked"))
-                .collect()
-        })
-    } else {
-        work()
-    };
-    results.sort_by_key(|r| r.0.g);
+    let results = on_threads(&todo, threads, |(g, (tcp, posture))| {
+        sweep_goal(*g, *tcp, posture, &joints, eps, options)
+    });
     // Overrides of more than the torque filter (the velocity limits must hold
     // with or without a filter), and whether every run had the filter.
     let overridden = results.iter().any(|r| r.1);

@@ -51,7 +51,7 @@
 mod safety_overrides;
 mod seeded;
 use safety_overrides::sweep_safety_overrides;
-use seeded::{Rng, quantile};
+use seeded::{Rng, on_threads, quantile};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 
@@ -526,31 +526,10 @@ fn unreachable_goals_energy_and_rest() {
         .enumerate()
         .filter(|(g, _)| only.is_none_or(|o| o == *g) && shard.is_none_or(|(i, n)| g % n == i))
         .collect();
-    let next = std::sync::atomic::AtomicUsize::new(0);
     let lines = shard.is_some() || only.is_some() || threads > 1;
-    let work = || {
-        let mut done = Vec::new();
-        loop {
-            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some(&(g, goal)) = todo.get(k) else {
-                break;
-            };
-            done.push(run_goal(&base, g, goal, seconds, only.is_some(), lines));
-        }
-        done
-    };
-    let mut runs: Vec<GoalRun> = if threads > 1 {
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().expect("a sweep thread panicked"))
-                .collect()
-        })
-    } else {
-        work()
-    };
-    runs.sort_by_key(|r| r.g);
+    let runs = on_threads(&todo, threads, |&(g, goal)| {
+        run_goal(&base, g, goal, seconds, only.is_some(), lines)
+    });
     report(&runs, seconds);
 
     let filtered = !std::env::var("UNREACHABLE_FILTER").is_ok_and(|v| v == "0");

@@ -32,3 +32,40 @@ impl Rng {
 pub fn quantile(sorted: &[f64], p: f64) -> f64 {
     sorted[((p * (sorted.len() as f64 - 1.0)).round() as usize).min(sorted.len() - 1)]
 }
+
+/// `f` of every item on `threads` threads (one per core; 1: on this one),
+/// the results in the items' order. Each thread takes the next item left,
+/// so a slow item holds up no other.
+#[allow(dead_code)] // used by the sweeps only
+pub fn on_threads<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(k) else {
+                break;
+            };
+            done.push((k, f(item)));
+        }
+        done
+    };
+    let mut done: Vec<(usize, R)> = if threads > 1 {
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().expect("a sweep thread panicked"))
+                .collect()
+        })
+    } else {
+        work()
+    };
+    done.sort_by_key(|d| d.0);
+    done.into_iter().map(|d| d.1).collect()
+}
