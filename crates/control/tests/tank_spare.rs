@@ -99,14 +99,18 @@ fn a_load_s_kinetic_energy_is_what_it_adds_to_the_arm_s() {
         Controller::new(&bare, panda_spec(&bare), &DVector::from_vec(Q0.to_vec())).expect("ctl");
     c.step(&Q0, &QD).expect("step");
     let t = c.load_kinetic_energy(&load, &Q0, &QD);
-    let q = DVector::from_vec(Q0.to_vec());
     let qd = DVector::from_vec(QD.to_vec());
-    let m = |model: &hcc_model::Model| {
-        let mut d = Data::new(model);
-        crba(model, &mut d, &q);
-        d.m.clone()
+    // ½ q̇ᵀ (M_loaded − M_bare) q̇ at q.
+    let added = |q: &[f64]| {
+        let q = DVector::from_column_slice(q);
+        let m = |model: &hcc_model::Model| {
+            let mut d = Data::new(model);
+            crba(model, &mut d, &q);
+            d.m.clone()
+        };
+        0.5 * qd.dot(&((m(&loaded) - m(&bare)) * &qd))
     };
-    let want = 0.5 * qd.dot(&((m(&loaded) - m(&bare)) * &qd));
+    let want = added(&Q0);
     println!("a load's kinetic energy {t:.6e} J, ½ q̇ᵀ ΔM q̇ {want:.6e} J");
     assert!(
         (t - want).abs() < 1e-12 * want.abs().max(1e-3),
@@ -121,13 +125,7 @@ fn a_load_s_kinetic_energy_is_what_it_adds_to_the_arm_s() {
         .map(|(k, x)| x + 0.05 * (k as f64 + 1.0))
         .collect();
     let t1 = c.load_kinetic_energy(&load, &q1, &QD);
-    let q1v = DVector::from_vec(q1.clone());
-    let m1 = |model: &hcc_model::Model| {
-        let mut d = Data::new(model);
-        crba(model, &mut d, &q1v);
-        d.m.clone()
-    };
-    let want1 = 0.5 * qd.dot(&((m1(&loaded) - m1(&bare)) * &qd));
+    let want1 = added(&q1);
     assert!(
         (t1 - want1).abs() < 1e-12 * want1.abs().max(1e-3),
         "{t1} vs {want1} (at the last cycle's state: {t})"
